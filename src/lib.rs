@@ -2,3 +2,4 @@
 //! around it from field measurements.
 pub mod physics;
 pub mod special;
+pub mod units;

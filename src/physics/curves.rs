@@ -1,0 +1,71 @@
+//! Wave-speed and attenuation curves over a frequency grid (spec C2): the form every later part
+//! stores and exports.
+
+use super::inputs::System;
+use super::solver::{solve_curve, Continuation, RootFlags, SolveError};
+use crate::units::{hz_to_omega, np_to_db};
+
+/// The standard frequency grid of stored curves, Hz: 10–2000 Hz, dense over the leak-noise band
+/// 100–800 Hz, and containing the export frequencies 100, 200, 500 and 1000 Hz.
+pub const STANDARD_GRID_HZ: [f64; 32] = [
+    10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 80.0, 100.0, 125.0, 150.0, 175.0, 200.0, 250.0, 300.0,
+    350.0, 400.0, 450.0, 500.0, 550.0, 600.0, 650.0, 700.0, 750.0, 800.0, 900.0, 1000.0, 1200.0,
+    1400.0, 1500.0, 1600.0, 1800.0, 2000.0,
+];
+
+/// The typical leak-noise band a correlator operator uses, Hz (issue 5).
+pub const LEAK_BAND_HZ: (f64, f64) = (100.0, 800.0);
+
+/// One point of a curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvePoint {
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Phase speed ω/Re k1, m/s (NaN when the root was not found).
+    pub phase_speed: f64,
+    /// Attenuation −(20/ln 10)·Im k1, dB/m (NaN when the root was not found).
+    pub attenuation_db: f64,
+    /// The root's warnings, or why it was not found.
+    pub status: Result<RootFlags, SolveError>,
+}
+
+/// Phase speed and attenuation at the given frequencies (Hz), by continuation (P41–P43).
+pub fn curve(system: &System, frequencies_hz: &[f64]) -> Vec<CurvePoint> {
+    let omegas: Vec<f64> = frequencies_hz.iter().map(|&f| hz_to_omega(f)).collect();
+    solve_curve(system, &omegas, Continuation::default())
+        .into_iter()
+        .zip(frequencies_hz)
+        .map(|(r, &f)| match r {
+            Ok(root) => CurvePoint {
+                frequency_hz: f,
+                phase_speed: root.phase_speed(),
+                attenuation_db: np_to_db(root.attenuation_np()),
+                status: Ok(root.flags),
+            },
+            Err(e) => CurvePoint {
+                frequency_hz: f,
+                phase_speed: f64::NAN,
+                attenuation_db: f64::NAN,
+                status: Err(e),
+            },
+        })
+        .collect()
+}
+
+/// Mean phase speed over a band (Hz), by the trapezoidal rule on 36 evenly spaced points:
+/// the single figure a correlator operator types in. `None` if any root failed.
+pub fn band_mean_speed(system: &System, band_hz: (f64, f64)) -> Option<f64> {
+    const N: usize = 36;
+    let f: Vec<f64> = (0..N)
+        .map(|i| band_hz.0 + (band_hz.1 - band_hz.0) * i as f64 / (N - 1) as f64)
+        .collect();
+    let pts = curve(system, &f);
+    if pts.iter().any(|p| p.status.is_err()) {
+        return None;
+    }
+    let mut s = 0.0;
+    for w in pts.windows(2) {
+        s += 0.5 * (w[0].phase_speed + w[1].phase_speed) * (w[1].frequency_hz - w[0].frequency_hz);
+    }
+    Some(s / (band_hz.1 - band_hz.0))
+}

@@ -1,0 +1,128 @@
+//! Extensions of the model ("effects"), spec §8: inputs the effects change.
+//!
+//! Each effect changes one forward-model input: soil damping the soil loss factor η_m (E1,
+//! eq. P13), pipe loss the wall loss factor η_p (E2, eq. P9), air in the water the fluid's bulk
+//! modulus and density by Wood's equation (E3, eqs. P60–P61), wall thinning the effective wall
+//! thickness (E4, eq. P62), and the full model the model variant (E6, eq. P33).
+
+use super::inputs::{check_range, Fluid, InputError, Pipe};
+
+/// Specific gas constant of air, J/(kg·K) (spec P61).
+pub const R_AIR: f64 = 287.05;
+/// Default absolute line pressure, Pa (3 bar gauge; spec §8 E3 example).
+pub const DEFAULT_LINE_PRESSURE_PA: f64 = 4e5;
+/// Default polytropic index of the bubbles (isothermal), spec §8 E3.
+pub const DEFAULT_POLYTROPIC_INDEX: f64 = 1.0;
+/// Default water temperature, K (15 °C), spec §8 E3.
+pub const DEFAULT_TEMPERATURE_K: f64 = 288.15;
+/// Largest air volume fraction the effect allows (spec §8 E3).
+pub const MAX_AIR_FRACTION: f64 = 0.02;
+/// Smallest effective / nominal wall thickness ratio (spec §8 E4).
+pub const MIN_WALL_RATIO: f64 = 0.3;
+
+/// Free air in the water (spec §8 E3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AirContent {
+    /// Air volume fraction φ at line pressure, 0–0.02.
+    pub fraction: f64,
+    /// Absolute line pressure p_abs, Pa (> 0).
+    pub pressure_abs: f64,
+    /// Polytropic index γ, 1–1.4.
+    pub polytropic_index: f64,
+    /// Temperature T, K.
+    pub temperature: f64,
+}
+
+impl AirContent {
+    /// Checked air content.
+    pub fn new(
+        fraction: f64,
+        pressure_abs: f64,
+        polytropic_index: f64,
+        temperature: f64,
+    ) -> Result<Self, InputError> {
+        check_range(
+            "air volume fraction",
+            fraction,
+            0.0,
+            MAX_AIR_FRACTION,
+            "0 - 0.02",
+        )?;
+        check_range(
+            "absolute line pressure (Pa)",
+            pressure_abs,
+            1e3,
+            1e8,
+            "1e3 - 1e8",
+        )?;
+        check_range("polytropic index", polytropic_index, 1.0, 1.4, "1 - 1.4")?;
+        check_range("temperature (K)", temperature, 250.0, 350.0, "250 - 350")?;
+        Ok(Self {
+            fraction,
+            pressure_abs,
+            polytropic_index,
+            temperature,
+        })
+    }
+
+    /// Air fraction φ at the default line pressure, γ and temperature.
+    pub fn with_fraction(fraction: f64) -> Result<Self, InputError> {
+        Self::new(
+            fraction,
+            DEFAULT_LINE_PRESSURE_PA,
+            DEFAULT_POLYTROPIC_INDEX,
+            DEFAULT_TEMPERATURE_K,
+        )
+    }
+
+    /// The bubbly mixture by Wood's equation [R19]: 1/B_eff = (1 − φ)/B_w + φ/(γ p_abs) (P60),
+    /// ρ_eff = (1 − φ)ρ_w + φ p_abs/(R_air T) (P61). Lossless, below bubble resonance.
+    pub fn mix(&self, water: &Fluid) -> Fluid {
+        let phi = self.fraction;
+        let inv_b =
+            (1.0 - phi) / water.bulk_modulus + phi / (self.polytropic_index * self.pressure_abs);
+        let rho_air = self.pressure_abs / (R_AIR * self.temperature);
+        Fluid {
+            density: (1.0 - phi) * water.density + phi * rho_air,
+            bulk_modulus: 1.0 / inv_b,
+        }
+    }
+}
+
+/// The pipe with an effective wall thickness r_h·h, eq. P62 (a unchanged).
+pub fn thinned(pipe: &Pipe, ratio: f64) -> Result<Pipe, InputError> {
+    check_range(
+        "effective / nominal wall thickness",
+        ratio,
+        MIN_WALL_RATIO,
+        1.0,
+        "0.3 - 1",
+    )?;
+    Ok(Pipe {
+        wall_thickness: pipe.wall_thickness * ratio,
+        ..*pipe
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Spec Appendix A.4 footnote 2: B_eff = 339673913.04347825 Pa, ρ_eff = 999.0048359724293.
+    #[test]
+    fn wood_equation_matches_appendix_a4() {
+        let air = AirContent::new(1e-3, 4e5, 1.0, 288.15).unwrap();
+        let f = air.mix(&Fluid::water());
+        assert!(
+            (f.bulk_modulus / 339673913.04347825 - 1.0).abs() < 1e-13,
+            "{}",
+            f.bulk_modulus
+        );
+        assert!(
+            (f.density / 999.0048359724293 - 1.0).abs() < 1e-13,
+            "{}",
+            f.density
+        );
+        assert!(AirContent::with_fraction(0.05).is_err());
+    }
+}

@@ -1,0 +1,455 @@
+//! Root solver for the dispersion relation, spec §5: Muller's method (P40) started from the
+//! in-vacuo root (P39) and continued in frequency (P41–P42), with failure detection (§5.6)
+//! reported as data.
+
+use std::fmt;
+
+use num_complex::Complex64;
+
+use super::dispersion::Evaluator;
+use super::inputs::System;
+
+/// Muller stops when |dx| ≤ tol·|x| (spec §5.5).
+pub const MULLER_STEP_RTOL: f64 = 1e-13;
+/// Muller gives up after this many iterations (spec §5.5).
+pub const MULLER_MAX_ITER: u32 = 100;
+/// A root is accepted only if |F(k1)| ≤ this; F is O(1) (spec §5.5).
+pub const RESIDUAL_ATOL: f64 = 1e-10;
+/// Jump detector threshold on the correction ratio of eq. P43 (spec §5.5).
+pub const CONTINUATION_RATIO_MAX: f64 = 0.1;
+/// Near-grazing band on |c/c_soil − 1|, eq. P44 (spec §5.5).
+pub const GRAZING_RTOL: f64 = 0.02;
+/// How many times a continuation step may be halved before a branch jump is declared (§5.6).
+pub const MAX_STEP_HALVINGS: u32 = 10;
+/// Growing-wave threshold: Im k1 > this·|k1| with every loss factor ≥ 0 (§5.6).
+pub const GROWING_RTOL: f64 = 1e-12;
+/// The correction ratio (P43) is not tested when a step moves the root by less than this
+/// relative amount: both numerator and denominator are then rounding noise.
+pub const RATIO_MIN_STEP_RTOL: f64 = 1e-9;
+/// Geometric ramp points below the lowest requested frequency, eq. P41 (the reference's 29).
+pub const RAMP_POINTS: usize = 29;
+/// Start of the ramp: ω₀ = min(2π·5 rad/s, ω_min/2), eq. P41.
+pub const RAMP_START_HZ: f64 = 5.0;
+
+/// Why no root could be reported (spec §5.6).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SolveError {
+    /// Muller exceeded its iterations, F became non-finite, or |F| stayed above the tolerance.
+    #[error("no convergence at omega = {omega} rad/s (|F| = {residual:e})")]
+    NoConvergence {
+        /// Angular frequency, rad/s.
+        omega: f64,
+        /// Last |F| (NaN or inf when F was not finite).
+        residual: f64,
+    },
+    /// The root has Re k1 ≤ 0: not the forward s = 1 wave.
+    #[error("wrong root at omega = {omega} rad/s: k1 = {k1}")]
+    WrongRoot {
+        /// Angular frequency, rad/s.
+        omega: f64,
+        /// The root found.
+        k1: Complex64,
+    },
+    /// The correction ratio of eq. P43 stayed above the threshold after all step halvings.
+    #[error("branch jump at omega = {omega} rad/s (correction ratio {ratio:.3})")]
+    BranchJump {
+        /// Angular frequency, rad/s.
+        omega: f64,
+        /// The correction ratio of the last attempt.
+        ratio: f64,
+    },
+    /// The frequency is not a positive finite number.
+    #[error("invalid angular frequency {omega} rad/s")]
+    InvalidFrequency {
+        /// The rejected value.
+        omega: f64,
+    },
+}
+
+impl SolveError {
+    /// Short status code for tables (`forward`'s `status` column).
+    pub fn code(&self) -> &'static str {
+        match self {
+            SolveError::NoConvergence { .. } => "no_convergence",
+            SolveError::WrongRoot { .. } => "wrong_root",
+            SolveError::BranchJump { .. } => "branch_jump",
+            SolveError::InvalidFrequency { .. } => "invalid_frequency",
+        }
+    }
+}
+
+/// Warnings attached to a root that was found (spec §3.2, §5.6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RootFlags {
+    /// Im k1 > 0 although every loss factor is ≥ 0: a growing wave (the known defect of
+    /// `printed`, or a bug / branch jump for the other readings).
+    pub growing_wave: bool,
+    /// The phase speed is within 2 % of a soil wave speed (eq. P44).
+    pub near_grazing: bool,
+    /// The frequency or the wall is outside the model's validity (eq. P7).
+    pub out_of_validity: bool,
+    /// The phase speed exceeds the free-field sound speed of the fluid (warning, §5.6 item 2).
+    pub faster_than_fluid: bool,
+}
+
+impl RootFlags {
+    /// Comma-separated codes of the raised flags (empty when none).
+    pub fn codes(&self) -> String {
+        let mut v = Vec::new();
+        if self.growing_wave {
+            v.push("growing_wave");
+        }
+        if self.near_grazing {
+            v.push("near_grazing");
+        }
+        if self.out_of_validity {
+            v.push("out_of_validity");
+        }
+        if self.faster_than_fluid {
+            v.push("faster_than_fluid");
+        }
+        v.join(",")
+    }
+
+    /// True when no flag is raised.
+    pub fn is_clean(&self) -> bool {
+        *self == RootFlags::default()
+    }
+}
+
+impl fmt::Display for RootFlags {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.codes())
+    }
+}
+
+/// A root of the dispersion relation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Root {
+    /// Angular frequency ω, rad/s.
+    pub omega: f64,
+    /// The wavenumber k1, rad/m (Im k1 < 0 for a decaying wave).
+    pub k1: Complex64,
+    /// |F(k1)| at the root.
+    pub residual: f64,
+    /// Muller iterations used for the final solve.
+    pub iterations: u32,
+    /// Warnings.
+    pub flags: RootFlags,
+}
+
+impl Root {
+    /// Phase speed c = ω/Re k1, m/s (eq. P2).
+    pub fn phase_speed(&self) -> f64 {
+        self.omega / self.k1.re
+    }
+    /// Attenuation −Im k1 in Np/m (eq. P2).
+    pub fn attenuation_np(&self) -> f64 {
+        -self.k1.im
+    }
+    /// Attenuation in dB/m (eq. P2).
+    pub fn attenuation_db(&self) -> f64 {
+        crate::units::np_to_db(-self.k1.im)
+    }
+}
+
+/// Result of Muller's iteration before classification.
+struct MullerOut {
+    k1: Complex64,
+    residual: f64,
+    iterations: u32,
+}
+
+/// Muller's method on F from the guess g, eq. P40 [R16].
+fn muller(ev: &Evaluator, g: Complex64) -> Result<MullerOut, SolveError> {
+    let fail = |r: f64| SolveError::NoConvergence {
+        omega: ev.omega,
+        residual: r,
+    };
+    let f = |x: Complex64| -> Result<Complex64, SolveError> {
+        match ev.residual(x) {
+            Ok(v) if v.re.is_finite() && v.im.is_finite() => Ok(v),
+            _ => Err(fail(f64::NAN)),
+        }
+    };
+    let mut x0 = g * (1.0 - 1e-3);
+    let mut x1 = g * (1.0 + 1e-3) + Complex64::new(0.0, 1e-6 * g.norm());
+    let mut x2 = g;
+    let (mut f0, mut f1, mut f2) = (f(x0)?, f(x1)?, f(x2)?);
+    for it in 1..=MULLER_MAX_ITER {
+        let h1 = x1 - x0;
+        let h2 = x2 - x1;
+        let d1 = (f1 - f0) / h1;
+        let d2 = (f2 - f1) / h2;
+        let a = (d2 - d1) / (h2 + h1);
+        let b = a * h2 + d2;
+        let disc = (b * b - 4.0 * f2 * a).sqrt();
+        let (bp, bm) = (b + disc, b - disc);
+        let den = if bp.norm() >= bm.norm() { bp } else { bm };
+        let dx = if den == Complex64::new(0.0, 0.0) || !den.is_finite() {
+            Complex64::new(1e-6 * (x2.norm() + 1.0), 0.0)
+        } else {
+            -2.0 * f2 / den
+        };
+        let x3 = x2 + dx;
+        if !x3.is_finite() {
+            return Err(fail(f64::NAN));
+        }
+        let f3 = f(x3)?;
+        if dx.norm() <= MULLER_STEP_RTOL * x3.norm() || f3 == Complex64::new(0.0, 0.0) {
+            let r = f3.norm();
+            if r > RESIDUAL_ATOL {
+                return Err(fail(r));
+            }
+            return Ok(MullerOut {
+                k1: x3,
+                residual: r,
+                iterations: it,
+            });
+        }
+        (x0, x1, x2) = (x1, x2, x3);
+        (f0, f1, f2) = (f1, f2, f3);
+    }
+    Err(fail(f2.norm()))
+}
+
+/// Classify a converged root: wrong root (error) or flags (spec §5.6, §3.2).
+fn classify(system: &System, ev: &Evaluator, out: MullerOut) -> Result<Root, SolveError> {
+    let k1 = out.k1;
+    if k1.re <= 0.0 {
+        return Err(SolveError::WrongRoot {
+            omega: ev.omega,
+            k1,
+        });
+    }
+    let c = ev.omega / k1.re;
+    let mut flags = RootFlags {
+        growing_wave: k1.im > GROWING_RTOL * k1.norm(),
+        faster_than_fluid: c > system.fluid.sound_speed(),
+        ..RootFlags::default()
+    };
+    if !system.soil.is_absent() {
+        let (cp, cs) = system.soil.wave_speeds();
+        flags.near_grazing =
+            (c / cp - 1.0).abs() < GRAZING_RTOL || (c / cs - 1.0).abs() < GRAZING_RTOL;
+    }
+    flags.out_of_validity = out_of_validity(system, ev.omega);
+    Ok(Root {
+        omega: ev.omega,
+        k1,
+        residual: out.residual,
+        iterations: out.iterations,
+        flags,
+    })
+}
+
+/// Validity of the membrane-shell, single-fluid-mode model, eq. P7: f ≤ f_ring/2,
+/// f ≤ f_cut/2 with f_cut = 3.8317·c_f/(2πa), and h/a ≤ 0.25.
+pub fn out_of_validity(system: &System, omega: f64) -> bool {
+    let f = omega / (2.0 * std::f64::consts::PI);
+    let p = &system.pipe;
+    let f_ring = p.ring_frequency_hz();
+    let f_cut = 3.8317 * system.fluid.sound_speed() / (2.0 * std::f64::consts::PI * p.mean_radius);
+    f > f_ring / 2.0 || f > f_cut / 2.0 || p.wall_thickness / p.mean_radius > 0.25
+}
+
+/// Solve at one frequency from a guess (no continuation). Used by continuation and for
+/// direct solves; classification of the result as in §5.6.
+pub fn solve_from_guess(system: &System, omega: f64, guess: Complex64) -> Result<Root, SolveError> {
+    if !(omega.is_finite() && omega > 0.0) {
+        return Err(SolveError::InvalidFrequency { omega });
+    }
+    let ev = Evaluator::new(system, omega);
+    let out = muller(&ev, guess)?;
+    classify(system, &ev, out)
+}
+
+/// Solve directly at one frequency from the in-vacuo root (P39), without continuation.
+/// Fine for iron in soft soil; for plastics in stiff soil prefer [`solve_curve`].
+pub fn solve_direct(system: &System, omega: f64) -> Result<Root, SolveError> {
+    if !(omega.is_finite() && omega > 0.0) {
+        return Err(SolveError::InvalidFrequency { omega });
+    }
+    let ev = Evaluator::new(system, omega);
+    let g = ev.in_vacuo_root();
+    classify(system, &ev, muller(&ev, g)?)
+}
+
+/// Options of the frequency continuation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Continuation {
+    /// Number of geometric ramp points below the lowest requested frequency (P41).
+    pub ramp_points: usize,
+}
+
+impl Default for Continuation {
+    fn default() -> Self {
+        Self {
+            ramp_points: RAMP_POINTS,
+        }
+    }
+}
+
+/// One accepted point of a continuation path.
+#[derive(Clone, Copy)]
+struct PathPoint {
+    omega: f64,
+    k1: Complex64,
+}
+
+/// Linear extrapolation guess of eq. P42 from the last two accepted points.
+fn extrapolate(hist: &[PathPoint], omega: f64) -> Complex64 {
+    match hist {
+        [] => unreachable_guess(),
+        [p] => p.k1 * (omega / p.omega),
+        [.., p2, p1] => {
+            if p1.omega == p2.omega {
+                p1.k1
+            } else {
+                p1.k1 + (p1.k1 - p2.k1) * ((omega - p1.omega) / (p1.omega - p2.omega))
+            }
+        }
+    }
+}
+
+#[inline]
+fn unreachable_guess() -> Complex64 {
+    // The path always starts with the in-vacuo root, so the history is never empty when a
+    // guess is needed; a NaN here would surface as NoConvergence, never as a wrong number.
+    Complex64::new(f64::NAN, f64::NAN)
+}
+
+/// Roots along a continuation in frequency, eqs. P41–P43, for the requested angular frequencies
+/// in any order (repeats allowed). Returns one result per requested ω, in the input order.
+///
+/// After a failure the following frequencies are not trusted: they are reported with the same
+/// error, since a continuation that lost the branch cannot say which root it would track.
+pub fn solve_curve(
+    system: &System,
+    omegas: &[f64],
+    opts: Continuation,
+) -> Vec<Result<Root, SolveError>> {
+    let mut out: Vec<Option<Result<Root, SolveError>>> = vec![None; omegas.len()];
+    let mut order: Vec<usize> = Vec::with_capacity(omegas.len());
+    for (i, &w) in omegas.iter().enumerate() {
+        if w.is_finite() && w > 0.0 {
+            order.push(i);
+        } else {
+            out[i] = Some(Err(SolveError::InvalidFrequency { omega: w }));
+        }
+    }
+    order.sort_by(|&i, &j| omegas[i].total_cmp(&omegas[j]));
+    if order.is_empty() {
+        return out.into_iter().map(|r| r.expect("filled")).collect();
+    }
+    let w_min = omegas[order[0]];
+    let w0 = (2.0 * std::f64::consts::PI * RAMP_START_HZ).min(w_min / 2.0);
+    let mut hist: Vec<PathPoint> = Vec::with_capacity(opts.ramp_points + order.len() + 4);
+    let mut failure: Option<SolveError> = None;
+
+    // Ramp: geometric points w0 … w_min (w_min itself excluded), P41.
+    let n = opts.ramp_points.max(1);
+    for j in 0..n {
+        let w = w0 * (w_min / w0).powf(j as f64 / n as f64);
+        let r = if hist.is_empty() {
+            solve_direct(system, w)
+        } else {
+            step_to(system, &mut hist, w)
+        };
+        match r {
+            Ok(root) => {
+                if hist.is_empty() {
+                    hist.push(PathPoint {
+                        omega: w,
+                        k1: root.k1,
+                    });
+                }
+            }
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        }
+    }
+    for &i in &order {
+        let w = omegas[i];
+        if let Some(e) = failure {
+            out[i] = Some(Err(e));
+            continue;
+        }
+        let r = step_to(system, &mut hist, w);
+        if let Err(e) = r {
+            failure = Some(e);
+        }
+        out[i] = Some(r);
+    }
+    out.into_iter().map(|r| r.expect("filled")).collect()
+}
+
+/// Advance the continuation to `target`, halving the step when Muller fails or the correction
+/// ratio (P43) exceeds [`CONTINUATION_RATIO_MAX`]. Pushes every accepted point onto `hist`.
+fn step_to(system: &System, hist: &mut Vec<PathPoint>, target: f64) -> Result<Root, SolveError> {
+    let last = hist[hist.len() - 1];
+    if target == last.omega {
+        // A repeated ω gives the previous root (P42).
+        return solve_from_guess(system, target, last.k1);
+    }
+    let mut halvings = 0u32;
+    let mut step = target - last.omega;
+    let mut last_ratio = f64::NAN;
+    loop {
+        let prev = hist[hist.len() - 1];
+        // Land exactly on the target when the remaining step is at most one step (plus rounding).
+        let w = if (target - prev.omega).abs() <= step.abs() * (1.0 + 1e-9) {
+            target
+        } else {
+            prev.omega + step
+        };
+        let guess = extrapolate(hist, w);
+        let attempt = solve_from_guess(system, w, guess);
+        let accepted = match attempt {
+            Ok(root) => {
+                // P43: ρ = |k − g| / |k − k_prev|, for n ≥ 2 and ω_n ≠ ω_{n−1}.
+                // Skipped when the step moved the root by less than rounding can resolve.
+                let moved = (root.k1 - prev.k1).norm();
+                let ratio = if hist.len() >= 2 && moved > RATIO_MIN_STEP_RTOL * root.k1.norm() {
+                    (root.k1 - guess).norm() / moved
+                } else {
+                    0.0
+                };
+                last_ratio = ratio;
+                if ratio <= CONTINUATION_RATIO_MAX {
+                    Some(root)
+                } else {
+                    None
+                }
+            }
+            Err(SolveError::WrongRoot { .. }) | Err(SolveError::NoConvergence { .. }) => None,
+            Err(e) => return Err(e),
+        };
+        match accepted {
+            Some(root) => {
+                hist.push(PathPoint {
+                    omega: w,
+                    k1: root.k1,
+                });
+                if w == target {
+                    return Ok(root);
+                }
+            }
+            None => {
+                halvings += 1;
+                if halvings > MAX_STEP_HALVINGS {
+                    return match attempt {
+                        Err(e) => Err(e),
+                        Ok(_) => Err(SolveError::BranchJump {
+                            omega: w,
+                            ratio: last_ratio,
+                        }),
+                    };
+                }
+                step = 0.5 * (w - prev.omega);
+            }
+        }
+    }
+}

@@ -1,0 +1,51 @@
+//! Unit conversions at the edges (spec C2, C6, C7). SI inside the library.
+
+use std::f64::consts::{LN_10, PI};
+
+/// Decibels per neper: 20/ln 10 = 8.685889638065035 (spec P2).
+pub const DB_PER_NP: f64 = 20.0 / LN_10;
+
+/// Attenuation in dB/m from Np/m, eq. P2.
+#[inline]
+pub fn np_to_db(att_np: f64) -> f64 {
+    DB_PER_NP * att_np
+}
+
+/// Attenuation in Np/m from dB/m, eq. P5.
+#[inline]
+pub fn db_to_np(att_db: f64) -> f64 {
+    att_db / DB_PER_NP
+}
+
+/// Angular frequency ω (rad/s) from a frequency in Hz.
+#[inline]
+pub fn hz_to_omega(f_hz: f64) -> f64 {
+    2.0 * PI * f_hz
+}
+
+/// Frequency in Hz from an angular frequency ω (rad/s).
+#[inline]
+pub fn omega_to_hz(omega: f64) -> f64 {
+    omega / (2.0 * PI)
+}
+
+/// Millimetres to metres.
+#[inline]
+pub fn mm_to_m(mm: f64) -> f64 {
+    mm * 1e-3
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Spec T14: att_dB = −8.685889638065035·Im k1 exactly, and the mapping P5.
+    #[test]
+    fn db_conversion_constant_and_round_trip() {
+        assert_eq!(DB_PER_NP, 8.685889638065035);
+        // Paper Table 2 row 1: 0.00544 Np/m is 0.047 dB/m.
+        assert!((np_to_db(0.00544) - 0.0472512).abs() < 1e-6);
+        assert!((db_to_np(np_to_db(0.0596)) - 0.0596).abs() < 1e-17);
+        assert!((omega_to_hz(hz_to_omega(496.9)) - 496.9).abs() < 1e-12);
+    }
+}
