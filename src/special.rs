@@ -30,11 +30,28 @@ pub enum SpecialError {
 /// evanescent ones (w < 0) get q = −i√|w|. Same as Kalkowski's `root_sign` [R12].
 #[inline]
 pub fn sqrt_plus(w: Complex64) -> Complex64 {
-    let r = w.sqrt();
+    let r = principal_sqrt(w);
     if r.re >= r.im {
         r
     } else {
         -r
+    }
+}
+
+/// Principal complex square root (Re ≥ 0; the cut on the negative real axis, where the sign of
+/// a zero imaginary part picks the side), by the hypot form (Kahan's algorithm without the
+/// polar round trip of `Complex::sqrt`, which costs an atan2, an exp and a sin/cos pair).
+#[inline]
+pub fn principal_sqrt(w: Complex64) -> Complex64 {
+    let (x, y) = (w.re, w.im);
+    if x == 0.0 && y == 0.0 {
+        return Complex64::new(0.0, y);
+    }
+    let t = ((x.abs() + x.hypot(y)) * 0.5).sqrt();
+    if x >= 0.0 {
+        Complex64::new(t, y / (2.0 * t))
+    } else {
+        Complex64::new(y.abs() / (2.0 * t), t.copysign(y))
     }
 }
 
@@ -77,7 +94,7 @@ pub fn psi(z2: Complex64) -> Result<Complex64, SpecialError> {
     if z2.norm() < PSI_SERIES_Z2 {
         return Ok(1.0 - z2 / 8.0 - z2 * z2 / 192.0);
     }
-    let z = z2.sqrt();
+    let z = principal_sqrt(z2);
     Ok(z * bessel_j_ratio(z)? * 0.5)
 }
 
@@ -189,6 +206,25 @@ mod tests {
         for (z2, want) in cases {
             let got = psi(z2).unwrap();
             assert!(rel(got, want) < 1e-13, "psi({z2}) = {got}, want {want}");
+        }
+    }
+
+    #[test]
+    fn principal_sqrt_agrees_with_num_complex() {
+        for &(x, y) in &[
+            (4.0, 0.0),
+            (-4.0, 0.0),
+            (-4.0, -0.0),
+            (3.0, -0.5),
+            (-2.0, -1.0),
+            (1e-3, 5.0),
+            (-1e-300, 1e-300),
+            (2.5e10, -3.0e9),
+            (0.0, -2.0),
+        ] {
+            let w = c(x, y);
+            let (a, b) = (principal_sqrt(w), w.sqrt());
+            assert!((a - b).norm() <= 1e-15 * b.norm(), "sqrt({w}) = {a} vs {b}");
         }
     }
 

@@ -153,6 +153,37 @@ impl Root {
     }
 }
 
+/// Stopping rule of Muller's method.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerance {
+    /// Stop when |dx| ≤ step_rtol·|x| (spec: [`MULLER_STEP_RTOL`]).
+    pub step_rtol: f64,
+    /// Also stop as soon as |F| ≤ residual_stop. The spec's rule is 0 (stop only on F = 0);
+    /// F is well conditioned on the s = 1 branch (k1·dF/dk1 = 2(1 + β₀) = O(1–30)), so
+    /// |F| ≤ 1e-12 bounds the relative error of k1 near 1e-12 and saves the confirming step.
+    pub residual_stop: f64,
+}
+
+impl Tolerance {
+    /// The spec's rule, §5.3 and §5.5: the reference precision.
+    pub const REFERENCE: Tolerance = Tolerance {
+        step_rtol: MULLER_STEP_RTOL,
+        residual_stop: 0.0,
+    };
+    /// For the inversion: stop at |dx| ≤ 1e-10|x| or |F| ≤ 1e-12, far below any measurement
+    /// noise yet smooth enough for finite-difference Jacobians with relative steps of 1e-6.
+    pub const FAST: Tolerance = Tolerance {
+        step_rtol: 1e-10,
+        residual_stop: 1e-12,
+    };
+}
+
+impl Default for Tolerance {
+    fn default() -> Self {
+        Tolerance::REFERENCE
+    }
+}
+
 /// Result of Muller's iteration before classification.
 struct MullerOut {
     k1: Complex64,
@@ -161,7 +192,7 @@ struct MullerOut {
 }
 
 /// Muller's method on F from the guess g, eq. P40 [R16].
-fn muller(ev: &Evaluator, g: Complex64) -> Result<MullerOut, SolveError> {
+fn muller(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
     let fail = |r: f64| SolveError::NoConvergence {
         omega: ev.omega,
         residual: r,
@@ -196,7 +227,7 @@ fn muller(ev: &Evaluator, g: Complex64) -> Result<MullerOut, SolveError> {
             return Err(fail(f64::NAN));
         }
         let f3 = f(x3)?;
-        if dx.norm() <= MULLER_STEP_RTOL * x3.norm() || f3 == Complex64::new(0.0, 0.0) {
+        if dx.norm() <= tol.step_rtol * x3.norm() || f3.norm() <= tol.residual_stop {
             let r = f3.norm();
             if r > RESIDUAL_ATOL {
                 return Err(fail(r));
@@ -256,36 +287,55 @@ pub fn out_of_validity(system: &System, omega: f64) -> bool {
 /// Solve at one frequency from a guess (no continuation). Used by continuation and for
 /// direct solves; classification of the result as in §5.6.
 pub fn solve_from_guess(system: &System, omega: f64, guess: Complex64) -> Result<Root, SolveError> {
+    solve_from_guess_tol(system, omega, guess, Tolerance::REFERENCE)
+}
+
+/// [`solve_from_guess`] with another stopping rule. The residual acceptance [`RESIDUAL_ATOL`]
+/// is unchanged.
+pub fn solve_from_guess_tol(
+    system: &System,
+    omega: f64,
+    guess: Complex64,
+    tol: Tolerance,
+) -> Result<Root, SolveError> {
     if !(omega.is_finite() && omega > 0.0) {
         return Err(SolveError::InvalidFrequency { omega });
     }
     let ev = Evaluator::new(system, omega);
-    let out = muller(&ev, guess)?;
+    let out = muller(&ev, guess, tol)?;
     classify(system, &ev, out)
 }
 
 /// Solve directly at one frequency from the in-vacuo root (P39), without continuation.
 /// Fine for iron in soft soil; for plastics in stiff soil prefer [`solve_curve`].
 pub fn solve_direct(system: &System, omega: f64) -> Result<Root, SolveError> {
+    solve_direct_tol(system, omega, Tolerance::REFERENCE)
+}
+
+fn solve_direct_tol(system: &System, omega: f64, tol: Tolerance) -> Result<Root, SolveError> {
     if !(omega.is_finite() && omega > 0.0) {
         return Err(SolveError::InvalidFrequency { omega });
     }
     let ev = Evaluator::new(system, omega);
     let g = ev.in_vacuo_root();
-    classify(system, &ev, muller(&ev, g)?)
+    classify(system, &ev, muller(&ev, g, tol)?)
 }
 
 /// Options of the frequency continuation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Continuation {
     /// Number of geometric ramp points below the lowest requested frequency (P41).
+    /// 0 means no ramp: the lowest frequency is solved directly from its in-vacuo root.
     pub ramp_points: usize,
+    /// Muller's stopping rule (default: the reference's, [`Tolerance::REFERENCE`]).
+    pub tolerance: Tolerance,
 }
 
 impl Default for Continuation {
     fn default() -> Self {
         Self {
             ramp_points: RAMP_POINTS,
+            tolerance: Tolerance::REFERENCE,
         }
     }
 }
@@ -348,13 +398,14 @@ pub fn solve_curve(
     let mut failure: Option<SolveError> = None;
 
     // Ramp: geometric points w0 … w_min (w_min itself excluded), P41.
-    let n = opts.ramp_points.max(1);
+    let n = opts.ramp_points;
+    let tol = opts.tolerance;
     for j in 0..n {
         let w = w0 * (w_min / w0).powf(j as f64 / n as f64);
         let r = if hist.is_empty() {
-            solve_direct(system, w)
+            solve_direct_tol(system, w, tol)
         } else {
-            step_to(system, &mut hist, w)
+            step_to(system, &mut hist, w, tol)
         };
         match r {
             Ok(root) => {
@@ -377,7 +428,17 @@ pub fn solve_curve(
             out[i] = Some(Err(e));
             continue;
         }
-        let r = step_to(system, &mut hist, w);
+        let r = if hist.is_empty() {
+            // No ramp: the lowest requested frequency straight from its in-vacuo root.
+            solve_direct_tol(system, w, tol).inspect(|root| {
+                hist.push(PathPoint {
+                    omega: w,
+                    k1: root.k1,
+                })
+            })
+        } else {
+            step_to(system, &mut hist, w, tol)
+        };
         if let Err(e) = r {
             failure = Some(e);
         }
@@ -396,17 +457,22 @@ pub fn solve_curve(
 /// after a long ramp step (the 29-point geometric ramp grows ω by 19 % a step; for the MDPE
 /// pipe at 800 Hz ρ = 0.11 there). A midpoint on another branch would show up as a persisting
 /// ratio at the target, and so as a `BranchJump`, never as a silent wrong root.
-fn step_to(system: &System, hist: &mut Vec<PathPoint>, target: f64) -> Result<Root, SolveError> {
+fn step_to(
+    system: &System,
+    hist: &mut Vec<PathPoint>,
+    target: f64,
+    tol: Tolerance,
+) -> Result<Root, SolveError> {
     let last = hist[hist.len() - 1];
     if target == last.omega {
         // A repeated ω gives the previous root (P42).
-        return solve_from_guess(system, target, last.k1);
+        return solve_from_guess_tol(system, target, last.k1, tol);
     }
     let mut halvings = 0u32;
     loop {
         let prev = hist[hist.len() - 1];
         let guess = extrapolate(hist, target);
-        let attempt = solve_from_guess(system, target, guess);
+        let attempt = solve_from_guess_tol(system, target, guess, tol);
         let mut ratio = f64::NAN;
         match attempt {
             Ok(root) => {
@@ -443,7 +509,7 @@ fn step_to(system: &System, hist: &mut Vec<PathPoint>, target: f64) -> Result<Ro
                 };
             }
             let m = prev.omega + frac * (target - prev.omega);
-            if let Ok(r) = solve_from_guess(system, m, extrapolate(hist, m)) {
+            if let Ok(r) = solve_from_guess_tol(system, m, extrapolate(hist, m), tol) {
                 hist.push(PathPoint { omega: m, k1: r.k1 });
                 break;
             }
