@@ -1,3 +1,4 @@
 //! pipewave: the leak-noise wavenumber of a buried water pipe, and the inversion of the soil
 //! around it from field measurements.
+pub mod optimize;
 pub mod special;
