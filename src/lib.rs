@@ -2,6 +2,7 @@
 //! around it from field measurements.
 pub mod bench;
 pub mod forward;
+pub mod optimize;
 pub mod physics;
 pub mod special;
 pub mod units;
