@@ -11,7 +11,7 @@
 //! evaluated at the trial point, it is rejected and `λ` grows.
 
 use super::linalg::{jt_vec, jtj, solve_spd};
-use super::{invalid, Bounds, OptimizeError};
+use super::{invalid, Bounds, Objective, OptimizeError};
 
 /// A nonlinear least-squares problem: `n_residuals` residuals of `n_params` parameters.
 pub trait LeastSquares {
@@ -34,6 +34,27 @@ impl<T: LeastSquares + ?Sized> LeastSquares for &T {
     }
     fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
         (**self).residuals(x, out)
+    }
+}
+
+/// Adapter presenting a least-squares problem as an [`Objective`] whose value is the sum
+/// of squared residuals (+∞ where the residuals cannot be evaluated), so the same problem
+/// can be searched globally by differential evolution and then refined by
+/// [`LevenbergMarquardt`].
+#[derive(Debug, Clone, Copy)]
+pub struct SumOfSquares<P>(pub P);
+
+impl<P: LeastSquares> Objective for SumOfSquares<P> {
+    fn dim(&self) -> usize {
+        self.0.n_params()
+    }
+    fn value(&self, x: &[f64]) -> f64 {
+        let mut r = vec![0.0; self.0.n_residuals()];
+        if eval_ok(&self.0, x, &mut r) {
+            sum_sq(&r)
+        } else {
+            f64::INFINITY
+        }
     }
 }
 
@@ -503,4 +524,326 @@ impl LevenbergMarquardt {
 
 fn sum_sq(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::{Cell, RefCell};
+
+    use super::*;
+
+    /// `y = a exp(−b t) + c` sampled at `t = 0, 0.5, …, 10`.
+    struct ExpFit {
+        t: Vec<f64>,
+        y: Vec<f64>,
+    }
+
+    impl ExpFit {
+        fn new(p: [f64; 3]) -> Self {
+            let t: Vec<f64> = (0..=20).map(|k| 0.5 * k as f64).collect();
+            let y = t.iter().map(|&t| Self::model(&p, t)).collect();
+            Self { t, y }
+        }
+        fn model(p: &[f64], t: f64) -> f64 {
+            p[0] * (-p[1] * t).exp() + p[2]
+        }
+        fn analytic_jacobian(&self, p: &[f64]) -> Vec<f64> {
+            self.t
+                .iter()
+                .flat_map(|&t| {
+                    let e = (-p[1] * t).exp();
+                    [e, -p[0] * t * e, 1.0]
+                })
+                .collect()
+        }
+    }
+
+    impl LeastSquares for ExpFit {
+        fn n_params(&self) -> usize {
+            3
+        }
+        fn n_residuals(&self) -> usize {
+            self.t.len()
+        }
+        fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+            for ((o, &t), &y) in out.iter_mut().zip(&self.t).zip(&self.y) {
+                *o = Self::model(x, t) - y;
+            }
+            true
+        }
+    }
+
+    struct Rosenbrock;
+
+    impl LeastSquares for Rosenbrock {
+        fn n_params(&self) -> usize {
+            2
+        }
+        fn n_residuals(&self) -> usize {
+            2
+        }
+        fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+            out[0] = 10.0 * (x[1] - x[0] * x[0]);
+            out[1] = 1.0 - x[0];
+            true
+        }
+    }
+
+    #[test]
+    fn recovers_exponential_parameters_exactly() {
+        let truth = [2.5, 0.7, 0.3];
+        let p = ExpFit::new(truth);
+        for scheme in [FiniteDifference::Forward, FiniteDifference::Central] {
+            let lm = LevenbergMarquardt::new().finite_difference(scheme);
+            let r = lm.minimize(&p, &[1.0, 0.2, 0.0], None).unwrap();
+            for (x, t) in r.x.iter().zip(truth) {
+                assert!(
+                    (x - t).abs() < 1e-8,
+                    "{scheme:?}: {:?} ({:?})",
+                    r.x,
+                    r.stop_reason
+                );
+            }
+            assert!(r.cost < 1e-18, "{}", r.cost);
+            assert!(r.iterations < 50);
+            assert_eq!(r.jacobian.len(), 21 * 3);
+            // The returned Jacobian is the one at the optimum.
+            let exact = p.analytic_jacobian(&r.x);
+            for (a, e) in r.jacobian.iter().zip(&exact) {
+                assert!((a - e).abs() < 1e-5 * (1.0 + e.abs()));
+            }
+        }
+    }
+
+    #[test]
+    fn solves_rosenbrock_least_squares() {
+        let r = LevenbergMarquardt::new()
+            .minimize(&Rosenbrock, &[-1.2, 1.0], None)
+            .unwrap();
+        assert!(
+            (r.x[0] - 1.0).abs() < 1e-8 && (r.x[1] - 1.0).abs() < 1e-8,
+            "{:?}",
+            r
+        );
+        assert!(r.cost < 1e-16);
+    }
+
+    /// `y = a t + c` with data from `a = 3, c = 1`; records every evaluated point.
+    struct Line {
+        points: RefCell<Vec<Vec<f64>>>,
+    }
+
+    impl LeastSquares for Line {
+        fn n_params(&self) -> usize {
+            2
+        }
+        fn n_residuals(&self) -> usize {
+            5
+        }
+        fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+            self.points.borrow_mut().push(x.to_vec());
+            for (k, o) in out.iter_mut().enumerate() {
+                let t = k as f64;
+                *o = x[0] * t + x[1] - (3.0 * t + 1.0);
+            }
+            true
+        }
+    }
+
+    #[test]
+    fn respects_bounds_and_ends_on_the_active_bound() {
+        let p = Line {
+            points: RefCell::new(Vec::new()),
+        };
+        let b = Bounds::from_pairs(&[(0.0, 2.0), (-10.0, 10.0)]).unwrap();
+        for scheme in [FiniteDifference::Forward, FiniteDifference::Central] {
+            p.points.borrow_mut().clear();
+            let r = LevenbergMarquardt::new()
+                .finite_difference(scheme)
+                .minimize(&p, &[0.5, 0.0], Some(&b))
+                .unwrap();
+            assert!(p.points.borrow().iter().all(|x| b.contains(x)));
+            // With a = 2 fixed, the best c is mean(y − 2t) = mean(t + 1) = 3.
+            assert_eq!(r.x[0], 2.0, "{r:?}");
+            assert!((r.x[1] - 3.0).abs() < 1e-8, "{r:?}");
+            assert!(b.contains(&r.x));
+        }
+        // A start outside the box is projected onto it.
+        let r = LevenbergMarquardt::new()
+            .minimize(&p, &[7.0, 0.0], Some(&b))
+            .unwrap();
+        assert_eq!(r.x[0], 2.0);
+    }
+
+    /// `r = exp(x) − e³`, which cannot be evaluated for `x > 5`.
+    struct Fragile {
+        failures: Cell<usize>,
+    }
+
+    impl LeastSquares for Fragile {
+        fn n_params(&self) -> usize {
+            1
+        }
+        fn n_residuals(&self) -> usize {
+            1
+        }
+        fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+            if x[0] > 5.0 {
+                self.failures.set(self.failures.get() + 1);
+                return false;
+            }
+            out[0] = x[0].exp() - 3f64.exp();
+            true
+        }
+    }
+
+    #[test]
+    fn failed_evaluations_are_rejected_steps() {
+        let p = Fragile {
+            failures: Cell::new(0),
+        };
+        // From x = 0 the Gauss–Newton step (≈ +19) lands where the model fails.
+        let r = LevenbergMarquardt::new()
+            .minimize(&p, &[0.0], None)
+            .unwrap();
+        assert!(p.failures.get() > 0);
+        assert!((r.x[0] - 3.0).abs() < 1e-9, "{r:?}");
+        // Not evaluable at the start: an error, not a result.
+        assert_eq!(
+            LevenbergMarquardt::new().minimize(&p, &[6.0], None),
+            Err(OptimizeError::StartNotEvaluable)
+        );
+    }
+
+    #[test]
+    fn finite_difference_jacobian_accuracy_and_bounds() {
+        let p = ExpFit::new([2.5, 0.7, 0.3]);
+        let x = [2.0, 0.5, 0.1];
+        let mut r0 = vec![0.0; 21];
+        p.residuals(&x, &mut r0);
+        let exact = p.analytic_jacobian(&x);
+        let err = |j: &[f64]| {
+            j.iter()
+                .zip(&exact)
+                .map(|(a, e)| (a - e).abs() / (1.0 + e.abs()))
+                .fold(0.0, f64::max)
+        };
+        let mut j = vec![0.0; 63];
+        let n = jacobian_fd(
+            &p,
+            &x,
+            &r0,
+            None,
+            FiniteDifference::Forward,
+            FD_REL_STEP_FORWARD,
+            &mut j,
+        )
+        .unwrap();
+        assert_eq!(n, 3);
+        assert!(err(&j) < 1e-6, "{}", err(&j));
+        let n = jacobian_fd(
+            &p,
+            &x,
+            &r0,
+            None,
+            FiniteDifference::Central,
+            FD_REL_STEP_CENTRAL,
+            &mut j,
+        )
+        .unwrap();
+        assert_eq!(n, 6);
+        assert!(err(&j) < 1e-9, "{}", err(&j));
+        // At the upper bound of every parameter: steps go inwards, still accurate.
+        let b = Bounds::from_pairs(&[(0.0, 2.0), (0.0, 0.5), (-1.0, 0.1)]).unwrap();
+        for (scheme, tol) in [
+            (FiniteDifference::Forward, 1e-6),
+            (FiniteDifference::Central, 1e-8),
+        ] {
+            let rec = RecordingFit {
+                inner: &p,
+                points: RefCell::new(Vec::new()),
+            };
+            jacobian_fd(
+                &rec,
+                &x,
+                &r0,
+                Some(&b),
+                scheme,
+                scheme.default_rel_step(),
+                &mut j,
+            )
+            .unwrap();
+            assert!(rec.points.borrow().iter().all(|pt| b.contains(pt)));
+            assert!(err(&j) < tol, "{scheme:?}: {}", err(&j));
+        }
+        assert!(jacobian_fd(&p, &x, &r0, None, FiniteDifference::Forward, 0.0, &mut j).is_err());
+        assert!(jacobian_fd(
+            &p,
+            &x,
+            &r0,
+            None,
+            FiniteDifference::Forward,
+            1e-8,
+            &mut j[..5]
+        )
+        .is_err());
+    }
+
+    struct RecordingFit<'a> {
+        inner: &'a ExpFit,
+        points: RefCell<Vec<Vec<f64>>>,
+    }
+
+    impl LeastSquares for RecordingFit<'_> {
+        fn n_params(&self) -> usize {
+            3
+        }
+        fn n_residuals(&self) -> usize {
+            self.inner.n_residuals()
+        }
+        fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+            self.points.borrow_mut().push(x.to_vec());
+            self.inner.residuals(x, out)
+        }
+    }
+
+    #[test]
+    fn setters_reject_bad_input() {
+        let lm = LevenbergMarquardt::new();
+        assert!(lm.clone().max_iterations(0).is_err());
+        assert!(lm.clone().xtol(-1.0).is_err());
+        assert!(lm.clone().ftol(f64::NAN).is_err());
+        assert!(lm.clone().gtol(f64::INFINITY).is_err());
+        assert!(lm.clone().fd_rel_step(0.0).is_err());
+        assert!(lm.clone().fd_rel_step(0.5).is_err());
+        assert!(lm.clone().initial_damping(0.0).is_err());
+        assert!(lm.clone().max_iterations(3).is_ok());
+        assert!(matches!(
+            lm.minimize(&Rosenbrock, &[1.0], None),
+            Err(OptimizeError::DimensionMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn iteration_limit_is_reported() {
+        let r = LevenbergMarquardt::new()
+            .max_iterations(2)
+            .unwrap()
+            .minimize(&Rosenbrock, &[-1.2, 1.0], None)
+            .unwrap();
+        assert_eq!(r.stop_reason, LmStopReason::MaxIterations);
+        assert_eq!(r.iterations, 2);
+    }
+
+    #[test]
+    fn sum_of_squares_objective() {
+        let f = SumOfSquares(Rosenbrock);
+        assert_eq!(f.dim(), 2);
+        assert_eq!(f.value(&[1.0, 1.0]), 0.0);
+        assert_eq!(f.value(&[0.0, 0.0]), 1.0);
+        let g = SumOfSquares(Fragile {
+            failures: Cell::new(0),
+        });
+        assert_eq!(g.value(&[6.0]), f64::INFINITY);
+    }
 }

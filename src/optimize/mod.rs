@@ -22,6 +22,7 @@ pub mod lm;
 pub use de::{DeMethod, DeResult, DifferentialEvolution};
 pub use lm::{
     jacobian_fd, FiniteDifference, LeastSquares, LevenbergMarquardt, LmResult, LmStopReason,
+    SumOfSquares,
 };
 
 use thiserror::Error;

@@ -19,6 +19,10 @@
 //!   `|Δf|`-weighted arithmetic mean of the successful `CR` and the weighted Lehmer mean
 //!   `Σ w F² / Σ w F` of the successful `F`.
 //!
+//! After each generation the driver may shrink the population linearly in the evaluations
+//! used, dropping the worst members and resizing the archive (L-SHADE's linear population
+//! size reduction, Tanabe & Fukunaga 2014).
+//!
 //! The generation is synchronous: trials are built from the population at its start.
 //! The initial population is a Latin hypercube (one point per stratum in every
 //! dimension), which covers the box more evenly than independent uniform draws.
@@ -61,6 +65,7 @@ pub(crate) struct State {
     next_slot: usize,
     archive: Vec<f64>,
     archive_cap: usize,
+    archive_rate: f64,
     pbest_max: f64,
 }
 
@@ -72,8 +77,28 @@ impl State {
             next_slot: 0,
             archive: Vec::new(),
             archive_cap: (cfg.archive_rate * np as f64).round() as usize,
+            archive_rate: cfg.archive_rate,
             pbest_max: cfg.pbest_max,
         }
+    }
+}
+
+impl State {
+    /// Removes random archive members until the archive fits its capacity.
+    fn trim_archive<R: Rng + ?Sized>(&mut self, dim: usize, rng: &mut R) {
+        while self.archive.len() / dim > self.archive_cap {
+            let n = self.archive.len() / dim;
+            let k = rng.gen_range(0..n);
+            // Swap-remove row k.
+            self.archive.copy_within((n - 1) * dim..n * dim, k * dim);
+            self.archive.truncate((n - 1) * dim);
+        }
+    }
+
+    /// Resizes the archive capacity to `archive_rate · np` after a population reduction.
+    pub(crate) fn shrink_archive<R: Rng + ?Sized>(&mut self, np: usize, dim: usize, rng: &mut R) {
+        self.archive_cap = (self.archive_rate * np as f64).round() as usize;
+        self.trim_archive(dim, rng);
     }
 }
 
@@ -170,16 +195,7 @@ pub(crate) fn generation<O: Objective + ?Sized, R: Rng + ?Sized>(
             pop.x[i * dim..(i + 1) * dim].copy_from_slice(&trials[i * dim..(i + 1) * dim]);
         }
     }
-    // Trim the archive to capacity by removing random members.
-    while st.archive.len() / dim > st.archive_cap {
-        let n = st.archive.len() / dim;
-        let k = rng.gen_range(0..n);
-        // Swap-remove row k.
-        for q in 0..dim {
-            st.archive[k * dim + q] = st.archive[(n - 1) * dim + q];
-        }
-        st.archive.truncate((n - 1) * dim);
-    }
+    st.trim_archive(dim, rng);
     if !s_f.is_empty() {
         let any_inf = s_df.iter().any(|d: &f64| d.is_infinite());
         let weights: Vec<f64> = if any_inf {
