@@ -2,7 +2,9 @@
 //! around it from field measurements.
 pub mod bench;
 pub mod forward;
+pub mod invert;
 pub mod optimize;
 pub mod physics;
 pub mod special;
+pub mod synth;
 pub mod units;

@@ -49,3 +49,34 @@ mod tests {
         assert!((omega_to_hz(hz_to_omega(496.9)) - 496.9).abs() < 1e-12);
     }
 }
+
+/// `x` with `digits` significant digits, in plain or scientific notation as fits (for
+/// messages and reports).
+pub fn sig(x: f64, digits: usize) -> String {
+    if !x.is_finite() {
+        return x.to_string();
+    }
+    if x == 0.0 {
+        return "0".to_string();
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..6).contains(&e) {
+        let decimals = (digits as i32 - 1 - e).max(0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.prec$e}", prec = digits.saturating_sub(1))
+    }
+}
+
+#[cfg(test)]
+mod sig_tests {
+    use super::sig;
+
+    #[test]
+    fn significant_digits() {
+        assert_eq!(sig(4.79e7, 3), "4.79e7");
+        assert_eq!(sig(0.3326, 3), "0.333");
+        assert_eq!(sig(1283.846, 5), "1283.8");
+        assert_eq!(sig(0.0, 3), "0");
+    }
+}

@@ -5,7 +5,7 @@
 //! modulus and density by Wood's equation (E3, eqs. P60–P61), wall thinning the effective wall
 //! thickness (E4, eq. P62), and the full model the model variant (E6, eq. P33).
 
-use super::inputs::{check_range, Fluid, InputError, Pipe};
+use super::inputs::{check_range, Fluid, InputError, Model, Pipe, System};
 
 /// Specific gas constant of air, J/(kg·K) (spec P61).
 pub const R_AIR: f64 = 287.05;
@@ -125,4 +125,144 @@ mod tests {
         );
         assert!(AirContent::with_fraction(0.05).is_err());
     }
+}
+
+/// The effects that extend the model, by their canonical names (interface.md, "Effects").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Effect {
+    /// E1: soil material loss η_m.
+    SoilDamping,
+    /// E3: free air in the water, volume fraction φ.
+    AirInWater,
+    /// E4: effective / nominal wall thickness r_h.
+    WallThinning,
+    /// E2: pipe wall loss factor η_p above the material's typical value.
+    PipeLoss,
+    /// E6: the `full` model in place of `seed` (no parameter).
+    FullModel,
+}
+
+impl Effect {
+    /// Every effect, in the interface's order.
+    pub const ALL: [Effect; 5] = [
+        Effect::SoilDamping,
+        Effect::AirInWater,
+        Effect::WallThinning,
+        Effect::PipeLoss,
+        Effect::FullModel,
+    ];
+
+    /// Canonical name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::SoilDamping => "soil_damping",
+            Effect::AirInWater => "air_in_water",
+            Effect::WallThinning => "wall_thinning",
+            Effect::PipeLoss => "pipe_loss",
+            Effect::FullModel => "full_model",
+        }
+    }
+
+    /// The parameter it adds, its range and the value that means "effect absent"; `None` for
+    /// `full_model`, which is a switch.
+    pub fn parameter(self) -> Option<EffectParameter> {
+        let p = |name, lower, upper, neutral| {
+            Some(EffectParameter {
+                name,
+                lower,
+                upper,
+                neutral,
+            })
+        };
+        match self {
+            Effect::SoilDamping => p("soil_loss_factor", 0.0, 0.3, 0.0),
+            Effect::AirInWater => p("air_fraction", 0.0, MAX_AIR_FRACTION, 0.0),
+            Effect::WallThinning => p("wall_thickness_ratio", MIN_WALL_RATIO, 1.0, 1.0),
+            Effect::PipeLoss => p("pipe_loss_factor", 0.0, 0.3, f64::NAN),
+            Effect::FullModel => None,
+        }
+    }
+
+    /// Physical meaning, for reports.
+    pub fn meaning(self) -> &'static str {
+        match self {
+            Effect::SoilDamping => "hysteretic loss in the soil skeleton (complex Lame moduli)",
+            Effect::AirInWater => "free air bubbles softening the water (Wood's equation)",
+            Effect::WallThinning => "corrosion or graphitisation thinning the load-bearing wall",
+            Effect::PipeLoss => "wall material and joint damping above the material's typical value",
+            Effect::FullModel => "exact radial fluid loading and axial wall inertia (full model)",
+        }
+    }
+
+    /// Apply the effect with parameter `value` to a system (the base is unchanged).
+    /// `full_model` ignores `value`.
+    pub fn apply(self, system: &System, value: f64) -> Result<System, InputError> {
+        let mut s = *system;
+        match self {
+            Effect::SoilDamping => {
+                s.soil.loss_factor = check_range("soil loss factor", value, 0.0, 0.3, "0 - 0.3")?;
+            }
+            Effect::AirInWater => {
+                s.fluid = AirContent::with_fraction(value)?.mix(&system.fluid);
+            }
+            Effect::WallThinning => s.pipe = thinned(&system.pipe, value)?,
+            Effect::PipeLoss => {
+                s.pipe.loss_factor = check_range("pipe loss factor", value, 0.0, 0.3, "0 - 0.3")?;
+            }
+            Effect::FullModel => s.model = Model::Full,
+        }
+        Ok(s)
+    }
+}
+
+/// The parameter an effect adds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EffectParameter {
+    /// Column name in `fits` (without `_std`).
+    pub name: &'static str,
+    /// Lower bound.
+    pub lower: f64,
+    /// Upper bound.
+    pub upper: f64,
+    /// The value at which the effect is absent (NaN: the material's own value).
+    pub neutral: f64,
+}
+
+impl std::fmt::Display for Effect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Effect {
+    type Err = InputError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let t = s.trim().to_ascii_lowercase();
+        Effect::ALL
+            .into_iter()
+            .find(|e| e.name() == t)
+            .ok_or_else(|| InputError::Unknown {
+                what: "effect",
+                value: s.to_string(),
+                expected: "soil_damping, air_in_water, wall_thinning, pipe_loss, full_model",
+            })
+    }
+}
+
+/// Parse a comma-separated list of effect names (empty text: none). Sorted, without repeats.
+pub fn parse_effects(text: &str) -> Result<Vec<Effect>, InputError> {
+    let mut v: Vec<Effect> = text
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(str::parse)
+        .collect::<Result<_, _>>()?;
+    v.sort();
+    v.dedup();
+    Ok(v)
+}
+
+/// Comma-separated names (the `fits.effects` column).
+pub fn effects_text(effects: &[Effect]) -> String {
+    effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(",")
 }

@@ -1,0 +1,506 @@
+//! The inversion problem of one segment: the measurements, the parameter space and the
+//! objective (spec §7.1–7.2 for the paper's method; chi-square for the default).
+
+use std::cell::Cell;
+
+use num_complex::Complex64;
+
+use crate::optimize::{Bounds, LeastSquares, Objective, OptimizeError};
+use crate::physics::effects::Effect;
+use crate::physics::inputs::{check_range, MAX_SOIL_POISSON};
+use crate::physics::solver::{solve_curve, Continuation, Tolerance};
+use crate::physics::{
+    ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System,
+};
+
+/// One measured wavenumber (spec C6: k = k_re − i·att).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measurement {
+    /// Angular frequency ω, rad/s.
+    pub omega: f64,
+    /// Re k, rad/m (> 0).
+    pub k_re: f64,
+    /// Attenuation −Im k, Np/m (≥ 0).
+    pub attenuation: f64,
+    /// One standard deviation of `k_re`, rad/m.
+    pub k_re_std: Option<f64>,
+    /// One standard deviation of `attenuation`, Np/m.
+    pub attenuation_std: Option<f64>,
+}
+
+impl Measurement {
+    /// A checked measurement.
+    pub fn new(
+        omega: f64,
+        k_re: f64,
+        attenuation: f64,
+        k_re_std: Option<f64>,
+        attenuation_std: Option<f64>,
+    ) -> Result<Self, InputError> {
+        check_range("angular frequency (rad/s)", omega, 1e-6, 1e7, "> 0")?;
+        check_range("k_re (rad/m)", k_re, 1e-9, 1e4, "> 0")?;
+        check_range("attenuation (Np/m)", attenuation, 0.0, 1e3, ">= 0")?;
+        for (name, s) in [("k_re_std", k_re_std), ("attenuation_std", attenuation_std)] {
+            if let Some(v) = s {
+                check_range(name, v, 1e-300, 1e6, "> 0")?;
+            }
+        }
+        Ok(Self {
+            omega,
+            k_re,
+            attenuation,
+            k_re_std,
+            attenuation_std,
+        })
+    }
+
+    /// Phase speed ω/k_re, m/s.
+    pub fn phase_speed(&self) -> f64 {
+        self.omega / self.k_re
+    }
+}
+
+/// Everything known about a segment before the fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentData {
+    /// The water (with the inventory's overrides).
+    pub fluid: Fluid,
+    /// The pipe wall (nominal thickness, material values or overrides).
+    pub pipe: Pipe,
+    /// Soil density ρ_m from a soil test, kg/m³ (fixed, never fitted: spec §7.5).
+    pub soil_density: f64,
+    /// The material, when known (used to judge whether measured speeds are plausible).
+    pub material: Option<Material>,
+    /// The field measurements.
+    pub measurements: Vec<Measurement>,
+}
+
+/// The inversion method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Method {
+    /// Chi-square (or relative least squares) over (log10 E_m, ν_m, ξ, effects), SHADE with a
+    /// Levenberg–Marquardt polish, restarts for a multiple-minima check.
+    #[default]
+    Default,
+    /// The paper's algorithm exactly (spec §7.1–7.3).
+    Paper,
+}
+
+impl Method {
+    /// Name used in the database and the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Default => "default",
+            Method::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = InputError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => Ok(Method::Default),
+            "paper" => Ok(Method::Paper),
+            _ => Err(InputError::Unknown {
+                what: "method",
+                value: s.to_string(),
+                expected: "default, paper",
+            }),
+        }
+    }
+}
+
+/// Paper weights of the objective (P53).
+pub const PAPER_W_RE: f64 = 1.0;
+/// Paper weight of the attenuation term (P53).
+pub const PAPER_W_IM: f64 = 5.0;
+/// Objective value of a failed forward solve in the paper's objective (the reference's 1e3,
+/// spec §5.6).
+pub const FAILED_SOLVE_OBJECTIVE: f64 = 1e3;
+/// Paper bounds on E_m, Pa (P51).
+pub const E_BOUNDS: (f64, f64) = (1e3, 1e10);
+/// Relative deviation from the in-vacuo root above which the fast evaluation (no ramp) is not
+/// trusted at the lowest frequency and the continuation ramp is used instead.
+pub const DIRECT_START_MAX_DEVIATION: f64 = 0.1;
+/// Ramp used when the direct start is not trusted (the reference inversion's 8 points).
+pub const INVERSION_RAMP_POINTS: usize = 8;
+
+/// How a coordinate of the search space maps to the physical parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scale {
+    /// The coordinate is the parameter.
+    Linear,
+    /// The coordinate is log10 of the parameter.
+    Log10,
+}
+
+/// What a coordinate of the search space is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Param {
+    /// Soil Young's modulus E_m, Pa.
+    SoilModulus,
+    /// Soil Poisson's ratio ν_m.
+    SoilPoisson,
+    /// Contact coefficient ξ.
+    Contact,
+    /// An effect's parameter.
+    Effect(Effect),
+}
+
+impl Param {
+    /// Column name in `fits`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Param::SoilModulus => "soil_youngs_modulus_pa",
+            Param::SoilPoisson => "soil_poisson",
+            Param::Contact => "contact",
+            Param::Effect(e) => e.parameter().map(|p| p.name).unwrap_or("none"),
+        }
+    }
+}
+
+/// One coordinate of the search space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamSpec {
+    /// What it is.
+    pub param: Param,
+    /// How the coordinate maps to the parameter.
+    pub scale: Scale,
+    /// Lower bound of the coordinate.
+    pub lower: f64,
+    /// Upper bound of the coordinate.
+    pub upper: f64,
+}
+
+impl ParamSpec {
+    /// Physical value of coordinate `x`.
+    pub fn value(&self, x: f64) -> f64 {
+        match self.scale {
+            Scale::Linear => x,
+            Scale::Log10 => 10f64.powf(x),
+        }
+    }
+    /// One-sigma error of the physical value from that of the coordinate (first order).
+    pub fn value_std(&self, x: f64, sx: f64) -> f64 {
+        match self.scale {
+            Scale::Linear => sx,
+            Scale::Log10 => 10f64.powf(x) * std::f64::consts::LN_10 * sx,
+        }
+    }
+    /// Coordinate of a physical value.
+    pub fn coordinate(&self, v: f64) -> f64 {
+        match self.scale {
+            Scale::Linear => v,
+            Scale::Log10 => v.log10(),
+        }
+    }
+}
+
+/// Lower bound of log10 of the air fraction: φ = 1e-7 softens water by 0.06 %, i.e. no air.
+pub const AIR_LOG10_MIN: f64 = -7.0;
+
+/// The search space for a method and a set of effects.
+pub fn parameter_space(method: Method, effects: &[Effect]) -> Vec<ParamSpec> {
+    let mut v = Vec::new();
+    match method {
+        Method::Paper => {
+            // P51: E linear; ν ≤ 0.499 (the reference's choice: 0.5 is singular).
+            v.push(ParamSpec {
+                param: Param::SoilModulus,
+                scale: Scale::Linear,
+                lower: E_BOUNDS.0,
+                upper: E_BOUNDS.1,
+            });
+        }
+        Method::Default => v.push(ParamSpec {
+            param: Param::SoilModulus,
+            scale: Scale::Log10,
+            lower: E_BOUNDS.0.log10(),
+            upper: E_BOUNDS.1.log10(),
+        }),
+    }
+    v.push(ParamSpec {
+        param: Param::SoilPoisson,
+        scale: Scale::Linear,
+        lower: 0.0,
+        upper: MAX_SOIL_POISSON,
+    });
+    v.push(ParamSpec {
+        param: Param::Contact,
+        scale: Scale::Linear,
+        lower: 0.0,
+        upper: 1.0,
+    });
+    for &e in effects {
+        if let Some(p) = e.parameter() {
+            let spec = if e == Effect::AirInWater {
+                ParamSpec {
+                    param: Param::Effect(e),
+                    scale: Scale::Log10,
+                    lower: AIR_LOG10_MIN,
+                    upper: p.upper.log10(),
+                }
+            } else {
+                ParamSpec {
+                    param: Param::Effect(e),
+                    scale: Scale::Linear,
+                    lower: p.lower,
+                    upper: p.upper,
+                }
+            };
+            v.push(spec);
+        }
+    }
+    v
+}
+
+/// Which misfit the default method minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weighting {
+    /// Residuals divided by the measurement standard deviations: chi-square.
+    ChiSquare,
+    /// No standard deviations: relative residuals with the paper's weights, w_re = 1 on
+    /// (model − measured)/measured for Re k and w_im = 5 for the attenuation (P52–P53),
+    /// squared and summed.
+    Relative,
+}
+
+/// The inversion of one segment as an optimisation problem. Counts its evaluations.
+pub struct Problem<'a> {
+    /// The segment.
+    pub data: &'a SegmentData,
+    /// Model variant.
+    pub model: Model,
+    /// Contact reading.
+    pub contact_mode: ContactMode,
+    /// Effects switched on (their parameters are coordinates; `full_model` switches the model).
+    pub effects: Vec<Effect>,
+    /// The search space.
+    pub specs: Vec<ParamSpec>,
+    /// The method (its objective).
+    pub method: Method,
+    /// The default method's weighting.
+    pub weighting: Weighting,
+    omegas: Vec<f64>,
+    evaluations: Cell<usize>,
+}
+
+impl<'a> Problem<'a> {
+    /// Set up the problem.
+    pub fn new(
+        data: &'a SegmentData,
+        method: Method,
+        model: Model,
+        contact_mode: ContactMode,
+        effects: &[Effect],
+    ) -> Self {
+        let weighting = if data
+            .measurements
+            .iter()
+            .all(|m| m.k_re_std.is_some() && m.attenuation_std.is_some())
+        {
+            Weighting::ChiSquare
+        } else {
+            Weighting::Relative
+        };
+        Self {
+            data,
+            model: if effects.contains(&Effect::FullModel) {
+                Model::Full
+            } else {
+                model
+            },
+            contact_mode,
+            effects: effects.to_vec(),
+            specs: parameter_space(method, effects),
+            method,
+            weighting,
+            omegas: data.measurements.iter().map(|m| m.omega).collect(),
+            evaluations: Cell::new(0),
+        }
+    }
+
+    /// Forward-model evaluations so far.
+    pub fn evaluations(&self) -> usize {
+        self.evaluations.get()
+    }
+
+    /// The search box.
+    pub fn bounds(&self) -> Result<Bounds, OptimizeError> {
+        Bounds::new(
+            self.specs.iter().map(|s| s.lower).collect(),
+            self.specs.iter().map(|s| s.upper).collect(),
+        )
+    }
+
+    /// Physical value of every coordinate of x.
+    pub fn values(&self, x: &[f64]) -> Vec<f64> {
+        self.specs.iter().zip(x).map(|(s, &v)| s.value(v)).collect()
+    }
+
+    /// The system at search point x, or `None` if x gives a non-physical input.
+    pub fn system_at(&self, x: &[f64]) -> Option<System> {
+        let d = self.data;
+        let (mut e, mut nu, mut xi) = (0.0, 0.0, 0.0);
+        let mut extra = Vec::new();
+        for (s, &v) in self.specs.iter().zip(x) {
+            let val = s.value(v);
+            match s.param {
+                Param::SoilModulus => e = val,
+                Param::SoilPoisson => nu = val,
+                Param::Contact => xi = val,
+                Param::Effect(eff) => extra.push((eff, val)),
+            }
+        }
+        let soil = Soil::new_unbounded(e, nu.min(MAX_SOIL_POISSON), d.soil_density, 0.0).ok()?;
+        let mut sys = System::new(
+            d.fluid,
+            d.pipe,
+            soil,
+            xi.clamp(0.0, 1.0),
+            self.model,
+            self.contact_mode,
+        )
+        .ok()?;
+        for (eff, val) in extra {
+            let val = match eff {
+                Effect::AirInWater if val <= 10f64.powf(AIR_LOG10_MIN) => 0.0,
+                _ => val,
+            };
+            sys = eff.apply(&sys, val).ok()?;
+        }
+        Some(sys)
+    }
+
+    /// Model wavenumbers at the measured frequencies for system `sys`, or `None` when a root
+    /// is not found (or is a growing wave under `reciprocal`/`blend`).
+    pub fn predict_system(&self, sys: &System) -> Option<Vec<Complex64>> {
+        predict(sys, &self.omegas)
+    }
+
+    /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.
+    pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
+        self.evaluations.set(self.evaluations.get() + 1);
+        self.predict_system(&self.system_at(x)?)
+    }
+
+    /// Number of residuals (two per measurement).
+    pub fn n_residuals(&self) -> usize {
+        2 * self.data.measurements.len()
+    }
+
+    /// Weighted residuals of a prediction: (model − measured)/σ for Re k, then for the
+    /// attenuation, per measurement.
+    pub fn residuals_of(&self, k: &[Complex64], out: &mut [f64]) {
+        for (i, (m, k)) in self.data.measurements.iter().zip(k).enumerate() {
+            let (d_re, d_att) = (k.re - m.k_re, -k.im - m.attenuation);
+            let (s_re, s_att) = match self.weighting {
+                Weighting::ChiSquare => (
+                    m.k_re_std.unwrap_or(f64::NAN),
+                    m.attenuation_std.unwrap_or(f64::NAN),
+                ),
+                Weighting::Relative => (
+                    m.k_re / PAPER_W_RE,
+                    m.attenuation.max(1e-12) / PAPER_W_IM,
+                ),
+            };
+            out[2 * i] = d_re / s_re;
+            out[2 * i + 1] = d_att / s_att;
+        }
+    }
+
+    /// The paper's objective f of P52–P53 for a prediction.
+    pub fn paper_objective(&self, k: &[Complex64]) -> f64 {
+        let m = self.data.measurements.len() as f64;
+        let (mut f_re, mut f_im) = (0.0, 0.0);
+        for (meas, k) in self.data.measurements.iter().zip(k) {
+            f_re += (meas.k_re - k.re).abs() / meas.k_re;
+            f_im += (meas.attenuation - (-k.im)).abs() / meas.attenuation.max(1e-12);
+        }
+        ((PAPER_W_RE * f_re / m).powi(2) + (PAPER_W_IM * f_im / m).powi(2)).sqrt()
+    }
+
+    /// Sum of squared weighted residuals for a prediction.
+    pub fn sum_of_squares(&self, k: &[Complex64]) -> f64 {
+        let mut r = vec![0.0; self.n_residuals()];
+        self.residuals_of(k, &mut r);
+        r.iter().map(|v| v * v).sum()
+    }
+}
+
+/// Wavenumbers of `sys` at `omegas` with the inversion's solver settings: the lowest frequency
+/// straight from its in-vacuo root when the root stays within 10 % of it, otherwise (or if any
+/// solve fails) an 8-point continuation ramp (spec §5.4 allows a shorter ramp for the inversion).
+pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
+    let fast = Continuation {
+        ramp_points: 0,
+        tolerance: Tolerance::FAST,
+    };
+    let accept = |res: &[Result<crate::physics::Root, crate::physics::SolveError>]| {
+        let mut out = Vec::with_capacity(res.len());
+        for r in res {
+            let r = r.as_ref().ok()?;
+            if r.flags.growing_wave && sys.contact_mode != ContactMode::Printed {
+                return None;
+            }
+            out.push(r.k1);
+        }
+        Some(out)
+    };
+    let res = solve_curve(sys, omegas, fast);
+    let w_min = omegas.iter().copied().fold(f64::INFINITY, f64::min);
+    let trusted = res
+        .iter()
+        .zip(omegas)
+        .find(|(_, &w)| w == w_min)
+        .and_then(|(r, _)| r.as_ref().ok())
+        .map(|r| {
+            let kv = crate::physics::dispersion::in_vacuo_root(sys, w_min);
+            (r.k1 - kv).norm() <= DIRECT_START_MAX_DEVIATION * kv.norm()
+        })
+        .unwrap_or(false);
+    if trusted {
+        if let Some(k) = accept(&res) {
+            return Some(k);
+        }
+    }
+    let ramp = Continuation {
+        ramp_points: INVERSION_RAMP_POINTS,
+        tolerance: Tolerance::FAST,
+    };
+    accept(&solve_curve(sys, omegas, ramp))
+}
+
+impl Objective for Problem<'_> {
+    fn dim(&self) -> usize {
+        self.specs.len()
+    }
+
+    fn value(&self, x: &[f64]) -> f64 {
+        match (self.predict(x), self.method) {
+            (Some(k), Method::Paper) => self.paper_objective(&k),
+            (None, Method::Paper) => FAILED_SOLVE_OBJECTIVE,
+            (Some(k), Method::Default) => self.sum_of_squares(&k),
+            (None, Method::Default) => f64::INFINITY,
+        }
+    }
+}
+
+impl LeastSquares for Problem<'_> {
+    fn n_params(&self) -> usize {
+        self.specs.len()
+    }
+    fn n_residuals(&self) -> usize {
+        Problem::n_residuals(self)
+    }
+    fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+        match self.predict(x) {
+            Some(k) => {
+                self.residuals_of(&k, out);
+                out.iter().all(|v| v.is_finite())
+            }
+            None => false,
+        }
+    }
+}

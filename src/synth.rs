@@ -1,0 +1,435 @@
+//! Synthetic pipe networks: inventories with field-like measurements made by the forward model
+//! from known soil parameters (and, optionally, hidden effects), with realistic noise.
+//!
+//! Used by `pipewave synth`, the bundled `sample_network`, and the recovery tests. The known
+//! truth is returned separately and never reaches the fit.
+
+use num_complex::Complex64;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::invert::problem::predict;
+use crate::physics::effects::Effect;
+use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
+use crate::units::hz_to_omega;
+
+/// Relative noise (one sigma) on Re k of a synthetic measurement (issue 3: 1 %).
+pub const NOISE_K_RE: f64 = 0.01;
+/// Relative noise (one sigma) on the attenuation (issue 3: 5 %).
+pub const NOISE_ATTENUATION: f64 = 0.05;
+
+/// A pipe size from a standard: nominal size, outside diameter and wall thickness (mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PipeSize {
+    /// Nominal diameter DN, mm.
+    pub dn: u32,
+    /// Outside diameter, mm.
+    pub od_mm: f64,
+    /// Wall thickness, mm.
+    pub wall_mm: f64,
+}
+
+const fn size(dn: u32, od_mm: f64, wall_mm: f64) -> PipeSize {
+    PipeSize { dn, od_mm, wall_mm }
+}
+
+/// Typical sizes of a European / North American distribution network, per material.
+/// DI: ISO 2531 K9 (e = 9(0.5 + 0.001 DN) mm, not checked against the standard, spec §9);
+/// CI: pit- and spun-cast grey iron, thicker walls; ST: EN 10220 / API 5L line pipe;
+/// PVC: EN 1452 SDR 21; MDPE: PE80 SDR 11; HDPE: PE100 SDR 17; AC: class 20 pressure pipe.
+pub fn sizes(material: Material) -> &'static [PipeSize] {
+    match material {
+        Material::CastIron => &CI_SIZES,
+        Material::DuctileIron => &DI_SIZES,
+        Material::Steel => &ST_SIZES,
+        Material::Pvc => &PVC_SIZES,
+        Material::Mdpe => &MDPE_SIZES,
+        Material::Hdpe => &HDPE_SIZES,
+        Material::AsbestosCement => &AC_SIZES,
+    }
+}
+
+const CI_SIZES: [PipeSize; 4] = [
+    size(100, 122.0, 9.0),
+    size(150, 175.0, 10.0),
+    size(200, 229.0, 11.0),
+    size(300, 335.0, 13.0),
+];
+
+const DI_SIZES: [PipeSize; 5] = [
+    size(100, 118.0, 6.0),
+    size(150, 170.0, 6.0),
+    size(200, 222.0, 6.3),
+    size(300, 326.0, 7.2),
+    size(400, 429.0, 8.1),
+];
+
+const ST_SIZES: [PipeSize; 4] = [
+    size(100, 114.3, 4.5),
+    size(150, 168.3, 5.6),
+    size(200, 219.1, 6.3),
+    size(300, 323.9, 7.1),
+];
+
+const PVC_SIZES: [PipeSize; 4] = [
+    size(100, 110.0, 5.3),
+    size(150, 160.0, 7.7),
+    size(200, 200.0, 9.6),
+    size(250, 250.0, 11.9),
+];
+
+const MDPE_SIZES: [PipeSize; 4] = [
+    size(50, 63.0, 5.8),
+    size(80, 90.0, 8.2),
+    size(100, 125.0, 11.4),
+    size(150, 180.0, 16.4),
+];
+
+const HDPE_SIZES: [PipeSize; 4] = [
+    size(100, 110.0, 6.6),
+    size(150, 160.0, 9.5),
+    size(200, 250.0, 14.8),
+    size(300, 315.0, 18.7),
+];
+
+const AC_SIZES: [PipeSize; 3] = [
+    size(100, 122.0, 11.5),
+    size(150, 177.0, 14.0),
+    size(200, 232.0, 17.0),
+];
+
+/// Soil classes from soft clay to gravel: (name, E_m range Pa, ν_m range, ρ_m range kg/m³).
+pub const SOILS: [(&str, (f64, f64), (f64, f64), (f64, f64)); 6] = [
+    ("soft_clay", (5e6, 2e7), (0.40, 0.47), (1600.0, 1800.0)),
+    ("stiff_clay", (2e7, 6e7), (0.35, 0.42), (1800.0, 2000.0)),
+    ("loam", (3e7, 7e7), (0.30, 0.38), (1800.0, 2000.0)),
+    ("sand", (4e7, 1.2e8), (0.25, 0.35), (1700.0, 2000.0)),
+    ("dense_sand", (1e8, 2.5e8), (0.25, 0.33), (1900.0, 2100.0)),
+    ("gravel", (1.5e8, 4e8), (0.20, 0.30), (2000.0, 2200.0)),
+];
+
+/// Network-wide share of each material (a utility with old iron and newer plastics).
+pub const MATERIAL_MIX: [(Material, f64); 7] = [
+    (Material::CastIron, 0.25),
+    (Material::DuctileIron, 0.2),
+    (Material::Steel, 0.07),
+    (Material::Pvc, 0.16),
+    (Material::Mdpe, 0.14),
+    (Material::Hdpe, 0.1),
+    (Material::AsbestosCement, 0.08),
+];
+
+/// One synthetic measurement (attenuation in Np/m, positive).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SynthMeasurement {
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Measured Re k, rad/m.
+    pub k_re: f64,
+    /// Measured attenuation, Np/m.
+    pub attenuation: f64,
+    /// Stated one-sigma of Re k.
+    pub k_re_std: f64,
+    /// Stated one-sigma of the attenuation.
+    pub attenuation_std: f64,
+}
+
+/// A deliberate defect of a "genuinely bad" segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Defect {
+    /// Nothing wrong.
+    None,
+    /// One measurement is a gross outlier (a wrong sensor spacing: speed 25 % off).
+    Outlier,
+    /// The attenuation was recorded in dB/m in a Np/m column (8.7× too large).
+    UnitMixUp,
+    /// The measurements belong to another pipe (the inventory material is wrong).
+    WrongMaterial,
+    /// A single measured frequency only.
+    TooFew,
+}
+
+impl Defect {
+    /// Name for truth.csv.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Defect::None => "",
+            Defect::Outlier => "outlier",
+            Defect::UnitMixUp => "attenuation_in_db",
+            Defect::WrongMaterial => "wrong_material",
+            Defect::TooFew => "too_few_measurements",
+        }
+    }
+}
+
+/// A synthetic segment with its truth.
+#[derive(Debug, Clone)]
+pub struct SynthSegment {
+    /// Asset id.
+    pub id: String,
+    /// Material in the inventory.
+    pub material: Material,
+    /// Size.
+    pub size: PipeSize,
+    /// Soil class name.
+    pub soil_type: &'static str,
+    /// Soil density, kg/m³ (given to the fit).
+    pub soil_density: f64,
+    /// True E_m, Pa.
+    pub soil_modulus: f64,
+    /// True ν_m.
+    pub soil_poisson: f64,
+    /// True ξ.
+    pub contact: f64,
+    /// Hidden effect and its value, if any.
+    pub hidden: Option<(Effect, f64)>,
+    /// Deliberate defect.
+    pub defect: Defect,
+    /// Measurements.
+    pub measurements: Vec<SynthMeasurement>,
+    /// Polyline, projected metres.
+    pub geometry: Vec<(f64, f64)>,
+    /// Length, m.
+    pub length_m: f64,
+    /// Installation year.
+    pub install_year: u32,
+}
+
+/// Options of a synthetic network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthOptions {
+    /// Number of segments.
+    pub segments: usize,
+    /// Seed.
+    pub seed: u64,
+    /// Fraction of segments with a deliberate defect.
+    pub defect_fraction: f64,
+    /// Model that generates the data.
+    pub model: Model,
+    /// Contact reading that generates the data.
+    pub contact_mode: ContactMode,
+    /// Hidden effect applied to every segment (for discrepancy studies), with its value range.
+    pub hidden_effect: Option<(Effect, f64, f64)>,
+    /// Easting, northing of the south-west corner of the street grid (EPSG:27700 metres).
+    pub origin: (f64, f64),
+    /// EPSG code of the coordinates.
+    pub srid: u32,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        Self {
+            segments: 200,
+            seed: 1,
+            defect_fraction: 0.03,
+            model: Model::Full,
+            contact_mode: ContactMode::Reciprocal,
+            hidden_effect: None,
+            // A street grid in central Southampton, British National Grid.
+            origin: (441_800.0, 111_900.0),
+            srid: 27700,
+        }
+    }
+}
+
+/// Standard normal deviate by Box–Muller.
+pub fn normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    let u1: f64 = rng.gen_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.gen();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+fn pick_material<R: Rng + ?Sized>(rng: &mut R) -> Material {
+    let total: f64 = MATERIAL_MIX.iter().map(|m| m.1).sum();
+    let mut u = rng.gen::<f64>() * total;
+    for (m, w) in MATERIAL_MIX {
+        if u < w {
+            return m;
+        }
+        u -= w;
+    }
+    Material::DuctileIron
+}
+
+fn log_uniform<R: Rng + ?Sized>(rng: &mut R, lo: f64, hi: f64) -> f64 {
+    (lo.ln() + rng.gen::<f64>() * (hi.ln() - lo.ln())).exp()
+}
+
+/// The measurement band of a material, Hz: iron, steel and AC carry leak noise to 1.5 kHz;
+/// plastics attenuate strongly above a few hundred Hz (spec §1, [R8]).
+pub fn band_hz(material: Material) -> (f64, f64) {
+    if material.is_plastic() {
+        (60.0, 600.0)
+    } else {
+        (100.0, 1500.0)
+    }
+}
+
+/// The pipe of a synthetic segment, from the material's typical values.
+pub fn pipe_of(material: Material, s: &PipeSize) -> Pipe {
+    Pipe::from_outside_diameter(material.typical(), s.od_mm * 1e-3, s.wall_mm * 1e-3)
+        .expect("catalogue sizes are valid")
+}
+
+/// Measured frequencies: `m` distinct values spread over the band, rounded to 1 Hz.
+fn frequencies<R: Rng + ?Sized>(rng: &mut R, band: (f64, f64), m: usize) -> Vec<f64> {
+    let mut f: Vec<f64> = (0..m)
+        .map(|i| {
+            let lo = band.0 + (band.1 - band.0) * i as f64 / m as f64;
+            let hi = band.0 + (band.1 - band.0) * (i + 1) as f64 / m as f64;
+            (lo + rng.gen::<f64>() * (hi - lo)).round()
+        })
+        .collect();
+    f.dedup();
+    f
+}
+
+/// Noisy measurements of `sys` at `freqs` (Hz): 1 % on Re k, 5 % on the attenuation, with those
+/// standard deviations stated. `None` if the forward model fails.
+pub fn measure<R: Rng + ?Sized>(
+    sys: &System,
+    freqs: &[f64],
+    rng: &mut R,
+) -> Option<Vec<SynthMeasurement>> {
+    let omegas: Vec<f64> = freqs.iter().map(|&f| hz_to_omega(f)).collect();
+    let k: Vec<Complex64> = predict(sys, &omegas)?;
+    Some(
+        freqs
+            .iter()
+            .zip(k)
+            .map(|(&f, k)| {
+                let (s_re, s_att) = (NOISE_K_RE * k.re, NOISE_ATTENUATION * (-k.im));
+                SynthMeasurement {
+                    frequency_hz: f,
+                    k_re: k.re + s_re * normal(rng),
+                    attenuation: (-k.im + s_att * normal(rng)).max(1e-9),
+                    k_re_std: s_re,
+                    attenuation_std: s_att,
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Generate a network. Deterministic for given options.
+pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
+    let mut out = Vec::with_capacity(opts.segments);
+    // Streets: a grid of blocks 120 m × 90 m; segment i runs along a block edge.
+    let cols = ((opts.segments as f64).sqrt().ceil() as usize).max(2);
+    let mut i = 0usize;
+    let mut attempts = 0usize;
+    while out.len() < opts.segments && attempts < opts.segments * 20 {
+        attempts += 1;
+        let material = pick_material(&mut rng);
+        let sz = sizes(material)[rng.gen_range(0..sizes(material).len())];
+        let (soil_type, e_r, nu_r, rho_r) = SOILS[rng.gen_range(0..SOILS.len())];
+        let e = log_uniform(&mut rng, e_r.0, e_r.1);
+        let nu = rng.gen_range(nu_r.0..nu_r.1);
+        let rho = rng.gen_range(rho_r.0..rho_r.1).round();
+        let xi = rng.gen::<f64>();
+        let pipe = pipe_of(material, &sz);
+        let soil = Soil::new(e, nu, rho, 0.0).expect("soil classes are valid");
+        let mut sys = System::new(Fluid::water(), pipe, soil, xi, opts.model, opts.contact_mode)
+            .expect("valid system");
+        let hidden = opts.hidden_effect.map(|(eff, lo, hi)| {
+            let v = if eff == Effect::AirInWater {
+                log_uniform(&mut rng, lo.max(1e-7), hi)
+            } else {
+                rng.gen_range(lo..hi)
+            };
+            (eff, v)
+        });
+        if let Some((eff, v)) = hidden {
+            sys = eff.apply(&sys, v).expect("hidden effect in range");
+        }
+        let defect = if rng.gen::<f64>() < opts.defect_fraction {
+            match rng.gen_range(0..4) {
+                0 => Defect::Outlier,
+                1 => Defect::UnitMixUp,
+                2 => Defect::WrongMaterial,
+                _ => Defect::TooFew,
+            }
+        } else {
+            Defect::None
+        };
+        let m = if defect == Defect::TooFew {
+            1
+        } else {
+            rng.gen_range(4..=8)
+        };
+        let mut band = band_hz(material);
+        band.1 = band.1.min(0.45 * pipe.ring_frequency_hz());
+        let freqs = frequencies(&mut rng, band, m);
+        let mut meas = match measure(&sys, &freqs, &mut rng) {
+            Some(v) => v,
+            None => continue, // the forward model fails there (e.g. grazing): draw again
+        };
+        let mut inv_material = material;
+        match defect {
+            Defect::Outlier => {
+                let j = rng.gen_range(0..meas.len());
+                meas[j].k_re *= 1.25;
+            }
+            Defect::UnitMixUp => {
+                for x in &mut meas {
+                    x.attenuation *= crate::units::DB_PER_NP;
+                    x.attenuation_std *= crate::units::DB_PER_NP;
+                }
+            }
+            Defect::WrongMaterial => {
+                inv_material = if material.is_plastic() {
+                    Material::DuctileIron
+                } else {
+                    Material::Pvc
+                };
+            }
+            _ => {}
+        }
+        // Keep the inventory size valid for the (possibly wrong) material.
+        let sz_inv = if inv_material == material {
+            sz
+        } else {
+            sizes(inv_material)[0]
+        };
+        let (row, col) = (i / cols, i % cols);
+        let horizontal = i % 2 == 0;
+        let (x0, y0) = (
+            opts.origin.0 + 120.0 * col as f64,
+            opts.origin.1 + 90.0 * row as f64,
+        );
+        let (x1, y1) = if horizontal {
+            (x0 + 120.0, y0)
+        } else {
+            (x0, y0 + 90.0)
+        };
+        let mid = ((x0 + x1) / 2.0 + rng.gen_range(-3.0..3.0), (y0 + y1) / 2.0 + rng.gen_range(-3.0..3.0));
+        let geometry = vec![(x0, y0), mid, (x1, y1)];
+        let length_m = geometry
+            .windows(2)
+            .map(|w| ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt())
+            .sum();
+        out.push(SynthSegment {
+            id: format!("WM{:05}", 10001 + i),
+            material: inv_material,
+            size: sz_inv,
+            soil_type,
+            soil_density: rho,
+            soil_modulus: e,
+            soil_poisson: nu,
+            contact: xi,
+            hidden,
+            defect,
+            measurements: meas,
+            geometry,
+            length_m,
+            install_year: if material.is_plastic() {
+                rng.gen_range(1975..2020)
+            } else {
+                rng.gen_range(1890..1985)
+            },
+        });
+        i += 1;
+    }
+    out
+}
