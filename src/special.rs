@@ -82,6 +82,7 @@ pub fn psi(z2: Complex64) -> Result<Complex64, SpecialError> {
 }
 
 #[cfg(test)]
+#[allow(clippy::excessive_precision)] // reference values copied verbatim from the spec
 mod tests {
     use super::*;
 
