@@ -91,7 +91,7 @@ fn plural(n: usize) -> &'static str {
 fn summary(r: &ImportReport) -> String {
     format!(
         "imported: segments {} new, {} updated, {} unchanged; measurements {} written for {} \
-         segment{}; {} segment{} to (re)fit",
+         segment{}; fit inputs changed for {} segment{}",
         r.segments_inserted,
         r.segments_updated,
         r.segments_unchanged,

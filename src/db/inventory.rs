@@ -431,7 +431,7 @@ pub(crate) fn refresh_inputs_hash(conn: &Connection, segment_id: &str) -> Result
 mod tests {
     use super::*;
 
-    pub(crate) fn sample() -> SegmentRecord {
+    fn sample() -> SegmentRecord {
         SegmentRecord {
             segment_id: "P-1".into(),
             material: Material::DuctileIron,
@@ -504,6 +504,18 @@ mod tests {
         let mut wall = s;
         wall.wall_thickness_mm = 6.5;
         assert_ne!(wall.compute_inputs_hash(), h);
+    }
+
+    /// The stored hashes must not change between program versions, or every segment would be
+    /// refitted after an upgrade. Value computed once from the canonical text (and checked
+    /// independently with a 5-line Python FNV-1a); change it only with a new version tag.
+    #[test]
+    fn inputs_hash_is_pinned() {
+        let s = sample();
+        assert!(s
+            .canonical_inputs()
+            .contains("\nomega_rad_s=f:6.283185307179587e2\nk_re_rad_per_m=f:5e-1\n"));
+        assert_eq!(s.compute_inputs_hash(), "0287f9d1471f32b9");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! Only this module speaks SQL. Callers hold a [`Database`] (or the [`Connection`] inside it)
 //! and use the functions of the submodules:
 //!
-//! - [`import`]: `segments.csv` / `measurements.csv` into the inventory, all-or-nothing.
+//! - [`mod@import`]: `segments.csv` / `measurements.csv` into the inventory, all-or-nothing.
 //! - [`inventory`]: reading segments and their measurements back as checked physics inputs.
 //! - [`results`]: calibrate runs, fits and curves, and which segments need a (re)fit.
 //! - [`lock`]: the one-calibrate-at-a-time lock.

@@ -6,7 +6,9 @@
 //!   and the others reported. A problem with a file as a whole (empty, no data rows, bad header)
 //!   rejects the import even then: no row of such a file can be trusted.
 //! - Re-importing identical data writes nothing.
-//! - A segment already in the database is updated when its row differs.
+//! - A segment already in the database is updated when its row differs. The file's row is the
+//!   whole description of the segment: a blank cell, or an optional column the file does not
+//!   have, stores NULL.
 //! - Every segment that appears in a measurements file gets exactly that file's measurements
 //!   (its old set is replaced, if different). Segments not in the file keep theirs. Nothing is
 //!   ever deleted from the inventory by an import.
@@ -175,8 +177,10 @@ pub fn import(
     // Segments: valid ones, and the lines of invalid ones by id (for measurement messages).
     let mut valid_segments = Vec::new();
     let mut invalid_segment_lines: BTreeMap<String, u64> = BTreeMap::new();
+    let mut segments_file_unusable = false;
     if let Some(p) = segs {
         fatal |= p.fatal;
+        segments_file_unusable = p.fatal;
         seg_errors = p.errors;
         for r in p.rows {
             match (r.record, r.segment_id) {
@@ -204,7 +208,10 @@ pub fn import(
             let (Some(id), Some(rec)) = (r.segment_id, r.record) else {
                 continue;
             };
-            if known_db.contains(&id) || known_file.contains(id.as_str()) {
+            // When the segments file is unusable as a whole, whether a measurement's segment
+            // exists cannot be told; the import is rejected anyway, so do not add noise.
+            if known_db.contains(&id) || known_file.contains(id.as_str()) || segments_file_unusable
+            {
                 new_sets.entry(id).or_default().push(rec);
                 continue;
             }
@@ -324,6 +331,33 @@ mod tests {
         );
         let a2 = inventory::load_segment(&conn, "A").unwrap().unwrap();
         assert_eq!(a2, a);
+    }
+
+    #[test]
+    fn excel_style_files_with_bom_crlf_and_mixed_case_headers_import() {
+        let mut conn = db();
+        let segs =
+            format!("\u{feff}{}", SEGS.replace("segment_id", "Segment_ID")).replace('\n', "\r\n");
+        let r = run(
+            &mut conn,
+            Some(&segs),
+            Some(&MEAS.replace('\n', "\r\n")),
+            false,
+        );
+        assert!(r.errors.is_empty(), "{:?}", r.errors);
+        assert_eq!((r.segments_inserted, r.measurements_written), (2, 3));
+    }
+
+    #[test]
+    fn a_header_without_rows_is_an_error_for_the_whole_file() {
+        let mut conn = db();
+        let head = SEGS.lines().next().unwrap();
+        let r = run(&mut conn, Some(head), None, true);
+        assert!(r.rejected);
+        assert_eq!(
+            r.errors[0].to_string(),
+            "segments.csv:2: the file has a header but no data rows"
+        );
     }
 
     #[test]

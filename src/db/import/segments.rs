@@ -238,10 +238,18 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         s => s,
     };
     if c.text("geometry_wkt").is_some() && c.text("srid").is_none() {
-        c.err(
-            "srid",
-            "geometry_wkt is given, so srid (its EPSG code, such as 27700 or 4326) is required",
-        );
+        if c.has("srid") {
+            c.err(
+                "srid",
+                "geometry_wkt is given, so srid (its EPSG code, such as 27700 or 4326) is required",
+            );
+        } else {
+            c.err(
+                "geometry_wkt",
+                "a geometry needs its coordinate system: add a column srid with its EPSG code \
+                 (such as 27700 or 4326)",
+            );
+        }
     }
 
     if !c.errors.is_empty() {

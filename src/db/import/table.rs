@@ -119,7 +119,7 @@ impl Table {
                         errors.push(RowError::new(
                             &file,
                             header_line,
-                            col,
+                            Some(ColumnRef::new(i, spec.name)),
                             format!(
                                 "duplicate column: '{}' is also column {}",
                                 spec.name,
