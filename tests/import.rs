@@ -514,6 +514,11 @@ fn skip_invalid_does_not_import_a_file_whose_header_is_bad() {
     let out = s.import(Some(&sp), None, &["--skip-invalid"]);
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(text(&out.stderr).contains("segments.csv:1:8: column colour:"));
+    assert!(
+        text(&out.stderr).contains("--skip-invalid does not help"),
+        "{}",
+        text(&out.stderr)
+    );
     assert_eq!(s.count("segments"), 0);
 }
 
@@ -676,6 +681,24 @@ fn a_missing_input_file_is_reported_and_creates_no_database() {
         text(&out.stderr)
     );
     assert!(!s.db.exists());
+}
+
+#[test]
+fn a_directory_as_database_is_explained() {
+    let s = Scratch::new();
+    let out = pipewave(&[
+        "import",
+        "--db",
+        s.dir.path().to_str().unwrap(),
+        "--segments",
+        fixture("segments.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("is a directory"),
+        "{}",
+        text(&out.stderr)
+    );
 }
 
 #[test]

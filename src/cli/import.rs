@@ -60,8 +60,8 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
     }
     let n_bad = report.errors.len();
     if report.rejected {
-        let hint = if args.skip_invalid {
-            "a file as a whole is unusable"
+        let hint = if report.unusable_file {
+            "a file as a whole is unusable, see above; --skip-invalid does not help with that"
         } else {
             "fix the rows above, or use --skip-invalid to import the valid rows"
         };

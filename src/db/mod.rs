@@ -49,6 +49,16 @@ pub enum DbError {
         #[source]
         source: rusqlite::Error,
     },
+    /// The path is a directory.
+    #[error(
+        "{} is a directory; give the path of the database file, such as {}",
+        path.display(),
+        path.join("pipewave.sqlite").display()
+    )]
+    IsDirectory {
+        /// The database path.
+        path: PathBuf,
+    },
     /// The file exists but is not a SQLite database.
     #[error(
         "{} is not a pipewave database (it is not a SQLite file at all); check the --db path, \
@@ -168,6 +178,9 @@ impl Database {
     /// database of a newer pipewave.
     pub fn open(path: impl AsRef<Path>) -> Result<Database, DbError> {
         let path = path.as_ref().to_path_buf();
+        if path.is_dir() {
+            return Err(DbError::IsDirectory { path });
+        }
         let conn = Connection::open(&path).map_err(|source| DbError::Open {
             path: path.clone(),
             source,

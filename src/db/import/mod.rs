@@ -139,6 +139,9 @@ pub struct ImportReport {
     /// True when nothing was written because of `errors` (without `skip_invalid`, any error;
     /// with it, a problem with a whole file).
     pub rejected: bool,
+    /// True when a file as a whole is unusable (empty, no data rows, bad header): then the
+    /// import is rejected even with `skip_invalid`.
+    pub unusable_file: bool,
     /// New segments.
     pub segments_inserted: usize,
     /// Segments whose row changed.
@@ -238,6 +241,7 @@ pub fn import(
 
     if fatal || (!report.errors.is_empty() && !options.skip_invalid) {
         report.rejected = true;
+        report.unusable_file = fatal;
         // Dropping the transaction rolls it back; nothing was written anyway.
         return Ok(report);
     }
@@ -353,7 +357,7 @@ mod tests {
         let mut conn = db();
         let head = SEGS.lines().next().unwrap();
         let r = run(&mut conn, Some(head), None, true);
-        assert!(r.rejected);
+        assert!(r.rejected && r.unusable_file);
         assert_eq!(
             r.errors[0].to_string(),
             "segments.csv:2: the file has a header but no data rows"
@@ -365,7 +369,7 @@ mod tests {
         let mut conn = db();
         let bad = format!("{SEGS}C,XX,100,5,1900\n");
         let r = run(&mut conn, Some(&bad), Some(MEAS), false);
-        assert!(r.rejected);
+        assert!(r.rejected && !r.unusable_file);
         assert_eq!(r.errors.len(), 1, "{:?}", r.errors);
         assert_eq!(
             r.errors[0].to_string(),
