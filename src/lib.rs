@@ -1,6 +1,7 @@
 //! pipewave: the leak-noise wavenumber of a buried water pipe, and the inversion of the soil
 //! around it from field measurements.
 pub mod bench;
+pub mod db;
 pub mod forward;
 pub mod invert;
 pub mod optimize;

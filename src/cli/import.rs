@@ -1,0 +1,104 @@
+//! `pipewave import --db DB [--segments FILE] [--measurements FILE] [--skip-invalid]`.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use pipewave::db::{self, Database, ImportOptions, ImportReport, ImportSource};
+
+use super::Outcome;
+
+/// Arguments of `import`.
+#[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("files").required(true).multiple(true).args(["segments", "measurements"]))]
+pub struct ImportArgs {
+    /// The database (created if it does not exist).
+    #[arg(long, value_name = "DB")]
+    db: PathBuf,
+    /// Inventory of pipe segments (segments.csv).
+    #[arg(long, value_name = "FILE")]
+    segments: Option<PathBuf>,
+    /// Field wavenumbers (measurements.csv); their segments must be in the database or in
+    /// --segments.
+    #[arg(long, value_name = "FILE")]
+    measurements: Option<PathBuf>,
+    /// Import the valid rows and report the invalid ones, instead of importing nothing.
+    #[arg(long)]
+    skip_invalid: bool,
+}
+
+/// Read the files, import, print each bad row on stderr and a summary on stdout.
+pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
+    // Read the inputs before touching the database, so a mistyped path creates no file.
+    let segments = args
+        .segments
+        .as_deref()
+        .map(ImportSource::from_path)
+        .transpose()?;
+    let measurements = args
+        .measurements
+        .as_deref()
+        .map(ImportSource::from_path)
+        .transpose()?;
+    let mut database = Database::open(&args.db)?;
+    let report = db::import(
+        database.conn_mut(),
+        segments.as_ref(),
+        measurements.as_ref(),
+        ImportOptions {
+            skip_invalid: args.skip_invalid,
+        },
+    )
+    .with_context(|| {
+        format!(
+            "import into {} failed; nothing was written",
+            args.db.display()
+        )
+    })?;
+    for e in &report.errors {
+        eprintln!("{e}");
+    }
+    let n_bad = report.errors.len();
+    if report.rejected {
+        let hint = if report.unusable_file {
+            "a file as a whole is unusable, see above; --skip-invalid does not help with that"
+        } else {
+            "fix the rows above, or use --skip-invalid to import the valid rows"
+        };
+        bail!(
+            "import rejected: {n_bad} problem{} found, nothing was written ({hint})",
+            plural(n_bad)
+        );
+    }
+    println!("{}", summary(&report));
+    if n_bad > 0 {
+        eprintln!(
+            "skipped {n_bad} invalid row{} (listed above); the valid rows were imported",
+            plural(n_bad)
+        );
+    }
+    Ok(Outcome::Done)
+}
+
+fn plural(n: usize) -> &'static str {
+    if n == 1 {
+        ""
+    } else {
+        "s"
+    }
+}
+
+fn summary(r: &ImportReport) -> String {
+    format!(
+        "imported: segments {} new, {} updated, {} unchanged; measurements {} written for {} \
+         segment{}; fit inputs changed for {} segment{}",
+        r.segments_inserted,
+        r.segments_updated,
+        r.segments_unchanged,
+        r.measurements_written,
+        r.segments_with_changed_measurements,
+        plural(r.segments_with_changed_measurements),
+        r.segments_with_changed_inputs,
+        plural(r.segments_with_changed_inputs),
+    )
+}

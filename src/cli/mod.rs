@@ -1,0 +1,58 @@
+//! The command line: one file per subcommand, each turning its arguments into checked values
+//! and calling the library. Only this module knows clap. It lives in the binary crate (not the
+//! library) so that clap and anyhow stay out of the library, as docs/style.md asks.
+
+mod import;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Exit code: the command did its job.
+pub const EXIT_OK: u8 = 0;
+/// Exit code: the command finished but some segments failed.
+pub const EXIT_SOME_FAILED: u8 = 1;
+/// Exit code: the command could not run (bad arguments, unreadable input, database unusable).
+/// clap uses the same code for argument errors.
+pub const EXIT_CANNOT_RUN: u8 = 2;
+
+/// Soil inversion from leak-noise wavenumbers of buried water pipes.
+#[derive(Debug, Parser)]
+#[command(name = "pipewave", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Load or update the inventory (segments.csv) and field measurements (measurements.csv).
+    Import(import::ImportArgs),
+}
+
+/// How a command that ran ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// It did its job.
+    Done,
+    /// It finished, but some segments failed.
+    #[allow(dead_code)] // Used by calibrate, which is still to come.
+    SomeFailed,
+}
+
+impl Outcome {
+    /// The process exit code.
+    pub fn exit_code(self) -> ExitCode {
+        ExitCode::from(match self {
+            Outcome::Done => EXIT_OK,
+            Outcome::SomeFailed => EXIT_SOME_FAILED,
+        })
+    }
+}
+
+/// Run the command. An `Err` means it could not run (exit 2); its chain is printed once by main.
+pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
+    match cli.command {
+        Command::Import(args) => import::run(&args),
+    }
+}

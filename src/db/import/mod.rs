@@ -1,0 +1,437 @@
+//! Importing `segments.csv` and `measurements.csv` (formats in docs/interface.md).
+//!
+//! Semantics:
+//! - All or nothing: the import runs in one transaction, and any invalid row rejects it whole,
+//!   with every bad row listed. With [`ImportOptions::skip_invalid`] the valid rows are imported
+//!   and the others reported. A problem with a file as a whole (empty, no data rows, bad header)
+//!   rejects the import even then: no row of such a file can be trusted.
+//! - Re-importing identical data writes nothing.
+//! - A segment already in the database is updated when its row differs. The file's row is the
+//!   whole description of the segment: a blank cell, or an optional column the file does not
+//!   have, stores NULL.
+//! - Every segment that appears in a measurements file gets exactly that file's measurements
+//!   (its old set is replaced, if different). Segments not in the file keep theirs. Nothing is
+//!   ever deleted from the inventory by an import.
+//! - Each touched segment's `inputs_hash` is recomputed from what is stored; calibrate refits a
+//!   segment whose hash changed.
+//! - With `skip_invalid`, a measurement row whose segment row was skipped is skipped too.
+
+mod measurements;
+mod segments;
+mod table;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::path::Path;
+
+use rusqlite::{Connection, TransactionBehavior};
+
+pub use measurements::SAME_FREQUENCY_REL_TOL;
+
+use super::inventory::{self, MeasurementRecord};
+use super::DbError;
+
+/// The text of one import file and the name to show in messages (usually its path).
+#[derive(Debug, Clone)]
+pub struct ImportSource {
+    /// Name used in messages, e.g. `data/segments.csv`.
+    pub name: String,
+    /// The raw bytes (checked for UTF-8 cell by cell, so a bad byte names its line and column).
+    pub data: Vec<u8>,
+}
+
+impl ImportSource {
+    /// Read a file.
+    pub fn from_path(path: &Path) -> Result<ImportSource, DbError> {
+        let data = std::fs::read(path).map_err(|source| DbError::ReadFile {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Ok(ImportSource {
+            name: path.display().to_string(),
+            data,
+        })
+    }
+
+    /// In-memory text, for tests and for generated networks.
+    pub fn from_bytes(name: impl Into<String>, data: impl Into<Vec<u8>>) -> ImportSource {
+        ImportSource {
+            name: name.into(),
+            data: data.into(),
+        }
+    }
+}
+
+/// How to import.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ImportOptions {
+    /// Import the valid rows and report the invalid ones, instead of rejecting the import.
+    pub skip_invalid: bool,
+}
+
+/// A column of an import file: 1-based position and name.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct ColumnRef {
+    /// 1-based column number.
+    pub index: usize,
+    /// Column name (canonical for known columns, as written otherwise).
+    pub name: String,
+}
+
+impl ColumnRef {
+    /// From a 0-based field index.
+    pub(crate) fn new(field: usize, name: &str) -> ColumnRef {
+        ColumnRef {
+            index: field + 1,
+            name: name.to_string(),
+        }
+    }
+}
+
+/// One problem in an import file. Displays as `FILE:LINE:COL: column NAME: reason`, or
+/// `FILE:LINE: reason` for a problem with the whole line or file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RowError {
+    /// The file, as named in the [`ImportSource`].
+    pub file: String,
+    /// 1-based line (where the record starts).
+    pub line: u64,
+    /// The column, when the problem is in one cell or header name.
+    pub column: Option<ColumnRef>,
+    /// What is wrong and what was expected.
+    pub message: String,
+}
+
+impl RowError {
+    pub(crate) fn new(
+        file: &str,
+        line: u64,
+        column: Option<ColumnRef>,
+        message: impl Into<String>,
+    ) -> RowError {
+        RowError {
+            file: file.to_string(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for RowError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.column {
+            Some(c) => write!(
+                f,
+                "{}:{}:{}: column {}: {}",
+                self.file, self.line, c.index, c.name, self.message
+            ),
+            None => write!(f, "{}:{}: {}", self.file, self.line, self.message),
+        }
+    }
+}
+
+impl std::error::Error for RowError {}
+
+/// What an import did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ImportReport {
+    /// True when nothing was written because of `errors` (without `skip_invalid`, any error;
+    /// with it, a problem with a whole file).
+    pub rejected: bool,
+    /// True when a file as a whole is unusable (empty, no data rows, bad header): then the
+    /// import is rejected even with `skip_invalid`.
+    pub unusable_file: bool,
+    /// New segments.
+    pub segments_inserted: usize,
+    /// Segments whose row changed.
+    pub segments_updated: usize,
+    /// Segments in the file whose row was already as given.
+    pub segments_unchanged: usize,
+    /// Measurement rows written (for segments whose set changed).
+    pub measurements_written: usize,
+    /// Segments whose measurement set was replaced.
+    pub segments_with_changed_measurements: usize,
+    /// Segments whose `inputs_hash` changed: calibrate will (re)fit them.
+    pub segments_with_changed_inputs: usize,
+    /// Every invalid row, in file and line order.
+    pub errors: Vec<RowError>,
+}
+
+/// Import the given files into the database (see the module docs for the semantics). At least
+/// one file should be given; with none, nothing happens. Row problems are returned in the
+/// report, not as `Err`; `Err` means the database itself failed.
+pub fn import(
+    conn: &mut Connection,
+    segments: Option<&ImportSource>,
+    measurements: Option<&ImportSource>,
+    options: ImportOptions,
+) -> Result<ImportReport, DbError> {
+    let segs = segments.map(segments::parse);
+    let meas = measurements.map(measurements::parse);
+
+    // IMMEDIATE: take the write lock now, so the segments we check against cannot change.
+    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+    let mut report = ImportReport::default();
+    let mut fatal = false;
+    let mut seg_errors = Vec::new();
+    let mut meas_errors = Vec::new();
+
+    // Segments: valid ones, and the lines of invalid ones by id (for measurement messages).
+    let mut valid_segments = Vec::new();
+    let mut invalid_segment_lines: BTreeMap<String, u64> = BTreeMap::new();
+    let mut segments_file_unusable = false;
+    if let Some(p) = segs {
+        fatal |= p.fatal;
+        segments_file_unusable = p.fatal;
+        seg_errors = p.errors;
+        for r in p.rows {
+            match (r.record, r.segment_id) {
+                (Some(rec), _) => valid_segments.push(rec),
+                (None, Some(id)) => {
+                    invalid_segment_lines.entry(id).or_insert(r.line);
+                }
+                (None, None) => {}
+            }
+        }
+    }
+
+    // Measurements: their segment must be in the database or among the valid file rows.
+    let mut new_sets: BTreeMap<String, Vec<MeasurementRecord>> = BTreeMap::new();
+    if let Some(p) = meas {
+        fatal |= p.fatal;
+        meas_errors = p.errors;
+        let known_db = inventory::segment_ids(&tx)?;
+        let known_file: BTreeSet<&str> = valid_segments
+            .iter()
+            .map(|s| s.segment_id.as_str())
+            .collect();
+        let seg_file = segments.map_or("segments file", |s| s.name.as_str());
+        for r in p.rows {
+            let (Some(id), Some(rec)) = (r.segment_id, r.record) else {
+                continue;
+            };
+            // When the segments file is unusable as a whole, whether a measurement's segment
+            // exists cannot be told; the import is rejected anyway, so do not add noise.
+            if known_db.contains(&id) || known_file.contains(id.as_str()) || segments_file_unusable
+            {
+                new_sets.entry(id).or_default().push(rec);
+                continue;
+            }
+            let message = match invalid_segment_lines.get(&id) {
+                Some(line) => format!(
+                    "segment '{id}' cannot be imported: its row in {seg_file} (line {line}) is invalid"
+                ),
+                None => format!(
+                    "segment '{id}' is not in the inventory (neither in the database nor in the segments file); import its segment row first"
+                ),
+            };
+            meas_errors.push(RowError::new(
+                &p.file,
+                r.line,
+                Some(ColumnRef::new(p.segment_id_column, "segment_id")),
+                message,
+            ));
+        }
+    }
+    seg_errors.sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
+    meas_errors.sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
+    report.errors = seg_errors;
+    report.errors.append(&mut meas_errors);
+
+    if fatal || (!report.errors.is_empty() && !options.skip_invalid) {
+        report.rejected = true;
+        report.unusable_file = fatal;
+        // Dropping the transaction rolls it back; nothing was written anyway.
+        return Ok(report);
+    }
+
+    let mut touched = BTreeSet::new();
+    for rec in &valid_segments {
+        match inventory::load_segment(&tx, &rec.segment_id)? {
+            None => {
+                inventory::insert_segment(&tx, rec)?;
+                report.segments_inserted += 1;
+            }
+            Some(old) if !old.same_inventory(rec) => {
+                inventory::update_segment(&tx, rec)?;
+                report.segments_updated += 1;
+            }
+            Some(_) => report.segments_unchanged += 1,
+        }
+        touched.insert(rec.segment_id.clone());
+    }
+    for (id, mut set) in new_sets {
+        set.sort_by(|a, b| a.omega_rad_s.total_cmp(&b.omega_rad_s));
+        if inventory::load_measurements(&tx, &id)? != set {
+            inventory::replace_measurements(&tx, &id, &set)?;
+            report.measurements_written += set.len();
+            report.segments_with_changed_measurements += 1;
+        }
+        touched.insert(id);
+    }
+    for id in &touched {
+        if inventory::refresh_inputs_hash(&tx, id)? {
+            report.segments_with_changed_inputs += 1;
+        }
+    }
+    tx.commit()?;
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::migrate;
+
+    fn db() -> Connection {
+        let mut conn = Connection::open_in_memory().unwrap();
+        conn.pragma_update(None, "foreign_keys", true).unwrap();
+        migrate::migrate(&mut conn, Path::new(":memory:")).unwrap();
+        conn
+    }
+
+    const SEGS: &str =
+        "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n\
+                        A,di,170,6,1900\nB,PVC,110,5.3,1800\n";
+    const MEAS: &str = "segment_id,frequency_hz,k_re_rad_per_m,attenuation_np_per_m\n\
+                        A,100,0.5,0.01\nA,200,1.0,0.02\nB,100,0.9,0.05\n";
+
+    fn run(conn: &mut Connection, s: Option<&str>, m: Option<&str>, skip: bool) -> ImportReport {
+        let s = s.map(|t| ImportSource::from_bytes("segments.csv", t));
+        let m = m.map(|t| ImportSource::from_bytes("measurements.csv", t));
+        import(
+            conn,
+            s.as_ref(),
+            m.as_ref(),
+            ImportOptions { skip_invalid: skip },
+        )
+        .unwrap()
+    }
+
+    fn count(conn: &Connection, table: &str) -> i64 {
+        conn.query_row(&format!("SELECT COUNT(*) FROM {table}"), [], |r| r.get(0))
+            .unwrap()
+    }
+
+    #[test]
+    fn good_import_then_identical_reimport_changes_nothing() {
+        let mut conn = db();
+        let r = run(&mut conn, Some(SEGS), Some(MEAS), false);
+        assert!(!r.rejected && r.errors.is_empty(), "{r:?}");
+        assert_eq!((r.segments_inserted, r.measurements_written), (2, 3));
+        assert_eq!(r.segments_with_changed_inputs, 2);
+        let a = inventory::load_segment(&conn, "A").unwrap().unwrap();
+        assert_eq!(a.material, crate::physics::Material::DuctileIron);
+        assert_eq!(a.inputs_hash, a.compute_inputs_hash());
+        assert!((a.measurements[1].omega_rad_s - 2.0 * std::f64::consts::PI * 200.0).abs() < 1e-12);
+        let r2 = run(&mut conn, Some(SEGS), Some(MEAS), false);
+        assert_eq!(
+            r2,
+            ImportReport {
+                segments_unchanged: 2,
+                ..ImportReport::default()
+            }
+        );
+        let a2 = inventory::load_segment(&conn, "A").unwrap().unwrap();
+        assert_eq!(a2, a);
+    }
+
+    #[test]
+    fn excel_style_files_with_bom_crlf_and_mixed_case_headers_import() {
+        let mut conn = db();
+        let segs =
+            format!("\u{feff}{}", SEGS.replace("segment_id", "Segment_ID")).replace('\n', "\r\n");
+        let r = run(
+            &mut conn,
+            Some(&segs),
+            Some(&MEAS.replace('\n', "\r\n")),
+            false,
+        );
+        assert!(r.errors.is_empty(), "{:?}", r.errors);
+        assert_eq!((r.segments_inserted, r.measurements_written), (2, 3));
+    }
+
+    #[test]
+    fn a_header_without_rows_is_an_error_for_the_whole_file() {
+        let mut conn = db();
+        let head = SEGS.lines().next().unwrap();
+        let r = run(&mut conn, Some(head), None, true);
+        assert!(r.rejected && r.unusable_file);
+        assert_eq!(
+            r.errors[0].to_string(),
+            "segments.csv:2: the file has a header but no data rows"
+        );
+    }
+
+    #[test]
+    fn one_bad_row_rejects_everything_unless_skipping() {
+        let mut conn = db();
+        let bad = format!("{SEGS}C,XX,100,5,1900\n");
+        let r = run(&mut conn, Some(&bad), Some(MEAS), false);
+        assert!(r.rejected && !r.unusable_file);
+        assert_eq!(r.errors.len(), 1, "{:?}", r.errors);
+        assert_eq!(
+            r.errors[0].to_string(),
+            "segments.csv:4:2: column material: unknown material 'XX' (expected one of CI, DI, ST, PVC, MDPE, HDPE, AC)"
+        );
+        assert_eq!(count(&conn, "segments"), 0);
+        let r = run(&mut conn, Some(&bad), Some(MEAS), true);
+        assert!(!r.rejected);
+        assert_eq!((r.segments_inserted, r.errors.len()), (2, 1));
+    }
+
+    #[test]
+    fn measurements_of_a_skipped_segment_are_skipped_with_a_pointer_to_its_row() {
+        let mut conn = db();
+        let segs = SEGS.replace("B,PVC,110,5.3,1800", "B,PVC,110,80,1800");
+        let r = run(&mut conn, Some(&segs), Some(MEAS), true);
+        assert_eq!(r.errors.len(), 2, "{:?}", r.errors);
+        assert_eq!(r.errors[1].file, "measurements.csv");
+        assert!(r.errors[1].message.contains("line 3"), "{}", r.errors[1]);
+        assert_eq!((r.segments_inserted, r.measurements_written), (1, 2));
+    }
+
+    #[test]
+    fn frequency_in_hz_and_rad_s_are_the_same_frequency() {
+        let mut conn = db();
+        let meas = "segment_id,frequency_hz,omega_rad_s,k_re_rad_per_m,attenuation_np_per_m\n\
+                    A,100,,0.5,0.01\nA,,628.3185307179587,0.5,0.01\n";
+        let r = run(&mut conn, Some(SEGS), Some(meas), false);
+        assert!(r.rejected);
+        assert_eq!(r.errors.len(), 2, "{:?}", r.errors);
+        assert!(r
+            .errors
+            .iter()
+            .all(|e| e.message.contains("at this frequency")));
+    }
+
+    #[test]
+    fn measurements_replace_the_set_of_segments_in_the_file_only() {
+        let mut conn = db();
+        run(&mut conn, Some(SEGS), Some(MEAS), false);
+        let hb = inventory::load_segment(&conn, "B")
+            .unwrap()
+            .unwrap()
+            .inputs_hash;
+        let ha = inventory::load_segment(&conn, "A")
+            .unwrap()
+            .unwrap()
+            .inputs_hash;
+        let r = run(
+            &mut conn,
+            None,
+            Some("segment_id,omega_rad_s,k_re_rad_per_m,attenuation_np_per_m\nA,1000,0.8,0\n"),
+            false,
+        );
+        assert_eq!(
+            (r.segments_with_changed_measurements, r.measurements_written),
+            (1, 1)
+        );
+        let a = inventory::load_segment(&conn, "A").unwrap().unwrap();
+        assert_eq!(a.measurements.len(), 1);
+        assert_ne!(a.inputs_hash, ha);
+        let b = inventory::load_segment(&conn, "B").unwrap().unwrap();
+        assert_eq!((b.measurements.len(), b.inputs_hash), (1, hb));
+    }
+}

@@ -1,0 +1,135 @@
+//! Schema migrations: the SQL files of `migrations/`, embedded in the binary, applied in order
+//! inside one `BEGIN EXCLUSIVE` transaction and tracked by `PRAGMA user_version` (the number of
+//! the last migration applied). Append-only, as cargo does it: a migration that has landed is
+//! never edited; a change is a new numbered file.
+
+use std::path::Path;
+
+use rusqlite::{Connection, TransactionBehavior};
+
+use super::DbError;
+
+/// One migration: its number (the `user_version` after it), file name and SQL.
+#[derive(Debug, Clone, Copy)]
+pub struct Migration {
+    /// Schema version after this migration; migrations are numbered 1, 2, 3, ...
+    pub version: i64,
+    /// File name in `migrations/`, for messages.
+    pub name: &'static str,
+    /// The SQL.
+    pub sql: &'static str,
+}
+
+/// All migrations, in order. Add a new file here (and only at the end).
+pub const MIGRATIONS: &[Migration] = &[
+    Migration {
+        version: 1,
+        name: "0001_initial.sql",
+        sql: include_str!("../../migrations/0001_initial.sql"),
+    },
+    Migration {
+        version: 2,
+        name: "0002_run_lock.sql",
+        sql: include_str!("../../migrations/0002_run_lock.sql"),
+    },
+];
+
+/// The schema version this program writes: that of the last migration.
+pub fn latest_version() -> i64 {
+    MIGRATIONS.last().map_or(0, |m| m.version)
+}
+
+/// `PRAGMA user_version`.
+pub fn user_version(conn: &Connection) -> rusqlite::Result<i64> {
+    conn.query_row("PRAGMA user_version", [], |r| r.get(0))
+}
+
+/// Bring the schema up to date. `path` is only for messages.
+pub fn migrate(conn: &mut Connection, path: &Path) -> Result<(), DbError> {
+    let latest = latest_version();
+    // Fast path without a write lock: an up-to-date database opened while a calibrate writes.
+    if user_version(conn)? == latest {
+        return Ok(());
+    }
+    let tx = conn.transaction_with_behavior(TransactionBehavior::Exclusive)?;
+    // Re-read inside the lock: another process may have migrated meanwhile.
+    let current = user_version(&tx)?;
+    if current > latest {
+        return Err(DbError::TooNew {
+            path: path.to_path_buf(),
+            found: current,
+            known: latest,
+        });
+    }
+    if current == 0 {
+        let tables: Vec<String> = tx
+            .prepare("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")?
+            .query_map([], |r| r.get(0))?
+            .collect::<Result<_, _>>()?;
+        if !tables.is_empty() {
+            return Err(DbError::ForeignDatabase {
+                path: path.to_path_buf(),
+                tables: tables.join(", "),
+            });
+        }
+    }
+    for m in MIGRATIONS.iter().filter(|m| m.version > current) {
+        let wrap = |source| DbError::Migration {
+            version: m.version,
+            name: m.name,
+            source,
+        };
+        tx.execute_batch(m.sql).map_err(wrap)?;
+        tx.pragma_update(None, "user_version", m.version)
+            .map_err(wrap)?;
+    }
+    tx.commit()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn migrations_are_numbered_consecutively_from_one_and_named_by_number() {
+        for (i, m) in MIGRATIONS.iter().enumerate() {
+            let expected = i64::try_from(i).unwrap() + 1;
+            assert_eq!(m.version, expected, "{}", m.name);
+            assert!(
+                m.name.starts_with(&format!("{expected:04}_")),
+                "{} should start with {expected:04}_",
+                m.name
+            );
+        }
+    }
+
+    #[test]
+    fn migrating_twice_is_a_no_op_and_sets_user_version() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        migrate(&mut conn, Path::new(":memory:")).unwrap();
+        assert_eq!(user_version(&conn).unwrap(), latest_version());
+        migrate(&mut conn, Path::new(":memory:")).unwrap();
+        assert_eq!(user_version(&conn).unwrap(), latest_version());
+    }
+
+    #[test]
+    fn a_newer_schema_is_refused() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        conn.pragma_update(None, "user_version", latest_version() + 1)
+            .unwrap();
+        let err = migrate(&mut conn, Path::new("x.sqlite")).unwrap_err();
+        assert!(matches!(err, DbError::TooNew { .. }), "{err}");
+        assert!(err.to_string().contains("newer pipewave"), "{err}");
+    }
+
+    #[test]
+    fn another_programs_database_is_refused_and_left_alone() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        conn.execute_batch("CREATE TABLE customers (id INTEGER)")
+            .unwrap();
+        let err = migrate(&mut conn, Path::new("x.sqlite")).unwrap_err();
+        assert!(matches!(err, DbError::ForeignDatabase { .. }), "{err}");
+        assert_eq!(user_version(&conn).unwrap(), 0);
+    }
+}

@@ -1,0 +1,223 @@
+//! The database: opening and migrating it, the imported inventory, and the calibration results.
+//!
+//! Only this module speaks SQL. Callers hold a [`Database`] (or the [`Connection`] inside it)
+//! and use the functions of the submodules:
+//!
+//! - [`mod@import`]: `segments.csv` / `measurements.csv` into the inventory, all-or-nothing.
+//! - [`inventory`]: reading segments and their measurements back as checked physics inputs.
+//! - [`results`]: calibrate runs, fits and curves, and which segments need a (re)fit.
+//! - [`lock`]: the one-calibrate-at-a-time lock.
+//!
+//! Schema changes are append-only SQL files in `migrations/`, embedded in the binary and applied
+//! in order in one exclusive transaction, tracked by `PRAGMA user_version` ([`migrate`]).
+
+pub mod hash;
+pub mod import;
+pub mod inventory;
+pub mod lock;
+pub mod migrate;
+pub mod results;
+pub mod wkt;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+pub use rusqlite::Connection;
+
+pub use import::{import, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError};
+pub use inventory::{load_segment, load_segments, MeasurementRecord, SegmentRecord};
+pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
+pub use results::{
+    curves_for, finish_run, insert_fit_with_curves, latest_fits, load_run, segments_needing_fit,
+    start_run, CurvePoint, FitRow, FitStatus, NewRun, RunCounts, RunRow, RunStatus,
+};
+
+/// How long a statement waits for another connection's write lock before giving up. A calibrate
+/// run commits one segment at a time, each in a few milliseconds, so 10 s is ample.
+pub const BUSY_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Everything that can go wrong at the database boundary, worded for the engineer running the
+/// import or the calibration.
+#[derive(Debug, thiserror::Error)]
+pub enum DbError {
+    /// SQLite could not open or create the file.
+    #[error("cannot open the database {}", path.display())]
+    Open {
+        /// The database path.
+        path: PathBuf,
+        /// What SQLite said.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// The path is a directory.
+    #[error(
+        "{} is a directory; give the path of the database file, such as {}",
+        path.display(),
+        path.join("pipewave.sqlite").display()
+    )]
+    IsDirectory {
+        /// The database path.
+        path: PathBuf,
+    },
+    /// The file exists but is not a SQLite database.
+    #[error(
+        "{} is not a pipewave database (it is not a SQLite file at all); check the --db path, \
+         or give a new path and pipewave will create the database",
+        path.display()
+    )]
+    NotADatabase {
+        /// The database path.
+        path: PathBuf,
+    },
+    /// The file is a SQLite database of some other program.
+    #[error(
+        "{} is a SQLite database of another program (it has the tables {tables} but no pipewave \
+         schema); check the --db path",
+        path.display()
+    )]
+    ForeignDatabase {
+        /// The database path.
+        path: PathBuf,
+        /// Its tables, comma-separated.
+        tables: String,
+    },
+    /// The database was written by a newer pipewave.
+    #[error(
+        "{} was written by a newer pipewave (schema version {found}; this pipewave knows up to \
+         version {known}); use the newer pipewave",
+        path.display()
+    )]
+    TooNew {
+        /// The database path.
+        path: PathBuf,
+        /// The schema version found in the file.
+        found: i64,
+        /// The newest schema version this program knows.
+        known: i64,
+    },
+    /// A migration failed; the database is left as it was before.
+    #[error("could not upgrade the database schema to version {version} ({name}); it was left unchanged")]
+    Migration {
+        /// The migration's version number.
+        version: i64,
+        /// The migration's file name.
+        name: &'static str,
+        /// What SQLite said.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// The database is damaged.
+    #[error("the database file is damaged (SQLite reports corruption); restore it from a backup or re-import into a new file")]
+    Corrupt(#[source] rusqlite::Error),
+    /// Another connection held the write lock for longer than [`BUSY_TIMEOUT`].
+    #[error("the database is busy: another pipewave process kept it locked for more than 10 s; try again when it has finished")]
+    Busy(#[source] rusqlite::Error),
+    /// An input file could not be read.
+    #[error("cannot read {}", path.display())]
+    ReadFile {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Segment ids asked for that are not in the inventory.
+    #[error("segment(s) not in the inventory: {ids} (import them first, or check the spelling)")]
+    UnknownSegments {
+        /// The unknown ids, comma-separated.
+        ids: String,
+    },
+    /// Another calibrate run holds the run lock.
+    #[error(
+        "another calibrate run (pid {pid}, started {started_at}) is using this database; wait for \
+         it to finish (if you are sure no calibrate is running, for instance on another machine \
+         sharing the file, delete the row of the table run_lock)"
+    )]
+    Locked {
+        /// Process id of the holder.
+        pid: i64,
+        /// When it started (UTC, ISO 8601).
+        started_at: String,
+    },
+    /// A stored value that pipewave cannot interpret (the file was edited by hand?).
+    #[error("the database holds a value pipewave cannot read: {what}")]
+    BadStoredValue {
+        /// What and where.
+        what: String,
+    },
+    /// Any other SQLite error.
+    #[error("database error")]
+    Sqlite(#[source] rusqlite::Error),
+}
+
+impl From<rusqlite::Error> for DbError {
+    fn from(e: rusqlite::Error) -> Self {
+        use rusqlite::ErrorCode;
+        match e.sqlite_error_code() {
+            Some(ErrorCode::DatabaseBusy | ErrorCode::DatabaseLocked) => DbError::Busy(e),
+            Some(ErrorCode::DatabaseCorrupt) => DbError::Corrupt(e),
+            _ => DbError::Sqlite(e),
+        }
+    }
+}
+
+/// An open, migrated pipewave database.
+#[derive(Debug)]
+pub struct Database {
+    conn: Connection,
+    path: PathBuf,
+}
+
+impl Database {
+    /// Open the database at `path`, creating the file if it does not exist, and bring its
+    /// schema up to date. Sets `foreign_keys = ON`, `journal_mode = WAL` and a busy timeout of
+    /// [`BUSY_TIMEOUT`].
+    ///
+    /// Errors: [`DbError::NotADatabase`] for a file that is not SQLite,
+    /// [`DbError::ForeignDatabase`] for another program's database, [`DbError::TooNew`] for a
+    /// database of a newer pipewave.
+    pub fn open(path: impl AsRef<Path>) -> Result<Database, DbError> {
+        let path = path.as_ref().to_path_buf();
+        if path.is_dir() {
+            return Err(DbError::IsDirectory { path });
+        }
+        let conn = Connection::open(&path).map_err(|source| DbError::Open {
+            path: path.clone(),
+            source,
+        })?;
+        let not_a_db = |e: rusqlite::Error| match e.sqlite_error_code() {
+            Some(rusqlite::ErrorCode::NotADatabase) => DbError::NotADatabase { path: path.clone() },
+            _ => DbError::from(e),
+        };
+        conn.busy_timeout(BUSY_TIMEOUT).map_err(not_a_db)?;
+        conn.pragma_update(None, "foreign_keys", true)
+            .map_err(not_a_db)?;
+        // journal_mode returns the mode now in force; a file that is not SQLite fails here.
+        let _mode: String = conn
+            .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))
+            .map_err(not_a_db)?;
+        let mut db = Database { conn, path };
+        migrate::migrate(&mut db.conn, &db.path)?;
+        Ok(db)
+    }
+
+    /// The connection, for the functions of the submodules.
+    pub fn conn(&self) -> &Connection {
+        &self.conn
+    }
+
+    /// The connection, for the functions of the submodules that write in a transaction.
+    pub fn conn_mut(&mut self) -> &mut Connection {
+        &mut self.conn
+    }
+
+    /// The path the database was opened from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The schema version (`PRAGMA user_version`).
+    pub fn schema_version(&self) -> Result<i64, DbError> {
+        Ok(migrate::user_version(&self.conn)?)
+    }
+}
