@@ -227,9 +227,11 @@ fn parse_case(rec: &csv::StringRecord, idx: &[usize; 17]) -> Result<(System, f64
             })
     };
     // Map a checked-constructor error to the column it came from.
-    let at = |j: usize| move |e: InputError| CellError {
-        column: idx[j],
-        message: e.to_string(),
+    let at = |j: usize| {
+        move |e: InputError| CellError {
+            column: idx[j],
+            message: e.to_string(),
+        }
     };
     let omega = num(1)?;
     if omega <= 0.0 {

@@ -98,8 +98,11 @@ const AC_SIZES: [PipeSize; 3] = [
     size(200, 232.0, 17.0),
 ];
 
-/// Soil classes from soft clay to gravel: (name, E_m range Pa, ν_m range, ρ_m range kg/m³).
-pub const SOILS: [(&str, (f64, f64), (f64, f64), (f64, f64)); 6] = [
+/// A soil class: (name, E_m range Pa, ν_m range, ρ_m range kg/m³).
+pub type SoilClass = (&'static str, (f64, f64), (f64, f64), (f64, f64));
+
+/// Soil classes from soft clay to gravel.
+pub const SOILS: [SoilClass; 6] = [
     ("soft_clay", (5e6, 2e7), (0.40, 0.47), (1600.0, 1800.0)),
     ("stiff_clay", (2e7, 6e7), (0.35, 0.42), (1800.0, 2000.0)),
     ("loam", (3e7, 7e7), (0.30, 0.38), (1800.0, 2000.0)),
@@ -330,8 +333,15 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
         let xi = rng.gen::<f64>();
         let pipe = pipe_of(material, &sz);
         let soil = Soil::new(e, nu, rho, 0.0).expect("soil classes are valid");
-        let mut sys = System::new(Fluid::water(), pipe, soil, xi, opts.model, opts.contact_mode)
-            .expect("valid system");
+        let mut sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            xi,
+            opts.model,
+            opts.contact_mode,
+        )
+        .expect("valid system");
         let hidden = opts.hidden_effect.map(|(eff, lo, hi)| {
             let v = if eff == Effect::AirInWater {
                 log_uniform(&mut rng, lo.max(1e-7), hi)
@@ -403,7 +413,10 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
         } else {
             (x0, y0 + 90.0)
         };
-        let mid = ((x0 + x1) / 2.0 + rng.gen_range(-3.0..3.0), (y0 + y1) / 2.0 + rng.gen_range(-3.0..3.0));
+        let mid = (
+            (x0 + x1) / 2.0 + rng.gen_range(-3.0..3.0),
+            (y0 + y1) / 2.0 + rng.gen_range(-3.0..3.0),
+        );
         let geometry = vec![(x0, y0), mid, (x1, y1)];
         let length_m = geometry
             .windows(2)

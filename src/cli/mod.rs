@@ -2,6 +2,8 @@
 //! and calling the library. Only this module knows clap. It lives in the binary crate (not the
 //! library) so that clap and anyhow stay out of the library, as docs/style.md asks.
 
+mod bench;
+mod forward;
 mod import;
 
 use std::process::ExitCode;
@@ -28,6 +30,10 @@ pub struct Cli {
 enum Command {
     /// Load or update the inventory (segments.csv) and field measurements (measurements.csv).
     Import(import::ImportArgs),
+    /// Evaluate the forward model for a table of cases (research and validation).
+    Forward(forward::ForwardArgs),
+    /// Print benchmark figures (build with --release).
+    Bench(bench::BenchArgs),
 }
 
 /// How a command that ran ended.
@@ -36,7 +42,6 @@ pub enum Outcome {
     /// It did its job.
     Done,
     /// It finished, but some segments failed.
-    #[allow(dead_code)] // Used by calibrate, which is still to come.
     SomeFailed,
 }
 
@@ -54,5 +59,7 @@ impl Outcome {
 pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
     match cli.command {
         Command::Import(args) => import::run(&args),
+        Command::Forward(args) => forward::run(&args),
+        Command::Bench(args) => bench::run(&args),
     }
 }

@@ -8,12 +8,11 @@ use super::flags::{assess, Flag};
 use super::problem::{Method, Param, Problem, SegmentData, Weighting};
 use crate::optimize::linalg::covariance_from_jacobian;
 use crate::optimize::{
-    DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, Objective,
-    OptimizeError,
+    DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, Objective, OptimizeError,
 };
 use crate::physics::effects::Effect;
-use crate::units::sig;
 use crate::physics::{ContactMode, Model, System};
+use crate::units::sig;
 
 /// Settings of a fit.
 #[derive(Debug, Clone, PartialEq)]
@@ -363,7 +362,10 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         weighting: problem.weighting,
         n_measurements: problem.data.measurements.len(),
         condition_number: cov.as_ref().map(|c| c.scaled_condition_number),
-        correlations: cov.as_ref().map(|c| c.correlation.clone()).unwrap_or_default(),
+        correlations: cov
+            .as_ref()
+            .map(|c| c.correlation.clone())
+            .unwrap_or_default(),
         flags: Vec::new(),
         evaluations: 0,
         system: Some(sys),
@@ -403,11 +405,7 @@ fn de_for(
 }
 
 /// Levenberg–Marquardt polish of a DE optimum inside the bounds.
-fn polish(
-    problem: &Problem<'_>,
-    x0: &[f64],
-    bounds: &crate::optimize::Bounds,
-) -> Option<Optimum> {
+fn polish(problem: &Problem<'_>, x0: &[f64], bounds: &crate::optimize::Bounds) -> Option<Optimum> {
     let lm = LevenbergMarquardt::new()
         .max_iterations(30)
         .ok()?

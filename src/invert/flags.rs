@@ -7,8 +7,8 @@ use super::problem::{Param, Problem, Scale, Weighting};
 use crate::physics::dispersion::korteweg_speed;
 use crate::physics::effects::Effect;
 use crate::physics::solver::{solve_curve, Continuation, Tolerance};
-use crate::units::sig;
 use crate::physics::{Soil, System};
+use crate::units::sig;
 
 /// A chi-square whose upper-tail probability is below this is too high for the stated noise.
 pub const MISFIT_P_VALUE: f64 = 1e-3;
@@ -115,7 +115,10 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
     if 2 * m <= n {
         push(
             FlagCode::TooFewMeasurements,
-            format!("{m} measurement(s) give {} numbers for {n} parameters", 2 * m),
+            format!(
+                "{m} measurement(s) give {} numbers for {n} parameters",
+                2 * m
+            ),
         );
     }
 
@@ -141,7 +144,13 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
             let c = meas.phase_speed();
             c > c_fluid || c < c_low
         })
-        .map(|meas| format!("{:.0} m/s at {:.0} Hz", meas.phase_speed(), meas.omega / std::f64::consts::TAU))
+        .map(|meas| {
+            format!(
+                "{:.0} m/s at {:.0} Hz",
+                meas.phase_speed(),
+                meas.omega / std::f64::consts::TAU
+            )
+        })
         .collect();
     if !bad.is_empty() {
         push(
@@ -162,7 +171,7 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
             if dof > 0 {
                 let chi2 = r.chi2_per_dof.unwrap_or(f64::NAN) * dof as f64;
                 let p = chi2_upper_tail(chi2, dof as f64);
-                if !(p >= MISFIT_P_VALUE) {
+                if p.is_nan() || p < MISFIT_P_VALUE {
                     push(
                         FlagCode::HighMisfit,
                         format!(
@@ -220,7 +229,7 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
     }
 
     if let Some(c) = r.condition_number {
-        if !(c <= CONDITION_MAX) {
+        if c.is_nan() || c > CONDITION_MAX {
             push(
                 FlagCode::IllConditioned,
                 format!("scaled Jacobian condition number {c:.2e}: parameters trade off against each other"),
@@ -236,7 +245,10 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
     if !unident.is_empty() {
         push(
             FlagCode::Unidentifiable,
-            format!("{} not constrained by the data (uncertainty spans most of the range)", unident.join(", ")),
+            format!(
+                "{} not constrained by the data (uncertainty spans most of the range)",
+                unident.join(", ")
+            ),
         );
     }
     if let Some(e) = r.get(Param::SoilModulus) {
@@ -284,7 +296,10 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
         if !grazing.is_empty() {
             push(
                 FlagCode::NearGrazing,
-                format!("predicted wave within 2 % of a soil wave speed at {}", grazing.join(", ")),
+                format!(
+                    "predicted wave within 2 % of a soil wave speed at {}",
+                    grazing.join(", ")
+                ),
             );
         }
         let out: Vec<String> = roots
@@ -296,7 +311,10 @@ pub fn assess(problem: &Problem<'_>, r: &FitResult, separated: Option<String>) -
         if !out.is_empty() {
             push(
                 FlagCode::OutOfValidity,
-                format!("{} above half the ring or fluid cut-on frequency (eq. P7)", out.join(", ")),
+                format!(
+                    "{} above half the ring or fluid cut-on frequency (eq. P7)",
+                    out.join(", ")
+                ),
             );
         }
     }

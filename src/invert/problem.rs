@@ -9,9 +9,7 @@ use crate::optimize::{Bounds, LeastSquares, Objective, OptimizeError};
 use crate::physics::effects::Effect;
 use crate::physics::inputs::{check_range, MAX_SOIL_POISSON};
 use crate::physics::solver::{solve_curve, Continuation, Tolerance};
-use crate::physics::{
-    ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System,
-};
+use crate::physics::{ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System};
 
 /// One measured wavenumber (spec C6: k = k_re − i·att).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -400,10 +398,7 @@ impl<'a> Problem<'a> {
                     m.k_re_std.unwrap_or(f64::NAN),
                     m.attenuation_std.unwrap_or(f64::NAN),
                 ),
-                Weighting::Relative => (
-                    m.k_re / PAPER_W_RE,
-                    m.attenuation.max(1e-12) / PAPER_W_IM,
-                ),
+                Weighting::Relative => (m.k_re / PAPER_W_RE, m.attenuation.max(1e-12) / PAPER_W_IM),
             };
             out[2 * i] = d_re / s_re;
             out[2 * i + 1] = d_att / s_att;

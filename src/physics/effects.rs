@@ -189,7 +189,9 @@ impl Effect {
             Effect::SoilDamping => "hysteretic loss in the soil skeleton (complex Lame moduli)",
             Effect::AirInWater => "free air bubbles softening the water (Wood's equation)",
             Effect::WallThinning => "corrosion or graphitisation thinning the load-bearing wall",
-            Effect::PipeLoss => "wall material and joint damping above the material's typical value",
+            Effect::PipeLoss => {
+                "wall material and joint damping above the material's typical value"
+            }
             Effect::FullModel => "exact radial fluid loading and axial wall inertia (full model)",
         }
     }
@@ -264,5 +266,9 @@ pub fn parse_effects(text: &str) -> Result<Vec<Effect>, InputError> {
 
 /// Comma-separated names (the `fits.effects` column).
 pub fn effects_text(effects: &[Effect]) -> String {
-    effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(",")
+    effects
+        .iter()
+        .map(|e| e.name())
+        .collect::<Vec<_>>()
+        .join(",")
 }
