@@ -1,0 +1,224 @@
+//! The paper's cast-iron field case (Lu et al. 2022, Table 2), under the stated geometry
+//! assumption (an inferred DN125: a = 69 mm, h = 6 mm; spec §7.7), and the buried MDPE pipe of
+//! Muggleton et al. (2004). Data from `tests/data/published/` (see its README for sources).
+
+mod common;
+
+use common::*;
+use pipewave::invert::problem::Problem;
+use pipewave::invert::*;
+use pipewave::physics::{ContactMode, Fluid, Material, Model, Pipe};
+use pipewave::units::{db_to_np, hz_to_omega};
+
+fn paper_data() -> SegmentData {
+    let meas = read_csv("published/seed_cast_iron_table2.csv")
+        .iter()
+        .map(|r| {
+            Measurement::new(
+                r.f("omega_rad_s"),
+                r.f("k_re_rad_per_m"),
+                r.f("attenuation_np_per_m"),
+                None,
+                None,
+            )
+            .unwrap()
+        })
+        .collect();
+    SegmentData {
+        fluid: Fluid::water(),
+        pipe: Pipe::new(1.22e11, 0.25, 7800.0, 0.01, 0.069, 0.006).unwrap(),
+        soil_density: 1999.0,
+        material: Some(Material::CastIron),
+        measurements: meas,
+    }
+}
+
+/// The paper's objective f (P52–P53) at (E_m, ν_m, ξ).
+fn paper_f(data: &SegmentData, model: Model, mode: ContactMode, x: [f64; 3]) -> f64 {
+    let p = Problem::new(data, Method::Paper, model, mode, &[]);
+    p.paper_objective(&p.predict(&x).unwrap())
+}
+
+/// Spec §7.8 table 1, column "f at the estimate" and "f at the soil test", all four variants.
+#[test]
+fn paper_objective_at_published_points_matches_spec() {
+    let d = paper_data();
+    for (model, mode, f_est, f_test) in [
+        (Model::Seed, ContactMode::Reciprocal, 0.7235, 0.7224),
+        (Model::Full, ContactMode::Reciprocal, 0.7068, 0.7055),
+        (Model::Seed, ContactMode::Printed, 0.6958, 0.6944),
+        (Model::Full, ContactMode::Printed, 0.6759, 0.6744),
+    ] {
+        let a = paper_f(&d, model, mode, [4.79e7, 0.3326, 0.0]);
+        let b = paper_f(&d, model, mode, [4.5e7, 0.35, 0.0]);
+        assert!(
+            (a - f_est).abs() < 5e-4,
+            "{model} {mode}: f(estimate) = {a}"
+        );
+        assert!(
+            (b - f_test).abs() < 5e-4,
+            "{model} {mode}: f(soil test) = {b}"
+        );
+    }
+}
+
+/// Spec §7.7: deviations (%) of `full`/`reciprocal` at the paper's estimate.
+#[test]
+fn deviations_at_the_estimate_match_spec() {
+    let d = paper_data();
+    let p = Problem::new(&d, Method::Paper, Model::Full, ContactMode::Reciprocal, &[]);
+    let k = p.predict(&[4.79e7, 0.3326, 0.0]).unwrap();
+    let re = [0.82, 0.17, 3.78, 1.35];
+    let im = [13.8, 9.8, 11.3, 21.6];
+    for (i, (m, k)) in d.measurements.iter().zip(&k).enumerate() {
+        let dre = 100.0 * (k.re - m.k_re).abs() / m.k_re;
+        let dim = 100.0 * (-k.im - m.attenuation).abs() / m.attenuation;
+        assert!((dre - re[i]).abs() < 0.01, "Re deviation {dre} at row {i}");
+        assert!((dim - im[i]).abs() < 0.1, "Im deviation {dim} at row {i}");
+    }
+}
+
+/// The paper's estimate is not the global optimum of this model, nor a stationary point:
+/// both the paper's DE and the default method find far lower f, and a local polish started at
+/// the estimate moves away from it down the E_m–ν_m valley (spec §7.8 items 1–2).
+#[test]
+fn paper_estimate_is_not_the_optimum() {
+    let d = paper_data();
+    let f_est = paper_f(
+        &d,
+        Model::Full,
+        ContactMode::Reciprocal,
+        [4.79e7, 0.3326, 0.0],
+    );
+    let paper = fit_segment(
+        &d,
+        &FitSettings::paper(Model::Full, ContactMode::Reciprocal),
+        3,
+    );
+    assert_ne!(paper.status, FitStatus::Failed);
+    assert!(
+        paper.misfit < 0.5 * f_est,
+        "paper DE f = {} vs estimate {f_est}",
+        paper.misfit
+    );
+    let default = fit_segment(&d, &FitSettings::default(), 3);
+    let x = [
+        default.soil_modulus().unwrap(),
+        default.soil_poisson().unwrap(),
+        default.contact().unwrap(),
+    ];
+    let f_default = paper_f(&d, Model::Full, ContactMode::Reciprocal, x);
+    assert!(
+        f_default < 0.5 * f_est,
+        "default optimum has paper f = {f_default}"
+    );
+    // The high-E basin sits where the soil's compressional speed overtakes the pipe wave
+    // (spec §7.8 item 3): c_P above ~1250 m/s at the optimum.
+    let soil = pipewave::physics::Soil::new(x[0], x[1], 1999.0, 0.0).unwrap();
+    assert!(
+        soil.wave_speeds().0 > 1250.0,
+        "c_P = {}",
+        soil.wave_speeds().0
+    );
+    // A local least-squares polish started at the estimate lowers the objective: not stationary.
+    let p = Problem::new(
+        &d,
+        Method::Default,
+        Model::Full,
+        ContactMode::Reciprocal,
+        &[],
+    );
+    let x0 = [4.79e7f64.log10(), 0.3326, 0.0];
+    let start = p.sum_of_squares(&p.predict(&x0).unwrap());
+    let lm = pipewave::optimize::LevenbergMarquardt::new();
+    let r = lm.minimize(&p, &x0, Some(&p.bounds().unwrap())).unwrap();
+    assert!(
+        r.cost < 0.9 * start,
+        "polish from the estimate: {start} -> {}",
+        r.cost
+    );
+    eprintln!(
+        "paper case: f(estimate) = {f_est:.4}; paper DE: E = {:.3e}, nu = {:.3}, xi = {:.2}, f = {:.4}; default: E = {:.3e}, nu = {:.3}, xi = {:.2}, f = {f_default:.4}",
+        paper.soil_modulus().unwrap(), paper.soil_poisson().unwrap(), paper.contact().unwrap(), paper.misfit,
+        x[0], x[1], x[2]
+    );
+}
+
+/// The buried MDPE pipe (Muggleton et al. 2004): the raw 100–750 Hz rows binned into 50 Hz
+/// bands with standard errors of the mean, fitted with the default method. The fitted soil
+/// modulus lies within a factor 1.5 of the soil identified from the group's own model curves
+/// (E_m = 4.0e7 Pa, spec §3.4) and Re k is explained to within 7 % in every band; but the raw
+/// data have structure far beyond their scatter (χ²/dof ≈ 38), which the fit must flag rather
+/// than hide. Issue 6 (diagnose) looks for the missing effect.
+#[test]
+fn mdpe_measurements_fit() {
+    let rows = read_csv("published/muggleton2004_buried_mdpe.csv");
+    let mut meas = Vec::new();
+    for band in 0..13 {
+        let lo = 100.0 + 50.0 * band as f64;
+        let sel: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.f("frequency_hz") >= lo && r.f("frequency_hz") < lo + 50.0)
+            .collect();
+        let n = sel.len() as f64;
+        let mean = |k: &str| sel.iter().map(|r| r.f(k)).sum::<f64>() / n;
+        let sem = |k: &str, m: f64| {
+            (sel.iter().map(|r| (r.f(k) - m).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
+        };
+        let (f, k, a) = (
+            mean("frequency_hz"),
+            mean("k_re_rad_per_m"),
+            mean("attenuation_db_per_m"),
+        );
+        meas.push(
+            Measurement::new(
+                hz_to_omega(f),
+                k,
+                db_to_np(a),
+                Some(sem("k_re_rad_per_m", k)),
+                Some(db_to_np(sem("attenuation_db_per_m", a))),
+            )
+            .unwrap(),
+        );
+    }
+    let d = SegmentData {
+        fluid: Fluid::water(),
+        pipe: Pipe::new(2.0e9, 0.4, 900.0, 0.06, 0.0845, 0.011).unwrap(),
+        soil_density: 1500.0,
+        material: Some(Material::Mdpe),
+        measurements: meas,
+    };
+    let r = fit_segment(&d, &FitSettings::default(), 1);
+    assert_ne!(r.status, FitStatus::Failed, "{:?}", r.message);
+    let e = r.soil_modulus().unwrap();
+    assert!(e > 4.0e7 / 1.5 && e < 4.0e7 * 1.5, "E = {e}");
+    assert!(r.flags.iter().any(|f| f.code == FlagCode::HighMisfit));
+    assert!(r.chi2_per_dof.unwrap() > 10.0);
+    for (m, k) in d.measurements.iter().zip(&r.predicted) {
+        assert!(
+            (k.re / m.k_re - 1.0).abs() < 0.07,
+            "Re k {} vs {}",
+            k.re,
+            m.k_re
+        );
+        eprintln!(
+            "f {:.0} Re k {:.3} vs {:.3} +- {:.3}; att {:.3} vs {:.3} +- {:.3}",
+            m.omega / std::f64::consts::TAU,
+            k.re,
+            m.k_re,
+            m.k_re_std.unwrap(),
+            -k.im,
+            m.attenuation,
+            m.attenuation_std.unwrap()
+        );
+    }
+    eprintln!(
+        "MDPE: E = {:.3e} (+- {:?}), nu = {:.3}, xi = {:.2}, chi2/dof = {:?}, flags {}",
+        r.soil_modulus().unwrap(),
+        r.get(Param::SoilModulus).unwrap().std,
+        r.soil_poisson().unwrap(),
+        r.contact().unwrap(),
+        r.chi2_per_dof,
+        r.flag_codes()
+    );
+}
