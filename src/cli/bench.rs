@@ -10,6 +10,9 @@ pub struct BenchArgs {
     /// Repeat factor: larger values time longer batches.
     #[arg(long, default_value_t = 1)]
     scale: usize,
+    /// Seeds per case for the inversion figures (0 skips them).
+    #[arg(long, default_value_t = 100)]
+    fits: usize,
 }
 
 /// Run the benchmarks and print them.
@@ -21,5 +24,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
     }
     let figs = pipewave::bench::forward_figures(args.scale.max(1));
     pipewave::bench::print_figures("forward model (one core):", &figs);
+    if args.fits > 0 {
+        let fits = pipewave::bench::inversion_figures(args.fits);
+        pipewave::bench::print_fit_figures(&fits);
+    }
     Ok(Outcome::Done)
 }

@@ -5,7 +5,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::flags::{assess, Flag};
-use super::problem::{Method, Param, Problem, SegmentData, Weighting};
+use super::problem::{Method, Param, Problem, SegmentData, SolvePath, Weighting};
 use crate::optimize::linalg::covariance_from_jacobian;
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, Objective, OptimizeError,
@@ -57,6 +57,10 @@ impl FitSettings {
         }
     }
 }
+
+/// The fast search path and the reference path agree at the optimum when every wavenumber
+/// agrees to this relative amount (the fast tolerance is 1e-10; another root differs by O(1)).
+pub const PATH_AGREEMENT_RTOL: f64 = 1e-6;
 
 /// Independent DE runs of the default method.
 pub const DEFAULT_RESTARTS: usize = 2;
@@ -162,6 +166,8 @@ pub struct FitResult {
     pub message: Option<String>,
     /// Best objective of every restart, after polish (diagnostics).
     pub restart_misfits: Vec<f64>,
+    /// The search path's roots agreed with the reference path at the optimum.
+    pub path_checked: bool,
 }
 
 impl FitResult {
@@ -210,6 +216,7 @@ impl FitResult {
             predicted: Vec::new(),
             message: Some(msg),
             restart_misfits: Vec::new(),
+            path_checked: true,
         }
     }
 }
@@ -252,7 +259,30 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
         );
     }
     match run(&problem, settings, seed) {
-        Ok(r) => r,
+        Ok(r) if r.path_checked => r,
+        Ok(fast) => {
+            // The fast search path tracked another root at its optimum: search again with the
+            // safe path (continuation ramp wherever the soil moves the root far from in vacuo).
+            let mut safe = Problem::new(
+                data,
+                settings.method,
+                settings.model,
+                settings.contact_mode,
+                &settings.effects,
+            );
+            safe.path = SolvePath::Safe;
+            match run(&safe, settings, seed) {
+                Ok(mut r) => {
+                    r.evaluations += fast.evaluations;
+                    r
+                }
+                Err(e) => {
+                    let mut r = FitResult::failed(settings, problem.weighting, n_meas, e);
+                    r.evaluations = problem.evaluations() + safe.evaluations();
+                    r
+                }
+            }
+        }
         Err(e) => {
             let mut r = FitResult::failed(settings, problem.weighting, n_meas, e);
             r.evaluations = problem.evaluations();
@@ -298,9 +328,16 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
     let sys = problem
         .system_at(&x)
         .ok_or_else(|| "the best parameters give a non-physical input".to_string())?;
+    // The answer is reported on the reference path (spec §5.3–5.4); the search path must agree.
     let predicted = problem
-        .predict_system(&sys)
+        .predict_reference(&sys)
         .ok_or_else(|| "forward solve failed at the optimum".to_string())?;
+    let path_checked = problem.path == SolvePath::Safe
+        || problem.predict_system(&sys).is_some_and(|k| {
+            k.iter()
+                .zip(&predicted)
+                .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
+        });
 
     // Uncertainty from the Jacobian of the weighted residuals at the optimum.
     let m = problem.n_residuals();
@@ -378,6 +415,7 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         predicted,
         message: None,
         restart_misfits: optima.iter().map(|o| o.cost).collect(),
+        path_checked,
     };
     let separated = separated_minima(problem, &optima, best_i, &result);
     result.flags = assess(problem, &result, separated);

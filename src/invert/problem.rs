@@ -280,8 +280,22 @@ pub struct Problem<'a> {
     pub method: Method,
     /// The default method's weighting.
     pub weighting: Weighting,
+    /// How the forward model is solved during the search.
+    pub path: SolvePath,
     omegas: Vec<f64>,
     evaluations: Cell<usize>,
+}
+
+/// How the inversion solves the forward model at each candidate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SolvePath {
+    /// Every frequency by continuation from the lowest one, solved directly from its in-vacuo
+    /// root (no ramp); an 8-point ramp only if that fails. Fast; may track another root for
+    /// thin plastic pipes in stiff soil, so the fit checks its optimum by the reference path.
+    Fast,
+    /// As `Fast`, but the ramp is also used whenever the lowest root is more than 10 % from
+    /// its in-vacuo value ([`predict`]).
+    Safe,
 }
 
 impl<'a> Problem<'a> {
@@ -314,6 +328,7 @@ impl<'a> Problem<'a> {
             specs: parameter_space(method, effects),
             method,
             weighting,
+            path: SolvePath::Fast,
             omegas: data.measurements.iter().map(|m| m.omega).collect(),
             evaluations: Cell::new(0),
         }
@@ -374,7 +389,19 @@ impl<'a> Problem<'a> {
     /// Model wavenumbers at the measured frequencies for system `sys`, or `None` when a root
     /// is not found (or is a growing wave under `reciprocal`/`blend`).
     pub fn predict_system(&self, sys: &System) -> Option<Vec<Complex64>> {
-        predict(sys, &self.omegas)
+        match self.path {
+            SolvePath::Fast => predict_fast(sys, &self.omegas),
+            SolvePath::Safe => predict(sys, &self.omegas),
+        }
+    }
+
+    /// Model wavenumbers by the reference path (29-point ramp, reference tolerance, spec
+    /// §5.3–5.4), for checking the search's answer.
+    pub fn predict_reference(&self, sys: &System) -> Option<Vec<Complex64>> {
+        accept_roots(
+            sys,
+            &solve_curve(sys, &self.omegas, Continuation::default()),
+        )
     }
 
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.
@@ -424,6 +451,38 @@ impl<'a> Problem<'a> {
     }
 }
 
+/// The roots as wavenumbers, or `None` if one failed or is a growing wave under `reciprocal` or
+/// `blend` (a bug or a branch jump there, spec §5.6).
+fn accept_roots(
+    sys: &System,
+    res: &[Result<crate::physics::Root, crate::physics::SolveError>],
+) -> Option<Vec<Complex64>> {
+    let mut out = Vec::with_capacity(res.len());
+    for r in res {
+        let r = r.as_ref().ok()?;
+        if r.flags.growing_wave && sys.contact_mode != ContactMode::Printed {
+            return None;
+        }
+        out.push(r.k1);
+    }
+    Some(out)
+}
+
+/// [`SolvePath::Fast`]: no ramp, fast tolerance; the 8-point ramp only if that fails.
+pub fn predict_fast(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
+    let fast = Continuation {
+        ramp_points: 0,
+        tolerance: Tolerance::FAST,
+    };
+    accept_roots(sys, &solve_curve(sys, omegas, fast)).or_else(|| {
+        let ramp = Continuation {
+            ramp_points: INVERSION_RAMP_POINTS,
+            tolerance: Tolerance::FAST,
+        };
+        accept_roots(sys, &solve_curve(sys, omegas, ramp))
+    })
+}
+
 /// Wavenumbers of `sys` at `omegas` with the inversion's solver settings: the lowest frequency
 /// straight from its in-vacuo root when the root stays within 10 % of it, otherwise (or if any
 /// solve fails) an 8-point continuation ramp (spec §5.4 allows a shorter ramp for the inversion).
@@ -432,17 +491,8 @@ pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
         ramp_points: 0,
         tolerance: Tolerance::FAST,
     };
-    let accept = |res: &[Result<crate::physics::Root, crate::physics::SolveError>]| {
-        let mut out = Vec::with_capacity(res.len());
-        for r in res {
-            let r = r.as_ref().ok()?;
-            if r.flags.growing_wave && sys.contact_mode != ContactMode::Printed {
-                return None;
-            }
-            out.push(r.k1);
-        }
-        Some(out)
-    };
+    let accept =
+        |res: &[Result<crate::physics::Root, crate::physics::SolveError>]| accept_roots(sys, res);
     let res = solve_curve(sys, omegas, fast);
     let w_min = omegas.iter().copied().fold(f64::INFINITY, f64::min);
     let trusted = res
