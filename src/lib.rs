@@ -2,6 +2,7 @@
 //! around it from field measurements.
 pub mod bench;
 pub mod db;
+pub mod diagnose;
 pub mod forward;
 pub mod invert;
 pub mod optimize;

@@ -1,0 +1,757 @@
+//! The discrepancy workflow (issue 6): find where model and measurements disagree, name the
+//! missing physical effect, refit with it, and show the misfit shrink.
+//!
+//! 1. **Find.** Residuals of the current fit normalised by the measurement standard deviations,
+//!    per frequency, for Re k and the attenuation separately, with tests for structure: misfit
+//!    far above the noise, a trend with frequency, runs of one sign, one part fine and the other
+//!    off ([`structure`]).
+//! 2. **Name.** Every effect of the library ([`Effect`], spec §8) is a nested extension of the
+//!    model with one parameter at a neutral value. At the current fit a score (Lagrange
+//!    multiplier) test says how much χ² each could remove, cheaply and without refitting; the
+//!    one-sided effects (air, thinning, losses only move one way) score zero when the data pull
+//!    the wrong way. The best candidates are refitted; an effect is accepted only when a
+//!    likelihood-ratio test that accounts for the parameter on its bound (χ̄² = ½χ²₀ + ½χ²₁,
+//!    Self & Liang 1987) rejects the base model at level α after a Bonferroni correction for
+//!    the candidates tried, **and** leave-one-frequency-out prediction improves. "None" is a
+//!    valid answer.
+//! 3. **Add** and 4. **Show** are done by the `diagnose` command: a new fit row with the effect
+//!    and its value, and a report.
+
+use num_complex::Complex64;
+
+use crate::invert::fit::{fit_segment, FitResult, FitSettings, FitStatus};
+use crate::invert::flags::chi2_upper_tail;
+use crate::invert::problem::{predict, Measurement, Param, Problem, SegmentData};
+use crate::optimize::{FiniteDifference, LevenbergMarquardt};
+use crate::physics::effects::Effect;
+use crate::physics::{ContactMode, Model};
+
+/// Assumed relative noise on Re k when a segment has no stated standard deviations (typical
+/// of two-sensor field estimates; it only matters for such segments and is reported).
+pub const ASSUMED_K_RE_RSTD: f64 = 0.01;
+/// Assumed relative noise on the attenuation when none is stated.
+pub const ASSUMED_ATTENUATION_RSTD: f64 = 0.1;
+/// Level of the tests (before the Bonferroni correction over candidates).
+pub const ALPHA: f64 = 1e-3;
+/// A base fit is "structured" (worth naming an effect) when its χ² has upper-tail probability
+/// below this.
+pub const STRUCTURE_P: f64 = 1e-3;
+/// Accepted effects whose χ² after differs by less than this explain the data equally well
+/// (two units of χ²: the AIC's price of a parameter).
+pub const TIE_LR: f64 = 2.0;
+/// Tie-break between equally good effects, most plausible first: the loss factor of a wall
+/// is the least certain input (plastics 0.04–0.1, iron a single published value, spec §3.3);
+/// wall thinning is common in old iron; free air needs a reason (a high point, a recent
+/// repair); soil damping shows only in stiff soil (spec §8 E1); the full model is the default.
+pub const PRIOR_ORDER: [Effect; 5] = [
+    Effect::PipeLoss,
+    Effect::WallThinning,
+    Effect::AirInWater,
+    Effect::SoilDamping,
+    Effect::FullModel,
+];
+/// The leave-one-frequency-out prediction error must fall by at least this fraction.
+pub const MIN_HOLDOUT_GAIN: f64 = 0.2;
+
+/// Settings of a diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnoseSettings {
+    /// Model variant of the base fit.
+    pub model: Model,
+    /// Contact reading.
+    pub contact_mode: ContactMode,
+    /// Effects already in the base model.
+    pub base_effects: Vec<Effect>,
+    /// Candidate effects.
+    pub candidates: Vec<Effect>,
+    /// Seed of the refits.
+    pub seed: u64,
+}
+
+impl Default for DiagnoseSettings {
+    fn default() -> Self {
+        Self {
+            model: Model::Full,
+            contact_mode: ContactMode::Reciprocal,
+            base_effects: Vec::new(),
+            candidates: Effect::ALL.to_vec(),
+            seed: 1,
+        }
+    }
+}
+
+/// Normalised residuals (model − measured)/σ of a fit, per measurement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Residuals {
+    /// Frequency, Hz.
+    pub frequency_hz: Vec<f64>,
+    /// Re k residuals in standard deviations.
+    pub re: Vec<f64>,
+    /// Attenuation residuals in standard deviations.
+    pub att: Vec<f64>,
+}
+
+impl Residuals {
+    /// Residuals of the predicted wavenumbers `k` against `data` (which has stds).
+    pub fn of(data: &SegmentData, k: &[Complex64]) -> Self {
+        let mut r = Residuals {
+            frequency_hz: Vec::new(),
+            re: Vec::new(),
+            att: Vec::new(),
+        };
+        for (m, k) in data.measurements.iter().zip(k) {
+            r.frequency_hz.push(m.omega / std::f64::consts::TAU);
+            r.re.push((k.re - m.k_re) / m.k_re_std.unwrap_or(f64::NAN));
+            r.att
+                .push((-k.im - m.attenuation) / m.attenuation_std.unwrap_or(f64::NAN));
+        }
+        r
+    }
+
+    /// χ² = Σ r².
+    pub fn chi2(&self) -> f64 {
+        self.re.iter().chain(&self.att).map(|v| v * v).sum()
+    }
+}
+
+/// Structure found in a fit's residuals.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Structure {
+    /// χ² of the Re k residuals.
+    pub chi2_re: f64,
+    /// χ² of the attenuation residuals.
+    pub chi2_att: f64,
+    /// Degrees of freedom of the fit (2M − n).
+    pub dof: usize,
+    /// Upper-tail probability of the total χ².
+    pub p_value: f64,
+    /// t statistic of a linear trend of the Re k residuals with frequency.
+    pub trend_re: f64,
+    /// t statistic of a linear trend of the attenuation residuals with frequency.
+    pub trend_att: f64,
+    /// Runs of one sign in the Re k residuals, and in the attenuation residuals.
+    pub runs: (usize, usize),
+    /// The misfit is far above the noise.
+    pub structured: bool,
+    /// A plain-words summary ("attenuation high at high frequency", …).
+    pub pattern: String,
+}
+
+/// t statistic of the slope of `y` on `x` (ordinary least squares); 0 with fewer than 3 points.
+pub fn trend_t(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len();
+    if n < 3 {
+        return 0.0;
+    }
+    let nf = n as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / nf, y.iter().sum::<f64>() / nf);
+    let sxx: f64 = x.iter().map(|v| (v - mx).powi(2)).sum();
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    if sxx <= 0.0 {
+        return 0.0;
+    }
+    let slope = sxy / sxx;
+    let resid: f64 = x
+        .iter()
+        .zip(y)
+        .map(|(a, b)| (b - my - slope * (a - mx)).powi(2))
+        .sum();
+    let se = (resid / (nf - 2.0) / sxx).sqrt();
+    if se > 0.0 {
+        slope / se
+    } else if slope == 0.0 {
+        0.0
+    } else {
+        slope.signum() * f64::INFINITY
+    }
+}
+
+/// Number of runs of one sign.
+pub fn runs(v: &[f64]) -> usize {
+    if v.is_empty() {
+        return 0;
+    }
+    1 + v
+        .windows(2)
+        .filter(|w| (w[0] >= 0.0) != (w[1] >= 0.0))
+        .count()
+}
+
+/// Tests for structure in the residuals of a fit with `n_params` parameters.
+pub fn structure(r: &Residuals, n_params: usize) -> Structure {
+    let chi2_re: f64 = r.re.iter().map(|v| v * v).sum();
+    let chi2_att: f64 = r.att.iter().map(|v| v * v).sum();
+    let dof = (2 * r.re.len()).saturating_sub(n_params);
+    let p_value = if dof > 0 {
+        chi2_upper_tail(chi2_re + chi2_att, dof as f64)
+    } else {
+        1.0
+    };
+    let trend_re = trend_t(&r.frequency_hz, &r.re);
+    let trend_att = trend_t(&r.frequency_hz, &r.att);
+    let m = r.re.len().max(1) as f64;
+    let (mean_re, mean_att) = (r.re.iter().sum::<f64>() / m, r.att.iter().sum::<f64>() / m);
+    let structured = p_value < STRUCTURE_P;
+    let mut words = Vec::new();
+    let part = |chi2: f64, mean: f64, trend: f64, name: &str| -> Option<String> {
+        if chi2 / m <= 2.0 {
+            return None;
+        }
+        let level = if mean > 1.0 {
+            "model above the data"
+        } else if mean < -1.0 {
+            "model below the data"
+        } else {
+            "scattered"
+        };
+        let tr = if trend > 2.0 {
+            ", rising with frequency"
+        } else if trend < -2.0 {
+            ", falling with frequency"
+        } else {
+            ""
+        };
+        Some(format!("{name}: {level}{tr}"))
+    };
+    if let Some(s) = part(chi2_re, mean_re, trend_re, "Re k") {
+        words.push(s);
+    }
+    if let Some(s) = part(chi2_att, mean_att, trend_att, "attenuation") {
+        words.push(s);
+    }
+    let pattern = if words.is_empty() {
+        "residuals within the noise".to_string()
+    } else {
+        words.join("; ")
+    };
+    Structure {
+        chi2_re,
+        chi2_att,
+        dof,
+        p_value,
+        trend_re,
+        trend_att,
+        runs: (runs(&r.re), runs(&r.att)),
+        structured,
+        pattern,
+    }
+}
+
+/// A candidate effect for one segment.
+#[derive(Debug, Clone)]
+pub struct Candidate {
+    /// The effect.
+    pub effect: Effect,
+    /// Score statistic at the current fit (χ² it could remove to first order; 0 when the data
+    /// pull the parameter out of its allowed range). `NaN` for `full_model`, which has no
+    /// parameter and is judged by its refit alone.
+    pub score: f64,
+    /// The refit with this effect, when it was tried.
+    pub refit: Option<Refit>,
+}
+
+/// A nested refit and its evidence.
+#[derive(Debug, Clone)]
+pub struct Refit {
+    /// The extended fit.
+    pub fit: FitResult,
+    /// χ²(base) − χ²(extended).
+    pub lr: f64,
+    /// p-value of the likelihood-ratio test (χ̄² mixture for a parameter on its bound; χ²₁
+    /// for the parameter-free `full_model`, conservatively).
+    pub p_value: f64,
+    /// AICc(extended) − AICc(base).
+    pub d_aicc: f64,
+    /// Leave-one-frequency-out prediction χ² of the base model.
+    pub holdout_base: f64,
+    /// Leave-one-frequency-out prediction χ² of the extended model.
+    pub holdout_ext: f64,
+    /// Accepted as the missing effect.
+    pub accepted: bool,
+}
+
+/// The diagnosis of one segment.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    /// The base fit (chi-square, with stds assumed where none were stated).
+    pub base: FitResult,
+    /// The data as diagnosed (stds filled in where none were stated).
+    pub data: SegmentData,
+    /// True when the stds were assumed.
+    pub assumed_noise: bool,
+    /// Residuals of the base fit.
+    pub before: Residuals,
+    /// Their structure.
+    pub structure: Structure,
+    /// Candidates, best score first.
+    pub candidates: Vec<Candidate>,
+    /// The named effect, if any.
+    pub named: Option<Effect>,
+    /// Other accepted effects that explain the data as well (within [`TIE_LR`]).
+    pub ambiguous_with: Vec<Effect>,
+    /// Residuals after adding it.
+    pub after: Option<Residuals>,
+}
+
+impl Diagnosis {
+    /// The accepted refit.
+    pub fn chosen(&self) -> Option<&Refit> {
+        self.candidates
+            .iter()
+            .filter_map(|c| c.refit.as_ref())
+            .find(|r| r.accepted)
+    }
+    /// χ²/dof before.
+    pub fn chi2_per_dof_before(&self) -> f64 {
+        self.base.chi2_per_dof.unwrap_or(f64::NAN)
+    }
+    /// χ²/dof after (the base's when nothing was named).
+    pub fn chi2_per_dof_after(&self) -> f64 {
+        self.chosen()
+            .and_then(|r| r.fit.chi2_per_dof)
+            .unwrap_or_else(|| self.chi2_per_dof_before())
+    }
+}
+
+/// Fill missing standard deviations with the assumed noise.
+pub fn with_noise(data: &SegmentData) -> (SegmentData, bool) {
+    let mut d = data.clone();
+    let mut assumed = false;
+    for m in &mut d.measurements {
+        if m.k_re_std.is_none() {
+            m.k_re_std = Some(ASSUMED_K_RE_RSTD * m.k_re);
+            assumed = true;
+        }
+        if m.attenuation_std.is_none() {
+            m.attenuation_std = Some(ASSUMED_ATTENUATION_RSTD * m.attenuation.max(1e-9));
+            assumed = true;
+        }
+    }
+    (d, assumed)
+}
+
+fn fit_settings(s: &DiagnoseSettings, effects: Vec<Effect>) -> FitSettings {
+    FitSettings {
+        model: s.model,
+        contact_mode: s.contact_mode,
+        effects,
+        ..FitSettings::default()
+    }
+}
+
+/// Diagnose one segment. `base` is its current fit when it already has stated stds and was made
+/// with `settings`; otherwise the base is refitted with the assumed noise.
+pub fn diagnose_segment(
+    data: &SegmentData,
+    base: Option<FitResult>,
+    settings: &DiagnoseSettings,
+) -> Diagnosis {
+    let (data, assumed_noise) = with_noise(data);
+    let base = match base {
+        Some(b) if !assumed_noise && b.status != FitStatus::Failed => b,
+        _ => fit_segment(
+            &data,
+            &fit_settings(settings, settings.base_effects.clone()),
+            settings.seed,
+        ),
+    };
+    let before = Residuals::of(&data, &base.predicted);
+    let st = structure(&before, base.estimates.len());
+    let mut diag = Diagnosis {
+        base,
+        data,
+        assumed_noise,
+        before,
+        structure: st,
+        candidates: Vec::new(),
+        named: None,
+        ambiguous_with: Vec::new(),
+        after: None,
+    };
+    let base_failed = diag.base.status == FitStatus::Failed;
+    // Score every candidate at the current fit.
+    let mut cands: Vec<Candidate> = settings
+        .candidates
+        .iter()
+        .filter(|e| !settings.base_effects.contains(e))
+        .filter(|e| **e != Effect::FullModel || diag.base.model == Model::Seed)
+        .map(|&e| Candidate {
+            effect: e,
+            score: score(&diag.data, &diag.base, settings, e),
+            refit: None,
+        })
+        .collect();
+    cands.sort_by(|a, b| {
+        let key = |c: &Candidate| {
+            if c.score.is_nan() {
+                f64::INFINITY
+            } else {
+                c.score
+            }
+        };
+        key(b).total_cmp(&key(a))
+    });
+    if !diag.structure.structured && !base_failed {
+        diag.candidates = cands;
+        return diag;
+    }
+    // Refit the candidates with a positive score; when the best of them could remove less than
+    // half the excess χ² (the score is a local, first-order view, and a base fit far from the
+    // truth can point the wrong way), or the base could not be fitted at all, refit them all.
+    let excess = diag.before.chi2() - diag.structure.dof as f64;
+    let best_score = cands
+        .iter()
+        .map(|c| c.score)
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let all = base_failed || best_score < 0.5 * excess;
+    let tried: Vec<usize> = (0..cands.len())
+        .filter(|&i| all || cands[i].score.is_nan() || cands[i].score > 0.0)
+        .collect();
+    let n_tests = tried.len().max(1) as f64;
+    for &i in &tried {
+        let e = cands[i].effect;
+        let mut effects = settings.base_effects.clone();
+        effects.push(e);
+        effects.sort();
+        let fit = fit_segment(
+            &diag.data,
+            &fit_settings(settings, effects.clone()),
+            settings.seed,
+        );
+        if fit.status == FitStatus::Failed {
+            continue;
+        }
+        let chi2_base = if base_failed {
+            f64::INFINITY
+        } else {
+            diag.before.chi2()
+        };
+        let after = Residuals::of(&diag.data, &fit.predicted);
+        let lr = chi2_base - after.chi2();
+        let has_param = e.parameter().is_some();
+        let p_value = if lr <= 0.0 {
+            1.0
+        } else if lr.is_infinite() {
+            0.0
+        } else if has_param {
+            0.5 * chi2_upper_tail(lr, 1.0)
+        } else {
+            chi2_upper_tail(lr, 1.0)
+        };
+        let n = 2 * diag.data.measurements.len();
+        let (k0, k1) = (diag.base.estimates.len(), fit.estimates.len());
+        let d_aicc = aicc(after.chi2(), n, k1) - aicc(chi2_base, n, k0);
+        let (hb, he) = if base_failed {
+            let (_, he) = holdout(&diag.data, &fit, &fit, settings, &effects, &effects);
+            (f64::INFINITY, he)
+        } else {
+            holdout(
+                &diag.data,
+                &diag.base,
+                &fit,
+                settings,
+                &settings.base_effects,
+                &effects,
+            )
+        };
+        // Without a base fit to compare with, the extension must itself explain the data.
+        let explains =
+            !base_failed || structure(&after, fit.estimates.len()).p_value >= STRUCTURE_P;
+        let accepted = p_value < ALPHA / n_tests
+            && explains
+            && d_aicc < 0.0
+            && he.is_finite()
+            && he < (1.0 - MIN_HOLDOUT_GAIN) * hb;
+        cands[i].refit = Some(Refit {
+            fit,
+            lr,
+            p_value,
+            d_aicc,
+            holdout_base: hb,
+            holdout_ext: he,
+            accepted: false,
+        });
+        if accepted {
+            cands[i].refit.as_mut().expect("set above").accepted = true;
+        }
+    }
+    // Among accepted effects keep the one that explains most (largest χ² drop, or lowest χ²
+    // after when the base could not be fitted). Effects within TIE_LR of it explain the data
+    // equally well: the tie is broken by PRIOR_ORDER and reported as ambiguous.
+    let accepted: Vec<(usize, f64)> = cands
+        .iter()
+        .enumerate()
+        .filter_map(|(i, c)| {
+            c.refit
+                .as_ref()
+                .filter(|r| r.accepted)
+                .map(|r| (i, -Residuals::of(&diag.data, &r.fit.predicted).chi2()))
+        })
+        .collect();
+    let top = accepted
+        .iter()
+        .map(|a| a.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let tied: Vec<usize> = accepted
+        .iter()
+        .filter(|a| a.1 >= top - TIE_LR)
+        .map(|a| a.0)
+        .collect();
+    let best = tied
+        .iter()
+        .copied()
+        .min_by_key(|&i| PRIOR_ORDER.iter().position(|e| *e == cands[i].effect));
+    if tied.len() > 1 {
+        diag.ambiguous_with = tied
+            .iter()
+            .filter(|&&i| Some(i) != best)
+            .map(|&i| cands[i].effect)
+            .collect();
+    }
+    for (i, c) in cands.iter_mut().enumerate() {
+        if let Some(r) = c.refit.as_mut() {
+            r.accepted = Some(i) == best;
+        }
+    }
+    if let Some(i) = best {
+        diag.named = Some(cands[i].effect);
+        let fit = &cands[i].refit.as_ref().expect("accepted refit").fit;
+        diag.after = Some(Residuals::of(&diag.data, &fit.predicted));
+    }
+    diag.candidates = cands;
+    diag
+}
+
+/// AICc = χ² + 2k + 2k(k + 1)/(n − k − 1) (Hurvich & Tsai 1989), ∞ when n ≤ k + 1.
+pub fn aicc(chi2: f64, n: usize, k: usize) -> f64 {
+    if n <= k + 1 {
+        return f64::INFINITY;
+    }
+    chi2 + 2.0 * k as f64 + 2.0 * (k * (k + 1)) as f64 / (n - k - 1) as f64
+}
+
+/// Score statistic of effect `e` at the base fit: U²/I, with U = J_θᵀr the gradient of χ²/2
+/// in the effect's natural parameter at its neutral value, and I = J_θᵀJ_θ − J_θᵀJ_b(J_bᵀJ_b)⁻¹J_bᵀJ_θ
+/// the information left after the base parameters adjust (the efficient score). One-sided:
+/// 0 when lowering χ² needs the parameter to leave its allowed side. `NaN` for `full_model`.
+fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) -> f64 {
+    let Some(par) = e.parameter() else {
+        return f64::NAN;
+    };
+    let Some(sys0) = base.system else {
+        return 0.0;
+    };
+    let omegas: Vec<f64> = data.measurements.iter().map(|m| m.omega).collect();
+    let resid = |k: &[Complex64]| -> Vec<f64> {
+        let r = Residuals::of(data, k);
+        r.re.iter()
+            .zip(&r.att)
+            .flat_map(|(a, b)| [*a, *b])
+            .collect()
+    };
+    let r0 = resid(&base.predicted);
+    // Neutral value and allowed direction of the natural parameter.
+    let (neutral, dir) = match e {
+        Effect::PipeLoss => (sys0.pipe.loss_factor, 1.0),
+        Effect::WallThinning => (1.0, -1.0),
+        _ => (par.neutral, 1.0),
+    };
+    let h = match e {
+        Effect::AirInWater => 1e-6,
+        Effect::WallThinning => 1e-3,
+        _ => 1e-3,
+    };
+    let Ok(sys1) = e.apply(&sys0, neutral + dir * h) else {
+        return 0.0;
+    };
+    let Some(k1) = predict(&sys1, &omegas) else {
+        return 0.0;
+    };
+    let r1 = resid(&k1);
+    let jt: Vec<f64> = r1.iter().zip(&r0).map(|(a, b)| (a - b) / h).collect();
+    // Base Jacobian at the base optimum, in the base search coordinates.
+    let p = Problem::new(
+        data,
+        crate::invert::Method::Default,
+        s.model,
+        s.contact_mode,
+        &s.base_effects,
+    );
+    let x: Vec<f64> = base.estimates.iter().map(|e| e.coordinate).collect();
+    let (m, n) = (r0.len(), x.len());
+    let mut jb = vec![0.0; m * n];
+    let Ok(b) = p.bounds() else { return 0.0 };
+    // Residual order of Problem: (re, att) per measurement, the same as `resid`. Central
+    // differences, else forward ones (near a bound or a grazing region one side may fail);
+    // if both fail, the score is taken without projecting out the base parameters (it then
+    // overstates what the effect can remove, which only affects the ranking: the refit and
+    // its likelihood-ratio test decide).
+    let jac_ok = [FiniteDifference::Central, FiniteDifference::Forward]
+        .into_iter()
+        .any(|scheme| {
+            crate::optimize::jacobian_fd(&p, &x, &r0, Some(&b), scheme, 1e-6, &mut jb).is_ok()
+        });
+    if !jac_ok {
+        jb.iter_mut().for_each(|v| *v = 0.0);
+    }
+    let u: f64 = jt.iter().zip(&r0).map(|(a, b)| a * b).sum();
+    // The data lower χ² along +dir only if U < 0 (χ² decreases along −gradient).
+    if u >= 0.0 {
+        return 0.0;
+    }
+    let jtj = crate::optimize::linalg::jtj(&jb, m, n);
+    let jbt_jt = crate::optimize::linalg::jt_vec(&jb, m, n, &jt);
+    let sol = crate::optimize::linalg::solve_spd(&jtj, n, &jbt_jt);
+    let info = jt.iter().map(|v| v * v).sum::<f64>()
+        - jbt_jt.iter().zip(&sol).map(|(a, b)| a * b).sum::<f64>();
+    if info <= 1e-12 * jt.iter().map(|v| v * v).sum::<f64>() {
+        return 0.0;
+    }
+    // Efficient score: the residuals' gradient with the base directions projected out.
+    let proj: Vec<f64> = {
+        let jbr = crate::optimize::linalg::jt_vec(&jb, m, n, &r0);
+        let sol_r = crate::optimize::linalg::solve_spd(&jtj, n, &jbr);
+        (0..m)
+            .map(|i| r0[i] - (0..n).map(|j| jb[i * n + j] * sol_r[j]).sum::<f64>())
+            .collect()
+    };
+    let ue: f64 = jt.iter().zip(&proj).map(|(a, b)| a * b).sum();
+    if ue >= 0.0 {
+        return 0.0;
+    }
+    ue * ue / info
+}
+
+/// Leave-one-frequency-out prediction χ² of the base and the extended model: each measurement
+/// is dropped in turn, both models are refitted locally (Levenberg–Marquardt from their
+/// full-data optimum) on the rest, and the dropped measurement is predicted.
+fn holdout(
+    data: &SegmentData,
+    base: &FitResult,
+    ext: &FitResult,
+    s: &DiagnoseSettings,
+    base_effects: &[Effect],
+    ext_effects: &[Effect],
+) -> (f64, f64) {
+    let m = data.measurements.len();
+    if m < 3 {
+        return (f64::NAN, f64::NAN);
+    }
+    let one = |fit: &FitResult, effects: &[Effect]| -> f64 {
+        let x0: Vec<f64> = fit.estimates.iter().map(|e| e.coordinate).collect();
+        let mut total = 0.0;
+        for i in 0..m {
+            let mut d = data.clone();
+            let held: Measurement = d.measurements.remove(i);
+            let p = Problem::new(
+                &d,
+                crate::invert::Method::Default,
+                s.model,
+                s.contact_mode,
+                effects,
+            );
+            let Ok(b) = p.bounds() else {
+                return f64::INFINITY;
+            };
+            let lm = LevenbergMarquardt::new();
+            let x = match lm.minimize(&p, &x0, Some(&b)) {
+                Ok(r) => r.x,
+                Err(_) => x0.clone(),
+            };
+            let Some(sys) = p.system_at(&x) else {
+                return f64::INFINITY;
+            };
+            let omegas: Vec<f64> = data.measurements.iter().map(|m| m.omega).collect();
+            let Some(k) = predict(&sys, &omegas) else {
+                return f64::INFINITY;
+            };
+            let k = k[i];
+            total += ((k.re - held.k_re) / held.k_re_std.unwrap_or(f64::NAN)).powi(2)
+                + ((-k.im - held.attenuation) / held.attenuation_std.unwrap_or(f64::NAN)).powi(2);
+        }
+        total
+    };
+    (one(base, base_effects), one(ext, ext_effects))
+}
+
+/// A pooled finding over a group of segments that share material, diameter class or soil.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupFinding {
+    /// Group label, e.g. `material=CI`.
+    pub group: String,
+    /// Segments diagnosed in the group.
+    pub segments: usize,
+    /// Segments with structured misfit.
+    pub structured: usize,
+    /// The effect named most often in the group (None if none named).
+    pub effect: Option<Effect>,
+    /// How many segments named it.
+    pub named: usize,
+    /// Σ LR of that effect over the group's segments where it was refitted.
+    pub pooled_lr: f64,
+    /// p-value of the pooled statistic (χ² with one dof per contributing segment).
+    pub pooled_p: f64,
+}
+
+/// Pool the evidence over groups: `groups[i]` lists the group labels of `diags[i]`.
+pub fn pool(diags: &[Diagnosis], groups: &[Vec<String>]) -> Vec<GroupFinding> {
+    use std::collections::BTreeMap;
+    let mut by: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
+    for (i, gs) in groups.iter().enumerate() {
+        for g in gs {
+            by.entry(g.as_str()).or_default().push(i);
+        }
+    }
+    let mut out = Vec::new();
+    for (g, idx) in by {
+        if idx.len() < 2 {
+            continue;
+        }
+        let mut counts: BTreeMap<Effect, usize> = BTreeMap::new();
+        for &i in &idx {
+            if let Some(e) = diags[i].named {
+                *counts.entry(e).or_default() += 1;
+            }
+        }
+        let top = counts
+            .iter()
+            .max_by_key(|(_, c)| **c)
+            .map(|(e, c)| (*e, *c));
+        let (mut lr, mut k) = (0.0, 0usize);
+        if let Some((e, _)) = top {
+            for &i in &idx {
+                for c in &diags[i].candidates {
+                    if c.effect == e {
+                        if let Some(r) = &c.refit {
+                            lr += r.lr.max(0.0);
+                            k += 1;
+                        }
+                    }
+                }
+            }
+        }
+        out.push(GroupFinding {
+            group: g.to_string(),
+            segments: idx.len(),
+            structured: idx
+                .iter()
+                .filter(|&&i| diags[i].structure.structured)
+                .count(),
+            effect: top.map(|t| t.0),
+            named: top.map(|t| t.1).unwrap_or(0),
+            pooled_lr: lr,
+            pooled_p: if k > 0 {
+                chi2_upper_tail(lr, k as f64)
+            } else {
+                f64::NAN
+            },
+        });
+    }
+    out
+}
+
+/// The effect's fitted value and standard error in a fit.
+pub fn effect_value(fit: &FitResult, e: Effect) -> Option<(f64, Option<f64>)> {
+    fit.get(Param::Effect(e)).map(|x| (x.value, x.std))
+}
