@@ -36,6 +36,9 @@ fn data_of(s: &SynthSegment) -> SegmentData {
     }
 }
 
+/// (true effect, hidden effect and its range, model generating the data).
+type Case = (&'static str, Option<(Effect, f64, f64)>, Model);
+
 struct Outcome {
     truth: &'static str,
     named: String,
@@ -46,8 +49,7 @@ struct Outcome {
 #[test]
 fn confusion_matrix_on_hidden_effects() {
     const N: usize = 10;
-    // (true effect, hidden effect and range, model generating the data, base model fitted)
-    let cases: [(&str, Option<(Effect, f64, f64)>, Model); 6] = [
+    let cases: [Case; 6] = [
         ("none", None, Model::Full),
         (
             "soil_damping",
