@@ -17,6 +17,8 @@
 //! 3. **Add** and 4. **Show** are done by the `diagnose` command: a new fit row with the effect
 //!    and its value, and a report.
 
+pub mod report;
+
 use num_complex::Complex64;
 
 use crate::invert::fit::{fit_segment, FitResult, FitSettings, FitStatus};

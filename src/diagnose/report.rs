@@ -1,0 +1,300 @@
+//! The diagnosis report: `diagnosis.csv` (interface.md) and `diagnosis.html` (inline SVG).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{effect_value, Diagnosis, GroupFinding, Residuals};
+use crate::units::sig;
+
+/// Columns of `diagnosis.csv`: the interface's, then details.
+pub const CSV_COLUMNS: [&str; 15] = [
+    "segment_id",
+    "named_effect",
+    "effect_value",
+    "effect_std",
+    "chi2_per_dof_before",
+    "chi2_per_dof_after",
+    "evidence",
+    "group",
+    "structured",
+    "pattern",
+    "ambiguous_with",
+    "lr_statistic",
+    "p_value",
+    "holdout_chi2_before",
+    "holdout_chi2_after",
+];
+
+/// The evidence column: the statistic used and its value.
+pub fn evidence(d: &Diagnosis) -> String {
+    match d.chosen() {
+        Some(r) => format!(
+            "LR {} (p {}), dAICc {}, held-out chi2 {} -> {}",
+            sig(r.lr, 4),
+            sig(r.p_value, 2),
+            sig(r.d_aicc, 3),
+            sig(r.holdout_base, 3),
+            sig(r.holdout_ext, 3)
+        ),
+        None if !d.structure.structured => format!(
+            "chi2 p = {} (within the noise)",
+            sig(d.structure.p_value, 2)
+        ),
+        None => {
+            let best = d
+                .candidates
+                .iter()
+                .filter_map(|c| c.refit.as_ref().map(|r| (c.effect, r)))
+                .min_by(|a, b| a.1.p_value.total_cmp(&b.1.p_value));
+            match best {
+                Some((e, r)) => format!(
+                    "no candidate passed: best {e} LR {} (p {}), held-out chi2 {} -> {}",
+                    sig(r.lr, 4),
+                    sig(r.p_value, 2),
+                    sig(r.holdout_base, 3),
+                    sig(r.holdout_ext, 3)
+                ),
+                None => "no candidate could lower the misfit".to_string(),
+            }
+        }
+    }
+}
+
+/// Write `diagnosis.csv`. `ids[i]` and `groups[i]` belong to `diags[i]`.
+pub fn write_csv(
+    path: &Path,
+    ids: &[String],
+    diags: &[Diagnosis],
+    groups: &[String],
+) -> Result<(), csv::Error> {
+    let mut w = csv::Writer::from_path(path)?;
+    w.write_record(CSV_COLUMNS)?;
+    for ((id, d), g) in ids.iter().zip(diags).zip(groups) {
+        let (val, std) = d
+            .named
+            .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
+            .map(|(v, s)| (v.to_string(), s.map(|s| s.to_string()).unwrap_or_default()))
+            .unwrap_or_default();
+        let r = d.chosen();
+        w.write_record([
+            id.as_str(),
+            d.named.map(|e| e.name()).unwrap_or("none"),
+            &val,
+            &std,
+            &num(d.chi2_per_dof_before()),
+            &num(d.chi2_per_dof_after()),
+            &evidence(d),
+            g,
+            if d.structure.structured { "1" } else { "0" },
+            &d.structure.pattern,
+            &d.ambiguous_with
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(" "),
+            &r.map(|r| num(r.lr)).unwrap_or_default(),
+            &r.map(|r| num(r.p_value)).unwrap_or_default(),
+            &r.map(|r| num(r.holdout_base)).unwrap_or_default(),
+            &r.map(|r| num(r.holdout_ext)).unwrap_or_default(),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
+
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        v.to_string()
+    } else {
+        String::new()
+    }
+}
+
+/// Escape text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// An inline SVG of normalised residuals against frequency: Re k (circles) and attenuation
+/// (squares), before (hollow) and after (filled), with the ±2σ band.
+pub fn residual_svg(before: &Residuals, after: Option<&Residuals>) -> String {
+    let (w, h, ml, mr, mt, mb) = (520.0, 220.0, 52.0, 12.0, 12.0, 34.0);
+    let all = before
+        .re
+        .iter()
+        .chain(&before.att)
+        .chain(after.iter().flat_map(|a| a.re.iter().chain(&a.att)))
+        .copied()
+        .filter(|v| v.is_finite());
+    let lim = all.fold(3.0f64, |m, v| m.max(v.abs())) * 1.1;
+    let fmin = before
+        .frequency_hz
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let fmax = before
+        .frequency_hz
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let (f0, f1) = if fmax > fmin {
+        (fmin - 0.05 * (fmax - fmin), fmax + 0.05 * (fmax - fmin))
+    } else {
+        (fmin - 1.0, fmin + 1.0)
+    };
+    let x = |f: f64| ml + (f - f0) / (f1 - f0) * (w - ml - mr);
+    let y = |v: f64| mt + (lim - v.clamp(-lim, lim)) / (2.0 * lim) * (h - mt - mb);
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" role="img"><rect x="{ml}" y="{}" width="{}" height="{}" fill="#eef3f8"/>"##,
+        y(2.0),
+        w - ml - mr,
+        y(-2.0) - y(2.0)
+    );
+    let _ = write!(
+        s,
+        r##"<line x1="{ml}" x2="{}" y1="{}" y2="{}" stroke="#888"/>"##,
+        w - mr,
+        y(0.0),
+        y(0.0)
+    );
+    for v in [-2.0, 0.0, 2.0] {
+        let _ = write!(
+            s,
+            r##"<text x="{}" y="{}" font-size="10" text-anchor="end">{v}</text>"##,
+            ml - 4.0,
+            y(v) + 3.0
+        );
+    }
+    let _ = write!(
+        s,
+        r##"<text x="{}" y="{}" font-size="11" text-anchor="middle">frequency (Hz): {} - {}</text><text x="12" y="{}" font-size="11" transform="rotate(-90 12 {})" text-anchor="middle">residual / sigma</text>"##,
+        (ml + w - mr) / 2.0,
+        h - 8.0,
+        sig(fmin, 4),
+        sig(fmax, 4),
+        (mt + h - mb) / 2.0,
+        (mt + h - mb) / 2.0
+    );
+    let mut dots = |r: &Residuals, filled: bool| {
+        for ((f, a), b) in r.frequency_hz.iter().zip(&r.re).zip(&r.att) {
+            let fill = if filled { "#1f77b4" } else { "none" };
+            let fill2 = if filled { "#d62728" } else { "none" };
+            let _ = write!(
+                s,
+                r##"<circle cx="{:.1}" cy="{:.1}" r="4" fill="{fill}" stroke="#1f77b4"/><rect x="{:.1}" y="{:.1}" width="7" height="7" fill="{fill2}" stroke="#d62728"/>"##,
+                x(*f),
+                y(*a),
+                x(*f) - 3.5,
+                y(*b) - 3.5
+            );
+        }
+    };
+    dots(before, false);
+    if let Some(a) = after {
+        dots(a, true);
+    }
+    s.push_str("</svg>");
+    s
+}
+
+/// Write `diagnosis.html`.
+pub fn write_html(
+    path: &Path,
+    ids: &[String],
+    diags: &[Diagnosis],
+    groups: &[GroupFinding],
+) -> std::io::Result<()> {
+    let mut h = String::new();
+    h.push_str("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>pipewave diagnosis</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px}th{background:#f0f0f0}.seg{border-top:2px solid #ddd;margin-top:1.5em;padding-top:.5em}.ok{color:#2a7}.none{color:#888}</style></head><body>");
+    h.push_str("<h1>Discrepancy diagnosis</h1><p>For each segment: the residuals of its fit in standard deviations (hollow: before; filled: after adding the named effect; circles: Re k, squares: attenuation; shaded: ±2σ), the misfit before and after (χ² per degree of freedom), the named effect with its value and uncertainty, and the evidence: a likelihood-ratio test that allows for the parameter on its bound, ΔAICc, and the χ² of predicting each frequency held out of the fit. \"none\" means no effect of the library explains the misfit well enough, or there is no misfit to explain.</p>");
+    let named = diags.iter().filter(|d| d.named.is_some()).count();
+    let structured = diags.iter().filter(|d| d.structure.structured).count();
+    let _ = write!(
+        h,
+        "<p>{} segments diagnosed; {structured} with misfit far above the noise; an effect named for {named}.</p>",
+        diags.len()
+    );
+    h.push_str("<h2>Summary</h2><table><tr><th>segment</th><th>pattern</th><th>named effect</th><th>value ± 1σ</th><th>χ²/dof before</th><th>after</th><th>evidence</th></tr>");
+    for (id, d) in ids.iter().zip(diags) {
+        let val = d
+            .named
+            .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
+            .map(|(v, s)| match s {
+                Some(s) => format!("{} ± {}", sig(v, 3), sig(s, 2)),
+                None => sig(v, 3),
+            })
+            .unwrap_or_default();
+        let _ = write!(
+            h,
+            "<tr><td><a href=\"#s-{0}\">{0}</a></td><td>{1}</td><td class=\"{2}\">{3}</td><td>{4}</td><td>{5}</td><td>{6}</td><td>{7}</td></tr>",
+            esc(id),
+            esc(&d.structure.pattern),
+            if d.named.is_some() { "ok" } else { "none" },
+            d.named.map(|e| e.name()).unwrap_or("none"),
+            val,
+            sig(d.chi2_per_dof_before(), 3),
+            sig(d.chi2_per_dof_after(), 3),
+            esc(&evidence(d))
+        );
+    }
+    h.push_str("</table>");
+    if !groups.is_empty() {
+        h.push_str("<h2>Pooled over groups</h2><table><tr><th>group</th><th>segments</th><th>structured</th><th>most named effect</th><th>named by</th><th>pooled LR</th><th>pooled p</th></tr>");
+        for g in groups {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(&g.group),
+                g.segments,
+                g.structured,
+                g.effect.map(|e| e.name()).unwrap_or("none"),
+                g.named,
+                sig(g.pooled_lr, 4),
+                sig(g.pooled_p, 2)
+            );
+        }
+        h.push_str("</table>");
+    }
+    h.push_str("<h2>Segments</h2>");
+    for (id, d) in ids.iter().zip(diags) {
+        let _ = write!(h, "<div class=\"seg\" id=\"s-{0}\"><h3>{0}</h3>", esc(id));
+        if d.assumed_noise {
+            h.push_str("<p><em>No measurement standard deviations were stated: 1 % on Re k and 10 % on the attenuation were assumed.</em></p>");
+        }
+        h.push_str(&residual_svg(&d.before, d.after.as_ref()));
+        h.push_str("<table><tr><th>candidate</th><th>meaning</th><th>score</th><th>LR</th><th>p</th><th>ΔAICc</th><th>held-out χ² base → ext</th><th>accepted</th></tr>");
+        for c in &d.candidates {
+            let (lr, p, da, ho, acc) = match &c.refit {
+                Some(r) => (
+                    sig(r.lr, 4),
+                    sig(r.p_value, 2),
+                    sig(r.d_aicc, 3),
+                    format!("{} → {}", sig(r.holdout_base, 3), sig(r.holdout_ext, 3)),
+                    if r.accepted { "yes" } else { "no" },
+                ),
+                None => (
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                    String::new(),
+                    "not refitted",
+                ),
+            };
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{lr}</td><td>{p}</td><td>{da}</td><td>{ho}</td><td>{acc}</td></tr>",
+                c.effect.name(),
+                esc(c.effect.meaning()),
+                if c.score.is_nan() { "n/a".to_string() } else { sig(c.score, 3) }
+            );
+        }
+        h.push_str("</table></div>");
+    }
+    h.push_str("</body></html>\n");
+    std::fs::write(path, h)
+}
