@@ -2,10 +2,12 @@
 //! around it from field measurements.
 pub mod bench;
 pub mod db;
+pub mod export;
 pub mod forward;
 pub mod invert;
 pub mod optimize;
 pub mod physics;
+pub mod report;
 pub mod special;
 pub mod synth;
 pub mod units;
