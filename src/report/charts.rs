@@ -104,6 +104,7 @@ pub fn log_histogram(
             .build_cartesian_2d(x0..x1, 0f64..ymax)
             .map_err(e2s)?;
         c.configure_mesh()
+            .max_light_lines(0)
             .disable_x_mesh()
             .x_desc(x_desc)
             .y_desc("segments")
@@ -196,6 +197,7 @@ pub fn speed_vs_diameter(
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(e2s)?;
         c.configure_mesh()
+            .max_light_lines(0)
             .x_desc("outside diameter (mm)")
             .y_desc("leak-band wave speed (m/s)")
             .label_style((FONT, 12))
@@ -307,6 +309,7 @@ pub fn log_boxplots(
             .build_cartesian_2d(x0 as f32..x1 as f32, -1i32..n as i32)
             .map_err(e2s)?;
         c.configure_mesh()
+            .max_light_lines(0)
             .disable_y_mesh()
             .x_desc(x_desc)
             .y_labels(n + 2)
@@ -360,6 +363,7 @@ pub fn curve_with_points(
             .build_cartesian_2d(0f64..x1, y0..y1)
             .map_err(e2s)?;
         c.configure_mesh()
+            .max_light_lines(0)
             .x_desc("frequency (Hz)")
             .y_desc(y_desc)
             .x_labels(5)
@@ -380,4 +384,43 @@ pub fn curve_with_points(
         .map_err(e2s)?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(n: usize) -> Vec<SpeedPoint<'static>> {
+        (0..n)
+            .map(|i| SpeedPoint {
+                material: ["CI", "PVC", "DI"][i % 3],
+                diameter_mm: [100.0, 150.0, 200.0][(i / 3) % 3],
+                speed: 400.0 + (i % 800) as f64,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn scatter_above_the_limit_becomes_a_density() {
+        let m = ["CI", "PVC", "DI"];
+        let small = speed_vs_diameter(&points(300), &m).unwrap();
+        // One dot per segment plus one marker per material and diameter (3 x 3).
+        assert_eq!(small.matches("<circle").count(), 300 + 9);
+        let large = speed_vs_diameter(&points(20_000), &m).unwrap();
+        assert_eq!(large.matches("<circle").count(), 9);
+        assert!(large.matches("<rect").count() <= 60 * 40 + 10);
+        assert!(large.len() < 300_000, "{} bytes", large.len());
+    }
+
+    #[test]
+    fn charts_survive_degenerate_data() {
+        assert!(log_histogram("h", &[], "x", &[]).is_ok());
+        assert!(log_histogram("h", &[1.0, 1.0], "x", &[("median", 1.0)]).is_ok());
+        assert!(log_histogram("h", &[f64::NAN, -1.0, 0.0], "x", &[("m", f64::NAN)]).is_ok());
+        assert!(speed_vs_diameter(&points(1), &["CI"]).is_ok());
+        assert!(log_boxplots("b", &[("a".into(), vec![5e7])], "E", |v| v.to_string()).is_ok());
+        assert!(log_boxplots("b", &[], "E", |v| v.to_string()).is_ok());
+        assert!(curve_with_points("c", "t", &[], &[], "m/s").is_ok());
+        assert!(curve_with_points("c", "t", &[(100.0, 1.0)], &[(100.0, 1.0)], "m/s").is_ok());
+    }
 }

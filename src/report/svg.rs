@@ -257,6 +257,63 @@ mod tests {
         assert_eq!(escape("a\u{1}b"), "a\u{FFFD}b");
     }
 
+    fn lines(n: usize) -> Vec<LineString> {
+        (0..n)
+            .map(|i| {
+                let (x, y) = ((i % 150) as f64 * 100.0, (i / 150) as f64 * 100.0);
+                LineString {
+                    points: vec![(x, y), (x + 60.0, y + 30.0), (x + 90.0, y + 80.0)],
+                }
+            })
+            .collect()
+    }
+
+    fn count(svg: &str, tag: &str) -> usize {
+        svg.matches(&format!("<{tag} ")).count() + svg.matches(&format!("<{tag}>")).count()
+    }
+
+    #[test]
+    fn small_maps_draw_each_segment_with_a_tooltip() {
+        let ls = lines(50);
+        let ids: Vec<String> = (0..50).map(|i| format!("S<{i}>")).collect();
+        let ml: Vec<MapLine<'_>> = ls
+            .iter()
+            .zip(&ids)
+            .enumerate()
+            .map(|(i, (l, id))| MapLine {
+                id,
+                line: l,
+                value: (i % 7 != 0).then_some(300.0 + i as f64),
+            })
+            .collect();
+        let svg = map(&ml, false, "m/s", 800.0);
+        assert_eq!(count(&svg, "path"), 50);
+        assert_eq!(count(&svg, "title"), 50);
+        assert!(svg.contains("<title>S&lt;7&gt;: no value</title>"));
+        assert!(svg.contains(NO_VALUE_COLOUR) && svg.contains(VIRIDIS_9[8]));
+    }
+
+    #[test]
+    fn large_maps_draw_one_path_per_colour_class() {
+        let ls = lines(20_000);
+        let ml: Vec<MapLine<'_>> = ls
+            .iter()
+            .enumerate()
+            .map(|(i, l)| MapLine {
+                id: "x",
+                line: l,
+                value: (i % 11 != 0).then_some((i % 1000) as f64),
+            })
+            .collect();
+        let svg = map(&ml, false, "m/s", 1000.0);
+        // Nine colour classes and grey, no per-segment element.
+        assert_eq!(count(&svg, "path"), 10);
+        assert_eq!(count(&svg, "title"), 0);
+        // Every segment is still drawn: one move-to per segment.
+        assert_eq!(svg.matches('M').count(), 20_000);
+        assert!(svg.len() < 1_200_000, "{} bytes", svg.len());
+    }
+
     #[test]
     fn colour_classes_cover_the_range_in_order() {
         let sc = ColourScale {
