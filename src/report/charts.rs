@@ -200,6 +200,8 @@ pub fn speed_vs_diameter(
             .max_light_lines(0)
             .x_desc("outside diameter (mm)")
             .y_desc("leak-band wave speed (m/s)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style((FONT, 12))
             .draw()
             .map_err(e2s)?;
@@ -263,7 +265,7 @@ pub fn speed_vs_diameter(
                 .map_err(e2s)?;
         }
         c.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(SeriesLabelPosition::LowerRight)
             .background_style(WHITE.mix(0.9))
             .border_style(BLACK.mix(0.4))
             .label_font((FONT, 12))
@@ -366,6 +368,8 @@ pub fn curve_with_points(
             .max_light_lines(0)
             .x_desc("frequency (Hz)")
             .y_desc(y_desc)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| sig(*v, 3))
             .x_labels(5)
             .y_labels(5)
             .label_style((FONT, 11))
