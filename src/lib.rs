@@ -3,10 +3,12 @@
 pub mod bench;
 pub mod db;
 pub mod diagnose;
+pub mod export;
 pub mod forward;
 pub mod invert;
 pub mod optimize;
 pub mod physics;
+pub mod report;
 pub mod special;
 pub mod synth;
 pub mod units;

@@ -2,7 +2,9 @@
 //! and calling the library. Only this module knows clap. It lives in the binary crate (not the
 //! library) so that clap and anyhow stay out of the library, as docs/style.md asks.
 
+mod audit;
 mod bench;
+mod export;
 mod forward;
 mod import;
 
@@ -34,6 +36,10 @@ enum Command {
     Forward(forward::ForwardArgs),
     /// Print benchmark figures (build with --release).
     Bench(bench::BenchArgs),
+    /// Write the fits for GIS: a GeoPackage, GeoJSON or CSV file, one feature per segment.
+    Export(export::ExportArgs),
+    /// Write the fit-quality report of the network: one self-contained HTML page.
+    Audit(audit::AuditArgs),
 }
 
 /// How a command that ran ended.
@@ -61,5 +67,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Import(args) => import::run(&args),
         Command::Forward(args) => forward::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Export(args) => export::run(&args),
+        Command::Audit(args) => audit::run(&args),
     }
 }

@@ -1,0 +1,472 @@
+//! OGC GeoPackage 1.4 writer (OGC 12-128r18), with rusqlite into a new file.
+//!
+//! The file holds the required metadata tables (`gpkg_spatial_ref_sys` with the three mandatory
+//! rows and the segments' system, `gpkg_contents`, `gpkg_geometry_columns`), one feature table
+//! [`TABLE`] of LINESTRINGs in GeoPackage binary encoding, one row per segment (NULL geometry
+//! when the segment has none), and an R-tree spatial index (extension `gpkg_rtree_index`).
+//!
+//! The table has one coordinate system: the one most segments' geometries are in
+//! ([`crs::dominant_srid`]); geometries in another system are reprojected into it, and the few
+//! that cannot be are written without geometry, with a warning.
+
+use std::path::Path;
+
+use rusqlite::{params, params_from_iter, Connection};
+
+use super::crs::{self, ToCommonCrs};
+use super::record::{Value, PROPERTIES};
+use super::{commit_temp, temp_path, ExportError, ExportSummary, SegmentExport};
+use crate::db::wkt::LineString;
+
+/// The feature table.
+pub const TABLE: &str = "pipe_segments";
+/// Its geometry column.
+pub const GEOMETRY_COLUMN: &str = "geom";
+
+/// `PRAGMA application_id` of a GeoPackage: ASCII "GPKG" (12-128r18 Req. 2).
+pub const APPLICATION_ID: i32 = 0x4750_4B47;
+/// `PRAGMA user_version` of GeoPackage 1.4.0 (Req. 2).
+pub const USER_VERSION: i32 = 10400;
+
+/// GeoPackage binary header flags (12-128r18 §2.1.3.1.1): bit 0 byte order (1 = little
+/// endian), bits 1–3 envelope contents indicator (1 = [minx, maxx, miny, maxy]), bit 4 empty
+/// geometry, bit 5 binary type (0 = standard).
+pub const FLAGS_LE_XY_ENVELOPE: u8 = 0b0000_0011;
+/// ISO WKB geometry type code of a 2-D LineString.
+pub const WKB_LINESTRING: u32 = 2;
+
+/// The GeoPackage binary encoding of a 2-D line: header "GP", version 0, flags
+/// [`FLAGS_LE_XY_ENVELOPE`], `srs_id` (int32), the envelope [minx, maxx, miny, maxy], then the
+/// ISO WKB LineString, all little endian.
+pub fn linestring_blob(srs_id: i32, line: &LineString) -> Vec<u8> {
+    let [minx, maxx, miny, maxy] = envelope(line);
+    let mut b = Vec::with_capacity(8 + 32 + 9 + 16 * line.points.len());
+    b.extend_from_slice(b"GP");
+    b.push(0);
+    b.push(FLAGS_LE_XY_ENVELOPE);
+    b.extend_from_slice(&srs_id.to_le_bytes());
+    for v in [minx, maxx, miny, maxy] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b.push(1); // WKB byte order: little endian
+    b.extend_from_slice(&WKB_LINESTRING.to_le_bytes());
+    let n = u32::try_from(line.points.len()).unwrap_or(u32::MAX);
+    b.extend_from_slice(&n.to_le_bytes());
+    for &(x, y) in line.points.iter().take(n as usize) {
+        b.extend_from_slice(&x.to_le_bytes());
+        b.extend_from_slice(&y.to_le_bytes());
+    }
+    b
+}
+
+/// [minx, maxx, miny, maxy] of a line.
+pub fn envelope(line: &LineString) -> [f64; 4] {
+    let mut e = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for &(x, y) in &line.points {
+        e[0] = e[0].min(x);
+        e[1] = e[1].max(x);
+        e[2] = e[2].min(y);
+        e[3] = e[3].max(y);
+    }
+    e
+}
+
+/// Geometries of the records in one system: the system (None when no segment has geometry) and
+/// each record's line in it. Shared with the audit map.
+pub(crate) fn common_geometries(
+    records: &[SegmentExport],
+    warnings: &mut Vec<String>,
+) -> (Option<i64>, Vec<Option<LineString>>) {
+    let srid = crs::dominant_srid(
+        records
+            .iter()
+            .filter(|r| r.geometry.is_some())
+            .filter_map(|r| r.segment.srid),
+    );
+    let Some(srid) = srid else {
+        return (None, records.iter().map(|_| None).collect());
+    };
+    let mut to = ToCommonCrs::new(srid);
+    let lines = records
+        .iter()
+        .map(|r| {
+            let (Some(line), Some(from)) = (&r.geometry, r.segment.srid) else {
+                return None;
+            };
+            match to.line(from, line) {
+                Ok(l) => Some(l),
+                Err(e) => {
+                    warnings.push(format!(
+                        "segment {}: {e}; exported without geometry",
+                        r.id()
+                    ));
+                    None
+                }
+            }
+        })
+        .collect();
+    (Some(srid), lines)
+}
+
+/// A `gpkg_spatial_ref_sys` row.
+struct SrsRow {
+    name: String,
+    id: i64,
+    organization: &'static str,
+    org_id: i64,
+    definition: String,
+    description: String,
+}
+
+const WGS84_WKT: &str = "GEOGCS[\"WGS 84\",DATUM[\"WGS_1984\",SPHEROID[\"WGS 84\",6378137,\
+    298.257223563,AUTHORITY[\"EPSG\",\"7030\"]],AUTHORITY[\"EPSG\",\"6326\"]],PRIMEM[\"Greenwich\",\
+    0,AUTHORITY[\"EPSG\",\"8901\"]],UNIT[\"degree\",0.0174532925199433,AUTHORITY[\"EPSG\",\"9122\"]],\
+    AUTHORITY[\"EPSG\",\"4326\"]]";
+
+/// The three rows every GeoPackage has (Req. 11), plus the table's system.
+fn srs_rows(srid: Option<i64>, warnings: &mut Vec<String>) -> Vec<SrsRow> {
+    let mut rows = vec![
+        SrsRow {
+            name: "WGS 84 geodetic".into(),
+            id: 4326,
+            organization: "EPSG",
+            org_id: 4326,
+            definition: WGS84_WKT.into(),
+            description: "longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid"
+                .into(),
+        },
+        SrsRow {
+            name: "Undefined cartesian SRS".into(),
+            id: -1,
+            organization: "NONE",
+            org_id: -1,
+            definition: "undefined".into(),
+            description: "undefined cartesian coordinate reference system".into(),
+        },
+        SrsRow {
+            name: "Undefined geographic SRS".into(),
+            id: 0,
+            organization: "NONE",
+            org_id: 0,
+            definition: "undefined".into(),
+            description: "undefined geographic coordinate reference system".into(),
+        },
+    ];
+    if let Some(s) = srid.filter(|&s| s > 0 && s != 4326) {
+        let (name, definition) = match crs::lookup(s) {
+            Some(d) => (d.name.to_string(), d.wkt.to_string()),
+            None => {
+                warnings.push(format!(
+                    "EPSG:{s} is not in pipewave's coordinate-system registry: the GeoPackage \
+                     records it with an 'undefined' definition; GIS software will ask for it"
+                ));
+                (format!("EPSG:{s}"), "undefined".to_string())
+            }
+        };
+        rows.push(SrsRow {
+            name,
+            id: s,
+            organization: "EPSG",
+            org_id: s,
+            definition,
+            description: String::new(),
+        });
+    }
+    rows
+}
+
+/// The required tables (12-128r18 Annex C, tables 29, 30, 31 and the extensions table).
+const SCHEMA: &str = "
+CREATE TABLE gpkg_spatial_ref_sys (
+  srs_name TEXT NOT NULL,
+  srs_id INTEGER PRIMARY KEY,
+  organization TEXT NOT NULL,
+  organization_coordsys_id INTEGER NOT NULL,
+  definition TEXT NOT NULL,
+  description TEXT
+);
+CREATE TABLE gpkg_contents (
+  table_name TEXT NOT NULL PRIMARY KEY,
+  data_type TEXT NOT NULL,
+  identifier TEXT UNIQUE,
+  description TEXT DEFAULT '',
+  last_change DATETIME NOT NULL DEFAULT (strftime('%Y-%m-%dT%H:%M:%fZ','now')),
+  min_x DOUBLE,
+  min_y DOUBLE,
+  max_x DOUBLE,
+  max_y DOUBLE,
+  srs_id INTEGER,
+  CONSTRAINT fk_gc_r_srs_id FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys(srs_id)
+);
+CREATE TABLE gpkg_geometry_columns (
+  table_name TEXT NOT NULL,
+  column_name TEXT NOT NULL,
+  geometry_type_name TEXT NOT NULL,
+  srs_id INTEGER NOT NULL,
+  z TINYINT NOT NULL,
+  m TINYINT NOT NULL,
+  CONSTRAINT pk_geom_cols PRIMARY KEY (table_name, column_name),
+  CONSTRAINT uk_gc_table_name UNIQUE (table_name),
+  CONSTRAINT fk_gc_tn FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name),
+  CONSTRAINT fk_gc_srs FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id)
+);
+CREATE TABLE gpkg_extensions (
+  table_name TEXT,
+  column_name TEXT,
+  extension_name TEXT NOT NULL,
+  definition TEXT NOT NULL,
+  scope TEXT NOT NULL,
+  CONSTRAINT ge_tce UNIQUE (table_name, column_name, extension_name)
+);
+";
+
+/// The R-tree index and the triggers that keep it in step with the feature table
+/// (12-128r18 Annex F.3, version 1.4 trigger set). The triggers call the GeoPackage SQL
+/// functions (ST_IsEmpty, ST_MinX, ...) that GIS software provides; pipewave fills the index
+/// itself and never edits the table afterwards.
+fn rtree_sql(t: &str, c: &str) -> String {
+    format!(
+        "CREATE VIRTUAL TABLE rtree_{t}_{c} USING rtree(id, minx, maxx, miny, maxy);
+CREATE TRIGGER rtree_{t}_{c}_insert AFTER INSERT ON {t}
+  WHEN (new.{c} NOT NULL AND NOT ST_IsEmpty(NEW.{c}))
+BEGIN
+  INSERT OR REPLACE INTO rtree_{t}_{c} VALUES (
+    NEW.fid, ST_MinX(NEW.{c}), ST_MaxX(NEW.{c}), ST_MinY(NEW.{c}), ST_MaxY(NEW.{c}));
+END;
+CREATE TRIGGER rtree_{t}_{c}_update5 AFTER UPDATE ON {t}
+  WHEN OLD.fid = NEW.fid AND (NEW.{c} NOTNULL AND NOT ST_IsEmpty(NEW.{c}))
+BEGIN
+  INSERT OR REPLACE INTO rtree_{t}_{c} VALUES (
+    NEW.fid, ST_MinX(NEW.{c}), ST_MaxX(NEW.{c}), ST_MinY(NEW.{c}), ST_MaxY(NEW.{c}));
+END;
+CREATE TRIGGER rtree_{t}_{c}_update6 AFTER UPDATE OF {c} ON {t}
+  WHEN OLD.fid = NEW.fid AND (NEW.{c} ISNULL OR ST_IsEmpty(NEW.{c}))
+BEGIN
+  DELETE FROM rtree_{t}_{c} WHERE id = OLD.fid;
+END;
+CREATE TRIGGER rtree_{t}_{c}_update7 AFTER UPDATE OF fid ON {t}
+  WHEN OLD.fid != NEW.fid AND (NEW.{c} NOTNULL AND NOT ST_IsEmpty(NEW.{c}))
+BEGIN
+  DELETE FROM rtree_{t}_{c} WHERE id = OLD.fid;
+  INSERT OR REPLACE INTO rtree_{t}_{c} VALUES (
+    NEW.fid, ST_MinX(NEW.{c}), ST_MaxX(NEW.{c}), ST_MinY(NEW.{c}), ST_MaxY(NEW.{c}));
+END;
+CREATE TRIGGER rtree_{t}_{c}_update4 AFTER UPDATE ON {t}
+  WHEN OLD.fid != NEW.fid AND (NEW.{c} ISNULL OR ST_IsEmpty(NEW.{c}))
+BEGIN
+  DELETE FROM rtree_{t}_{c} WHERE id IN (OLD.fid, NEW.fid);
+END;
+CREATE TRIGGER rtree_{t}_{c}_delete AFTER DELETE ON {t}
+  WHEN old.{c} NOT NULL
+BEGIN
+  DELETE FROM rtree_{t}_{c} WHERE id = OLD.fid;
+END;
+"
+    )
+}
+
+/// Write the GeoPackage of `records` to `out` (through a temporary file).
+pub fn write(records: &[SegmentExport], out: &Path) -> Result<ExportSummary, ExportError> {
+    let tmp = temp_path(out);
+    let _ = std::fs::remove_file(&tmp);
+    let result = write_to(records, &tmp, out);
+    match result {
+        Ok(summary) => {
+            commit_temp(&tmp, out)?;
+            Ok(summary)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+fn write_to(
+    records: &[SegmentExport],
+    tmp: &Path,
+    out: &Path,
+) -> Result<ExportSummary, ExportError> {
+    let sql = |source| ExportError::Gpkg {
+        path: out.to_path_buf(),
+        source,
+    };
+    let mut warnings = Vec::new();
+    let (srid, lines) = common_geometries(records, &mut warnings);
+    // -1: "undefined cartesian", when no segment has a geometry.
+    let table_srs = srid.unwrap_or(-1);
+    let srs_id = i32::try_from(table_srs).unwrap_or(-1);
+
+    let mut conn = Connection::open(tmp).map_err(sql)?;
+    conn.pragma_update(None, "application_id", APPLICATION_ID)
+        .map_err(sql)?;
+    conn.pragma_update(None, "user_version", USER_VERSION)
+        .map_err(sql)?;
+    let tx = conn.transaction().map_err(sql)?;
+    tx.execute_batch(SCHEMA).map_err(sql)?;
+    for r in srs_rows(srid, &mut warnings) {
+        tx.execute(
+            "INSERT INTO gpkg_spatial_ref_sys (srs_name, srs_id, organization, \
+             organization_coordsys_id, definition, description) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            params![
+                r.name,
+                r.id,
+                r.organization,
+                r.org_id,
+                r.definition,
+                r.description
+            ],
+        )
+        .map_err(sql)?;
+    }
+
+    let columns: Vec<String> = PROPERTIES
+        .iter()
+        .map(|p| {
+            let extra = if p.name == "segment_id" {
+                " NOT NULL UNIQUE"
+            } else {
+                ""
+            };
+            format!("\"{}\" {}{extra}", p.name, p.kind.gpkg_type())
+        })
+        .collect();
+    tx.execute_batch(&format!(
+        "CREATE TABLE {TABLE} (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, \
+         {GEOMETRY_COLUMN} LINESTRING, {});",
+        columns.join(", ")
+    ))
+    .map_err(sql)?;
+
+    let mut bbox = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    let mut with_geometry = 0;
+    {
+        let names: Vec<String> = PROPERTIES
+            .iter()
+            .map(|p| format!("\"{}\"", p.name))
+            .collect();
+        let marks: Vec<String> = (0..=PROPERTIES.len())
+            .map(|i| format!("?{}", i + 1))
+            .collect();
+        let mut ins = tx
+            .prepare(&format!(
+                "INSERT INTO {TABLE} ({GEOMETRY_COLUMN}, {}) VALUES ({})",
+                names.join(", "),
+                marks.join(", ")
+            ))
+            .map_err(sql)?;
+        // The R-tree is created after the rows (so its triggers, which need the GIS SQL
+        // functions, never fire here); its rows are collected meanwhile.
+        let mut index_rows: Vec<(i64, [f64; 4])> = Vec::new();
+        for (rec, line) in records.iter().zip(&lines) {
+            let blob = line.as_ref().map(|l| linestring_blob(srs_id, l));
+            let mut values: Vec<rusqlite::types::Value> = Vec::with_capacity(PROPERTIES.len() + 1);
+            values.push(blob.map_or(rusqlite::types::Value::Null, rusqlite::types::Value::Blob));
+            for p in PROPERTIES {
+                values.push(match (p.get)(rec) {
+                    Value::Null => rusqlite::types::Value::Null,
+                    Value::Text(s) => rusqlite::types::Value::Text(s.to_string()),
+                    Value::Real(x) => rusqlite::types::Value::Real(x),
+                    Value::Integer(i) => rusqlite::types::Value::Integer(i),
+                });
+            }
+            ins.execute(params_from_iter(values)).map_err(sql)?;
+            if let Some(l) = line {
+                let e = envelope(l);
+                bbox = [
+                    bbox[0].min(e[0]),
+                    bbox[1].max(e[1]),
+                    bbox[2].min(e[2]),
+                    bbox[3].max(e[3]),
+                ];
+                index_rows.push((tx.last_insert_rowid(), e));
+                with_geometry += 1;
+            }
+        }
+        tx.execute_batch(&rtree_sql(TABLE, GEOMETRY_COLUMN))
+            .map_err(sql)?;
+        let mut idx = tx
+            .prepare(&format!(
+                "INSERT INTO rtree_{TABLE}_{GEOMETRY_COLUMN} (id, minx, maxx, miny, maxy) \
+                 VALUES (?1, ?2, ?3, ?4, ?5)"
+            ))
+            .map_err(sql)?;
+        for (fid, e) in index_rows {
+            idx.execute(params![fid, e[0], e[1], e[2], e[3]])
+                .map_err(sql)?;
+        }
+    }
+    let has_bbox = with_geometry > 0;
+    tx.execute(
+        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, \
+         max_x, max_y, srs_id) VALUES (?1, 'features', ?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        params![
+            TABLE,
+            "pipe segments with fitted soil parameters, wave speed and attenuation (pipewave)",
+            has_bbox.then_some(bbox[0]),
+            has_bbox.then_some(bbox[2]),
+            has_bbox.then_some(bbox[1]),
+            has_bbox.then_some(bbox[3]),
+            table_srs,
+        ],
+    )
+    .map_err(sql)?;
+    tx.execute(
+        "INSERT INTO gpkg_geometry_columns (table_name, column_name, geometry_type_name, srs_id, \
+         z, m) VALUES (?1, ?2, 'LINESTRING', ?3, 0, 0)",
+        params![TABLE, GEOMETRY_COLUMN, table_srs],
+    )
+    .map_err(sql)?;
+    tx.execute(
+        "INSERT INTO gpkg_extensions (table_name, column_name, extension_name, definition, scope) \
+         VALUES (?1, ?2, 'gpkg_rtree_index', 'http://www.geopackage.org/spec/#extension_rtree', \
+         'write-only')",
+        params![TABLE, GEOMETRY_COLUMN],
+    )
+    .map_err(sql)?;
+    tx.commit().map_err(sql)?;
+    conn.close().map_err(|(_, e)| sql(e))?;
+    Ok(ExportSummary {
+        segments: records.len(),
+        with_geometry,
+        fitted: records.iter().filter(|r| r.fit.is_some()).count(),
+        warnings,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blob_layout_is_the_geopackage_binary() {
+        let l = LineString {
+            points: vec![(1.0, 5.0), (-2.0, 7.5), (3.0, 6.0)],
+        };
+        let b = linestring_blob(27700, &l);
+        assert_eq!(&b[..2], b"GP");
+        assert_eq!(b[2], 0);
+        assert_eq!(b[3], 0b11);
+        assert_eq!(i32::from_le_bytes(b[4..8].try_into().unwrap()), 27700);
+        let f = |i: usize| f64::from_le_bytes(b[i..i + 8].try_into().unwrap());
+        assert_eq!([f(8), f(16), f(24), f(32)], [-2.0, 3.0, 5.0, 7.5]);
+        assert_eq!(b[40], 1);
+        assert_eq!(u32::from_le_bytes(b[41..45].try_into().unwrap()), 2);
+        assert_eq!(u32::from_le_bytes(b[45..49].try_into().unwrap()), 3);
+        assert_eq!(
+            [f(49), f(57), f(65), f(73), f(81), f(89)],
+            [1.0, 5.0, -2.0, 7.5, 3.0, 6.0]
+        );
+        assert_eq!(b.len(), 97);
+    }
+}

@@ -1,0 +1,262 @@
+//! GIS export of the calibration results: one record per segment of the inventory, with its
+//! latest fit, written as a GeoPackage, GeoJSON or CSV file.
+//!
+//! - [`record`]: the per-segment record shared by the three formats and the audit report, and
+//!   the list of exported properties ([`record::PROPERTIES`]).
+//! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
+//! - [`gpkg`], [`geojson`], [`csv`]: the writers.
+//!
+//! Every writer writes a temporary file beside the target and renames it over the target at the
+//! end, so a failed export never leaves a half-written file, and it refuses to replace the
+//! pipewave database itself (or any other pipewave database).
+
+pub mod crs;
+pub mod csv;
+pub mod geojson;
+pub mod gpkg;
+pub mod record;
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use crate::db::{Database, DbError};
+
+pub use record::{load_records, SegmentExport, PROPERTIES};
+
+/// The output formats of `pipewave export`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ExportFormat {
+    /// OGC GeoPackage 1.4 (`.gpkg`), in the segments' own coordinate system.
+    Gpkg,
+    /// RFC 7946 GeoJSON, WGS 84 longitude/latitude.
+    GeoJson,
+    /// CSV keyed by `segment_id`, for joining onto an existing pipe layer.
+    Csv,
+}
+
+impl ExportFormat {
+    /// The name used on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ExportFormat::Gpkg => "gpkg",
+            ExportFormat::GeoJson => "geojson",
+            ExportFormat::Csv => "csv",
+        }
+    }
+}
+
+impl fmt::Display for ExportFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for ExportFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "gpkg" | "geopackage" => Ok(ExportFormat::Gpkg),
+            "geojson" | "json" => Ok(ExportFormat::GeoJson),
+            "csv" => Ok(ExportFormat::Csv),
+            _ => Err(format!(
+                "unknown export format '{s}'; expected gpkg, geojson or csv"
+            )),
+        }
+    }
+}
+
+/// What an export (or the audit report) did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ExportSummary {
+    /// Segments written (every segment of the inventory).
+    pub segments: usize,
+    /// Of which with a geometry in the output.
+    pub with_geometry: usize,
+    /// Of which with a fit.
+    pub fitted: usize,
+    /// Things the user should know (unknown coordinate system, unreadable geometry, ...), one
+    /// line each.
+    pub warnings: Vec<String>,
+}
+
+/// Everything that can go wrong while writing an export or a report, worded for the engineer
+/// running it; each message names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// Reading the pipewave database failed.
+    #[error("cannot read the results from the database {}", path.display())]
+    Database {
+        /// The database path.
+        path: PathBuf,
+        /// What went wrong.
+        #[source]
+        source: DbError,
+    },
+    /// The output path is the database being read, or another pipewave database.
+    #[error(
+        "refusing to write {} over {}: it is a pipewave database; give another --out path",
+        format,
+        path.display()
+    )]
+    WouldOverwriteDatabase {
+        /// The output path.
+        path: PathBuf,
+        /// What was being written.
+        format: &'static str,
+    },
+    /// The output path is a directory.
+    #[error("{} is a directory; give the path of the file to write, such as {}", path.display(), path.join(suggested).display())]
+    OutIsDirectory {
+        /// The output path.
+        path: PathBuf,
+        /// A file name to suggest.
+        suggested: &'static str,
+    },
+    /// Creating, writing or renaming the output failed.
+    #[error("cannot write {}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// SQLite failed while writing the GeoPackage.
+    #[error("cannot write the GeoPackage {}", path.display())]
+    Gpkg {
+        /// The file.
+        path: PathBuf,
+        /// What SQLite said.
+        #[source]
+        source: rusqlite::Error,
+    },
+    /// Serialising JSON or CSV failed.
+    #[error("cannot write {}: {message}", path.display())]
+    Encode {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+impl ExportError {
+    pub(crate) fn db(db: &Database) -> impl Fn(DbError) -> ExportError + '_ {
+        move |source| ExportError::Database {
+            path: db.path().to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// Write the export of every segment in `format` to `out_path` (replacing the file if it
+/// exists, unless it is a pipewave database).
+pub fn write(
+    db: &Database,
+    format: ExportFormat,
+    out_path: &Path,
+) -> Result<ExportSummary, ExportError> {
+    let suggested = match format {
+        ExportFormat::Gpkg => "pipewave.gpkg",
+        ExportFormat::GeoJson => "pipewave.geojson",
+        ExportFormat::Csv => "pipewave.csv",
+    };
+    check_out_path(db, out_path, format.as_str(), suggested)?;
+    let mut warnings = Vec::new();
+    let records = load_records(db, &mut warnings)?;
+    let mut summary = match format {
+        ExportFormat::Gpkg => gpkg::write(&records, out_path)?,
+        ExportFormat::GeoJson => geojson::write(&records, out_path)?,
+        ExportFormat::Csv => csv::write(&records, out_path)?,
+    };
+    warnings.append(&mut summary.warnings);
+    summary.warnings = warnings;
+    Ok(summary)
+}
+
+/// Refuse an output path that is a directory, the database being read, or any pipewave database.
+pub(crate) fn check_out_path(
+    db: &Database,
+    out: &Path,
+    format: &'static str,
+    suggested: &'static str,
+) -> Result<(), ExportError> {
+    if out.is_dir() {
+        return Err(ExportError::OutIsDirectory {
+            path: out.to_path_buf(),
+            suggested,
+        });
+    }
+    if !out.exists() {
+        return Ok(());
+    }
+    let same = match (out.canonicalize(), db.path().canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same || is_pipewave_database(out) {
+        return Err(ExportError::WouldOverwriteDatabase {
+            path: out.to_path_buf(),
+            format,
+        });
+    }
+    Ok(())
+}
+
+/// True when the file is a SQLite database with pipewave's `segments` and `fits` tables. Any
+/// failure to tell (not SQLite, unreadable) answers false: such a file is not a pipewave database.
+fn is_pipewave_database(path: &Path) -> bool {
+    let Ok(mut f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut magic = [0u8; 16];
+    if std::io::Read::read_exact(&mut f, &mut magic).is_err() || &magic != b"SQLite format 3\0" {
+        return false;
+    }
+    let flags =
+        rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
+    let Ok(conn) = rusqlite::Connection::open_with_flags(path, flags) else {
+        return false;
+    };
+    conn.query_row(
+        "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name IN ('segments', 'fits')",
+        [],
+        |r| r.get::<_, i64>(0),
+    )
+    .map(|n| n == 2)
+    .unwrap_or(false)
+}
+
+/// A temporary path beside `out` (same directory, so the final rename is atomic).
+pub(crate) fn temp_path(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "export".into());
+    out.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// Move the finished temporary file over `out`; on failure remove the temporary file.
+pub(crate) fn commit_temp(tmp: &Path, out: &Path) -> Result<(), ExportError> {
+    std::fs::rename(tmp, out).map_err(|source| {
+        let _ = std::fs::remove_file(tmp);
+        ExportError::Write {
+            path: out.to_path_buf(),
+            source,
+        }
+    })
+}
+
+/// Write bytes to `out` through a temporary file.
+pub(crate) fn write_file_atomically(out: &Path, bytes: &[u8]) -> Result<(), ExportError> {
+    let tmp = temp_path(out);
+    std::fs::write(&tmp, bytes).map_err(|source| {
+        let _ = std::fs::remove_file(&tmp);
+        ExportError::Write {
+            path: out.to_path_buf(),
+            source,
+        }
+    })?;
+    commit_temp(&tmp, out)
+}

@@ -1,0 +1,526 @@
+//! The per-segment record of the exports and the audit report, assembled in one place: the
+//! inventory row, its latest fit (view `latest_fits`), that fit's curve (same run), the speeds
+//! and attenuations at the standard frequencies and the leak-band mean speed.
+//!
+//! [`PROPERTIES`] lists the exported properties, in order, with their types: the GeoPackage
+//! columns, the GeoJSON properties and the CSV columns are all made from it, so the three
+//! formats cannot drift apart.
+
+use std::collections::HashMap;
+
+use crate::db::wkt::LineString;
+use crate::db::{self, CurvePoint, Database, FitRow, SegmentRecord};
+use crate::physics::curves::LEAK_BAND_HZ;
+
+use super::ExportError;
+
+/// The standard export frequencies, Hz (issue 5). All are on
+/// [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ), so the values are stored
+/// curve points, not interpolations.
+pub const EXPORT_FREQUENCIES_HZ: [f64; 4] = [100.0, 200.0, 500.0, 1000.0];
+
+/// Relative tolerance for matching a stored curve frequency to a wanted one (the grid is stored
+/// as written in the source, so equal values match exactly; this only absorbs round-off of a
+/// curve written through another tool).
+pub const FREQUENCY_MATCH_REL_TOL: f64 = 1e-9;
+
+/// The status exported for a segment without any fit.
+pub const UNFITTED: &str = "unfitted";
+
+/// One segment as exported.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentExport {
+    /// The inventory row, with its measurements.
+    pub segment: SegmentRecord,
+    /// The parsed geometry, in EPSG:`segment.srid` (None: no geometry, or unreadable).
+    pub geometry: Option<LineString>,
+    /// The latest fit (None: never fitted).
+    pub fit: Option<FitRow>,
+    /// The latest fit's curve, by increasing frequency.
+    pub curve: Vec<CurvePoint>,
+    /// Phase speed at [`EXPORT_FREQUENCIES_HZ`], m/s.
+    pub speed_at: [Option<f64>; 4],
+    /// Attenuation at [`EXPORT_FREQUENCIES_HZ`], dB/m.
+    pub attenuation_at: [Option<f64>; 4],
+    /// Mean phase speed over [`LEAK_BAND_HZ`], m/s ([`band_mean_speed`]).
+    pub leak_band_speed: Option<f64>,
+}
+
+impl SegmentExport {
+    /// Build the record from its parts (the derived values are computed here).
+    pub fn new(segment: SegmentRecord, fit: Option<FitRow>, curve: Vec<CurvePoint>) -> Self {
+        let geometry = segment
+            .geometry_wkt
+            .as_deref()
+            .and_then(|w| LineString::parse_wkt(w).ok());
+        let mut speed_at = [None; 4];
+        let mut attenuation_at = [None; 4];
+        for (i, &f) in EXPORT_FREQUENCIES_HZ.iter().enumerate() {
+            if let Some(p) = point_at(&curve, f) {
+                speed_at[i] = p.phase_speed_m_per_s.filter(|v| v.is_finite());
+                attenuation_at[i] = p.attenuation_db_per_m.filter(|v| v.is_finite());
+            }
+        }
+        let leak_band_speed = band_mean_speed(&curve, LEAK_BAND_HZ);
+        SegmentExport {
+            segment,
+            geometry,
+            fit,
+            curve,
+            speed_at,
+            attenuation_at,
+            leak_band_speed,
+        }
+    }
+
+    /// The segment id.
+    pub fn id(&self) -> &str {
+        &self.segment.segment_id
+    }
+
+    /// `ok`, `flagged`, `failed`, or [`UNFITTED`].
+    pub fn status(&self) -> &'static str {
+        self.fit.as_ref().map_or(UNFITTED, |f| f.status.as_str())
+    }
+
+    /// The flag codes of the latest fit (empty when none or unfitted).
+    pub fn flag_codes(&self) -> impl Iterator<Item = &str> {
+        self.fit
+            .iter()
+            .flat_map(|f| f.flags.split(','))
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+    }
+}
+
+/// The stored point at frequency `f_hz`, if the curve has one.
+fn point_at(curve: &[CurvePoint], f_hz: f64) -> Option<&CurvePoint> {
+    curve
+        .iter()
+        .find(|p| (p.frequency_hz - f_hz).abs() <= FREQUENCY_MATCH_REL_TOL * f_hz)
+}
+
+/// Mean phase speed over a band, m/s: (1/(f₂ − f₁)) ∫ c(f) df by the trapezoidal rule over the
+/// stored curve points with f₁ ≤ f ≤ f₂. On the standard grid the leak band 100–800 Hz holds 17
+/// points (25–50 Hz apart), on which the speed varies smoothly, so this differs from a dense
+/// quadrature by far less than the fit's own uncertainty.
+///
+/// `None` unless the stored points cover the whole band (a point at each end, within
+/// [`FREQUENCY_MATCH_REL_TOL`]) and every point in it has a finite speed: a mean over part of the
+/// band would be a different figure under the same name.
+pub fn band_mean_speed(curve: &[CurvePoint], band_hz: (f64, f64)) -> Option<f64> {
+    let (lo, hi) = band_hz;
+    let tol = |f: f64| FREQUENCY_MATCH_REL_TOL * f.abs();
+    let pts: Vec<&CurvePoint> = curve
+        .iter()
+        .filter(|p| p.frequency_hz >= lo - tol(lo) && p.frequency_hz <= hi + tol(hi))
+        .collect();
+    let (first, last) = (pts.first()?, pts.last()?);
+    if pts.len() < 2
+        || (first.frequency_hz - lo).abs() > tol(lo)
+        || (last.frequency_hz - hi).abs() > tol(hi)
+    {
+        return None;
+    }
+    let mut integral = 0.0;
+    for w in pts.windows(2) {
+        let c0 = w[0].phase_speed_m_per_s.filter(|v| v.is_finite())?;
+        let c1 = w[1].phase_speed_m_per_s.filter(|v| v.is_finite())?;
+        integral += 0.5 * (c0 + c1) * (w[1].frequency_hz - w[0].frequency_hz);
+    }
+    Some(integral / (last.frequency_hz - first.frequency_hz))
+}
+
+/// Every segment of the inventory, sorted by id, with its latest fit and that fit's curve.
+/// Segments without a fit are included (status [`UNFITTED`]). A stored geometry that cannot be
+/// parsed is exported without geometry, with a warning.
+pub fn load_records(
+    db: &Database,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<SegmentExport>, ExportError> {
+    let conn = db.conn();
+    let err = ExportError::db(db);
+    let segments = db::load_segments(conn, None).map_err(&err)?;
+    let mut fits: HashMap<String, FitRow> = db::latest_fits(conn, None)
+        .map_err(&err)?
+        .into_iter()
+        .map(|f| (f.segment_id.clone(), f))
+        .collect();
+    let mut out = Vec::with_capacity(segments.len());
+    for seg in segments {
+        let fit = fits.remove(&seg.segment_id);
+        let curve = match &fit {
+            Some(f) => db::curves_for(conn, &f.segment_id, f.run_id).map_err(&err)?,
+            None => Vec::new(),
+        };
+        let rec = SegmentExport::new(seg, fit, curve);
+        if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
+            let why = LineString::parse_wkt(w).err().unwrap_or_default();
+            warnings.push(format!(
+                "segment {}: its stored geometry cannot be read ({why}); exported without geometry",
+                rec.id()
+            ));
+        }
+        out.push(rec);
+    }
+    Ok(out)
+}
+
+/// The SQL/JSON type of a property.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// Text.
+    Text,
+    /// 64-bit float.
+    Real,
+    /// 64-bit integer.
+    Integer,
+}
+
+impl Kind {
+    /// The GeoPackage column type (OGC 12-128r18 Table 1).
+    pub fn gpkg_type(self) -> &'static str {
+        match self {
+            Kind::Text => "TEXT",
+            Kind::Real => "DOUBLE",
+            Kind::Integer => "INTEGER",
+        }
+    }
+}
+
+/// The value of one property of one segment.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value<'a> {
+    /// Missing (NULL, JSON null, empty CSV cell).
+    Null,
+    /// Text.
+    Text(&'a str),
+    /// A finite float.
+    Real(f64),
+    /// An integer.
+    Integer(i64),
+}
+
+impl Value<'_> {
+    fn real(v: Option<f64>) -> Self {
+        match v {
+            Some(x) if x.is_finite() => Value::Real(x),
+            _ => Value::Null,
+        }
+    }
+    fn int(v: Option<i64>) -> Self {
+        v.map_or(Value::Null, Value::Integer)
+    }
+    fn text(v: Option<&str>) -> Value<'_> {
+        v.map_or(Value::Null, Value::Text)
+    }
+}
+
+/// One exported property: its name (GeoPackage column, GeoJSON property, CSV header), type,
+/// meaning and how to read it from a record.
+pub struct Property {
+    /// Name, as in the outputs.
+    pub name: &'static str,
+    /// Type.
+    pub kind: Kind,
+    /// Meaning and unit.
+    pub doc: &'static str,
+    /// The value for a segment.
+    pub get: for<'a> fn(&'a SegmentExport) -> Value<'a>,
+}
+
+impl std::fmt::Debug for Property {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Property")
+            .field("name", &self.name)
+            .field("kind", &self.kind)
+            .finish()
+    }
+}
+
+fn fit_real(r: &SegmentExport, get: fn(&FitRow) -> Option<f64>) -> Value<'_> {
+    Value::real(r.fit.as_ref().and_then(get))
+}
+
+macro_rules! fit_real {
+    ($name:literal, $field:ident, $doc:literal) => {
+        Property {
+            name: $name,
+            kind: Kind::Real,
+            doc: $doc,
+            get: |r| fit_real(r, |f| f.$field),
+        }
+    };
+}
+
+/// The exported properties, in output order; `segment_id` first (the join key).
+pub const PROPERTIES: &[Property] = &[
+    Property {
+        name: "segment_id",
+        kind: Kind::Text,
+        doc: "the utility's asset id (join key)",
+        get: |r| Value::Text(&r.segment.segment_id),
+    },
+    Property {
+        name: "material",
+        kind: Kind::Text,
+        doc: "pipe material code (CI, DI, ST, PVC, MDPE, HDPE, AC)",
+        get: |r| Value::Text(r.segment.material.code()),
+    },
+    Property {
+        name: "outer_diameter_mm",
+        kind: Kind::Real,
+        doc: "outside diameter, mm",
+        get: |r| Value::real(Some(r.segment.outer_diameter_mm)),
+    },
+    Property {
+        name: "wall_thickness_mm",
+        kind: Kind::Real,
+        doc: "wall thickness, mm",
+        get: |r| Value::real(Some(r.segment.wall_thickness_mm)),
+    },
+    Property {
+        name: "soil_type",
+        kind: Kind::Text,
+        doc: "soil description from the inventory",
+        get: |r| Value::text(r.segment.soil_type.as_deref()),
+    },
+    Property {
+        name: "status",
+        kind: Kind::Text,
+        doc: "latest fit: ok, flagged, failed; unfitted when never fitted",
+        get: |r| Value::Text(r.status()),
+    },
+    Property {
+        name: "flags",
+        kind: Kind::Text,
+        doc: "comma-separated flag codes of the latest fit",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.flags.as_str())),
+    },
+    Property {
+        name: "run_id",
+        kind: Kind::Integer,
+        doc: "the calibrate run of the latest fit",
+        get: |r| Value::int(r.fit.as_ref().map(|f| f.run_id)),
+    },
+    Property {
+        name: "model",
+        kind: Kind::Text,
+        doc: "model variant of the fit (full, seed)",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.model.as_str())),
+    },
+    Property {
+        name: "effects",
+        kind: Kind::Text,
+        doc: "comma-separated effects switched on for the fit",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.effects.as_str())),
+    },
+    fit_real!(
+        "soil_youngs_modulus_pa",
+        soil_youngs_modulus_pa,
+        "fitted soil Young's modulus E, Pa"
+    ),
+    fit_real!(
+        "soil_youngs_modulus_std_pa",
+        soil_youngs_modulus_std_pa,
+        "its one-sigma error, Pa"
+    ),
+    fit_real!(
+        "soil_poisson",
+        soil_poisson,
+        "fitted soil Poisson's ratio nu"
+    ),
+    fit_real!("soil_poisson_std", soil_poisson_std, "its one-sigma error"),
+    fit_real!(
+        "contact",
+        contact,
+        "fitted pipe-soil contact coefficient xi"
+    ),
+    fit_real!("contact_std", contact_std, "its one-sigma error"),
+    fit_real!(
+        "soil_loss_factor",
+        soil_loss_factor,
+        "soil loss factor (effect soil_damping)"
+    ),
+    fit_real!(
+        "soil_loss_factor_std",
+        soil_loss_factor_std,
+        "its one-sigma error"
+    ),
+    fit_real!(
+        "air_fraction",
+        air_fraction,
+        "air volume fraction (effect air_in_water)"
+    ),
+    fit_real!("air_fraction_std", air_fraction_std, "its one-sigma error"),
+    fit_real!(
+        "wall_thickness_ratio",
+        wall_thickness_ratio,
+        "effective/nominal wall (effect wall_thinning)"
+    ),
+    fit_real!(
+        "wall_thickness_ratio_std",
+        wall_thickness_ratio_std,
+        "its one-sigma error"
+    ),
+    fit_real!(
+        "pipe_loss_factor",
+        pipe_loss_factor,
+        "fitted pipe loss factor (effect pipe_loss)"
+    ),
+    fit_real!(
+        "pipe_loss_factor_std",
+        pipe_loss_factor_std,
+        "its one-sigma error"
+    ),
+    fit_real!("misfit", misfit, "objective value at the optimum"),
+    fit_real!(
+        "chi2_per_dof",
+        chi2_per_dof,
+        "chi-squared per degree of freedom"
+    ),
+    Property {
+        name: "n_measurements",
+        kind: Kind::Integer,
+        doc: "measurements used by the fit",
+        get: |r| Value::int(r.fit.as_ref().and_then(|f| f.n_measurements)),
+    },
+    Property {
+        name: "speed_100hz_m_per_s",
+        kind: Kind::Real,
+        doc: "phase speed at 100 Hz, m/s",
+        get: |r| Value::real(r.speed_at[0]),
+    },
+    Property {
+        name: "speed_200hz_m_per_s",
+        kind: Kind::Real,
+        doc: "phase speed at 200 Hz, m/s",
+        get: |r| Value::real(r.speed_at[1]),
+    },
+    Property {
+        name: "speed_500hz_m_per_s",
+        kind: Kind::Real,
+        doc: "phase speed at 500 Hz, m/s",
+        get: |r| Value::real(r.speed_at[2]),
+    },
+    Property {
+        name: "speed_1000hz_m_per_s",
+        kind: Kind::Real,
+        doc: "phase speed at 1000 Hz, m/s",
+        get: |r| Value::real(r.speed_at[3]),
+    },
+    Property {
+        name: "attenuation_100hz_db_per_m",
+        kind: Kind::Real,
+        doc: "attenuation at 100 Hz, dB/m",
+        get: |r| Value::real(r.attenuation_at[0]),
+    },
+    Property {
+        name: "attenuation_200hz_db_per_m",
+        kind: Kind::Real,
+        doc: "attenuation at 200 Hz, dB/m",
+        get: |r| Value::real(r.attenuation_at[1]),
+    },
+    Property {
+        name: "attenuation_500hz_db_per_m",
+        kind: Kind::Real,
+        doc: "attenuation at 500 Hz, dB/m",
+        get: |r| Value::real(r.attenuation_at[2]),
+    },
+    Property {
+        name: "attenuation_1000hz_db_per_m",
+        kind: Kind::Real,
+        doc: "attenuation at 1000 Hz, dB/m",
+        get: |r| Value::real(r.attenuation_at[3]),
+    },
+    Property {
+        name: "leak_band_speed_m_per_s",
+        kind: Kind::Real,
+        doc: "mean phase speed over 100-800 Hz (trapezoidal rule on the stored grid), m/s: \
+              the figure to type into a leak correlator",
+        get: |r| Value::real(r.leak_band_speed),
+    },
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::curves::STANDARD_GRID_HZ;
+
+    fn curve(c: impl Fn(f64) -> Option<f64>) -> Vec<CurvePoint> {
+        STANDARD_GRID_HZ
+            .iter()
+            .map(|&f| CurvePoint {
+                frequency_hz: f,
+                phase_speed_m_per_s: c(f),
+                attenuation_db_per_m: Some(f * 1e-4),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn band_mean_is_exact_for_a_linear_speed() {
+        // The trapezoidal rule integrates a linear function exactly: mean of 1000 + 0.2 f over
+        // 100..800 Hz is 1000 + 0.2 * 450 = 1090.
+        let c = curve(|f| Some(1000.0 + 0.2 * f));
+        let m = band_mean_speed(&c, LEAK_BAND_HZ).unwrap();
+        assert!((m - 1090.0).abs() < 1e-9, "{m}");
+        // A constant curve has that constant as mean.
+        let c = curve(|_| Some(1234.5));
+        assert!((band_mean_speed(&c, LEAK_BAND_HZ).unwrap() - 1234.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn band_mean_weights_by_frequency_spacing() {
+        // Speed 2000 only on 800..900 (outside the band) and 1000 inside: the mean stays 1000.
+        let c = curve(|f| Some(if f > 800.0 { 2000.0 } else { 1000.0 }));
+        assert!((band_mean_speed(&c, LEAK_BAND_HZ).unwrap() - 1000.0).abs() < 1e-9);
+        // A step at 450 Hz: the trapezoid spreads it over 450..500 (half weight), so the mean is
+        // (1000*350 + 1500*50 + ... ) / 700; compute it independently.
+        let c = curve(|f| Some(if f >= 500.0 { 2000.0 } else { 1000.0 }));
+        let expected = (1000.0 * (450.0 - 100.0) + 1500.0 * 50.0 + 2000.0 * 300.0) / 700.0;
+        assert!((band_mean_speed(&c, LEAK_BAND_HZ).unwrap() - expected).abs() < 1e-9);
+    }
+
+    #[test]
+    fn band_mean_needs_the_whole_band_and_every_root() {
+        let c = curve(|f| if f == 300.0 { None } else { Some(1000.0) });
+        assert_eq!(band_mean_speed(&c, LEAK_BAND_HZ), None);
+        let c = curve(|f| Some(if f == 300.0 { f64::NAN } else { 1000.0 }));
+        assert_eq!(band_mean_speed(&c, LEAK_BAND_HZ), None);
+        let part: Vec<CurvePoint> = curve(|_| Some(1000.0))
+            .into_iter()
+            .filter(|p| p.frequency_hz >= 200.0)
+            .collect();
+        assert_eq!(band_mean_speed(&part, LEAK_BAND_HZ), None);
+        assert_eq!(band_mean_speed(&[], LEAK_BAND_HZ), None);
+        // Outside the band a failed root does not matter.
+        let c = curve(|f| if f == 2000.0 { None } else { Some(1000.0) });
+        assert!(band_mean_speed(&c, LEAK_BAND_HZ).is_some());
+    }
+
+    #[test]
+    fn export_frequencies_are_on_the_standard_grid() {
+        for f in EXPORT_FREQUENCIES_HZ {
+            assert!(STANDARD_GRID_HZ.contains(&f), "{f}");
+        }
+        assert!(STANDARD_GRID_HZ.contains(&LEAK_BAND_HZ.0));
+        assert!(STANDARD_GRID_HZ.contains(&LEAK_BAND_HZ.1));
+    }
+
+    #[test]
+    fn property_names_are_unique_and_segment_id_first() {
+        assert_eq!(PROPERTIES[0].name, "segment_id");
+        let mut names: Vec<&str> = PROPERTIES.iter().map(|p| p.name).collect();
+        names.sort_unstable();
+        let n = names.len();
+        names.dedup();
+        assert_eq!(names.len(), n);
+        for p in PROPERTIES {
+            assert!(p
+                .name
+                .bytes()
+                .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_'));
+        }
+    }
+}

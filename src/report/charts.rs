@@ -1,0 +1,430 @@
+//! The XY charts of the reports, drawn with `plotters`' SVG backend into strings. Text uses
+//! plotters' built-in size estimate (no system fonts), and the browser's sans-serif font.
+//!
+//! Every chart aggregates when the data are many: histograms, 2-D histograms above
+//! [`SCATTER_LIMIT`] points, box plots per category.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::quantile;
+use crate::units::sig;
+
+/// A chart that could not be drawn (plotters' message).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("cannot draw the chart '{chart}': {message}")]
+pub struct ChartError {
+    /// Which chart.
+    pub chart: &'static str,
+    /// What plotters said.
+    pub message: String,
+}
+
+/// Above this many points a scatter plot becomes a 2-D histogram: 20,000 overlapping dots say
+/// less than a density, and cost ~1.5 MB of SVG.
+pub const SCATTER_LIMIT: usize = 3000;
+
+/// Categorical colours (Paul Tol's "bright" scheme, colour-blind safe), then grey.
+pub const CATEGORY_COLOURS: [RGBColor; 7] = [
+    RGBColor(0x44, 0x77, 0xAA),
+    RGBColor(0xEE, 0x66, 0x77),
+    RGBColor(0x22, 0x88, 0x33),
+    RGBColor(0xCC, 0xBB, 0x44),
+    RGBColor(0x66, 0xCC, 0xEE),
+    RGBColor(0xAA, 0x33, 0x77),
+    RGBColor(0xBB, 0xBB, 0xBB),
+];
+
+const FONT: &str = "sans-serif";
+
+fn render(
+    chart: &'static str,
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> Result<(), String>,
+) -> Result<String, ChartError> {
+    let mut buf = String::new();
+    {
+        let root = SVGBackend::with_string(&mut buf, size).into_drawing_area();
+        let res = root
+            .fill(&WHITE)
+            .map_err(|e| e.to_string())
+            .and_then(|()| draw(&root))
+            .and_then(|()| root.present().map_err(|e| e.to_string()));
+        res.map_err(|message| ChartError { chart, message })?;
+    }
+    Ok(buf)
+}
+
+fn e2s<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// A range around the values with a margin of `frac` of the span (or ±1 when flat).
+fn padded(lo: f64, hi: f64, frac: f64) -> (f64, f64) {
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (0.0, 1.0);
+    }
+    let span = hi - lo;
+    if span <= 1e-12 * hi.abs().max(1.0) {
+        let d = if lo == 0.0 { 1.0 } else { 0.05 * lo.abs() };
+        (lo - d, hi + d)
+    } else {
+        (lo - frac * span, hi + frac * span)
+    }
+}
+
+/// Histogram of log10 of positive values, with vertical markers (label, value).
+pub fn log_histogram(
+    chart: &'static str,
+    values: &[f64],
+    x_desc: &str,
+    markers: &[(&str, f64)],
+) -> Result<String, ChartError> {
+    const BINS: usize = 40;
+    let logs: Vec<f64> = values
+        .iter()
+        .filter(|v| v.is_finite() && **v > 0.0)
+        .map(|v| v.log10())
+        .collect();
+    let lo = logs.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (x0, x1) = padded(lo, hi, 0.02);
+    let w = (x1 - x0) / BINS as f64;
+    let mut counts = [0usize; BINS];
+    for v in &logs {
+        let i = (((v - x0) / w) as usize).min(BINS - 1);
+        counts[i] += 1;
+    }
+    let ymax = counts.iter().copied().max().unwrap_or(0).max(1) as f64 * 1.1;
+    render(chart, (720, 300), |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1, 0f64..ymax)
+            .map_err(e2s)?;
+        c.configure_mesh()
+            .max_light_lines(0)
+            .disable_x_mesh()
+            .x_desc(x_desc)
+            .y_desc("segments")
+            .x_label_formatter(&|v| sig(10f64.powf(*v), 2))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .label_style((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        c.draw_series(
+            counts
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| **n > 0)
+                .map(|(i, &n)| {
+                    let a = x0 + i as f64 * w;
+                    Rectangle::new([(a, 0.0), (a + w, n as f64)], CATEGORY_COLOURS[0].filled())
+                }),
+        )
+        .map_err(e2s)?;
+        for (k, (label, v)) in markers.iter().enumerate() {
+            if !(v.is_finite() && *v > 0.0) {
+                continue;
+            }
+            let colour = CATEGORY_COLOURS[(k + 1) % CATEGORY_COLOURS.len()];
+            let x = v.log10();
+            c.draw_series(std::iter::once(PathElement::new(
+                vec![(x, 0.0), (x, ymax)],
+                colour.stroke_width(2),
+            )))
+            .map_err(e2s)?
+            .label(format!("{label} {}", sig(*v, 3)))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2))
+            });
+        }
+        if !markers.is_empty() {
+            c.configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.9))
+                .border_style(BLACK.mix(0.4))
+                .label_font((FONT, 12))
+                .draw()
+                .map_err(e2s)?;
+        }
+        Ok(())
+    })
+}
+
+/// One point of the speed–diameter chart.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedPoint<'a> {
+    /// Material code.
+    pub material: &'a str,
+    /// Outside diameter, mm.
+    pub diameter_mm: f64,
+    /// Wave speed, m/s.
+    pub speed: f64,
+}
+
+/// Wave speed against diameter, by material: one dot per segment (or a 2-D histogram above
+/// [`SCATTER_LIMIT`]) and, for each material, the median speed at each diameter.
+pub fn speed_vs_diameter(
+    points: &[SpeedPoint<'_>],
+    materials: &[&str],
+) -> Result<String, ChartError> {
+    let fold = |f: fn(&SpeedPoint<'_>) -> f64| {
+        points
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
+    };
+    let (x0, x1) = fold(|p| p.diameter_mm);
+    let (y0, y1) = fold(|p| p.speed);
+    let (x0, x1) = padded(x0, x1, 0.04);
+    let (y0, y1) = padded(y0, y1, 0.06);
+    let colour_of = |m: &str| {
+        let i = materials
+            .iter()
+            .position(|x| *x == m)
+            .unwrap_or(CATEGORY_COLOURS.len() - 1);
+        CATEGORY_COLOURS[i.min(CATEGORY_COLOURS.len() - 1)]
+    };
+    render("speed against diameter", (720, 420), |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(e2s)?;
+        c.configure_mesh()
+            .max_light_lines(0)
+            .x_desc("outside diameter (mm)")
+            .y_desc("leak-band wave speed (m/s)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .label_style((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        if points.len() <= SCATTER_LIMIT {
+            c.draw_series(points.iter().map(|p| {
+                Circle::new(
+                    (p.diameter_mm, p.speed),
+                    2,
+                    colour_of(p.material).mix(0.5).filled(),
+                )
+            }))
+            .map_err(e2s)?;
+        } else {
+            const NX: usize = 60;
+            const NY: usize = 40;
+            let mut grid = vec![0usize; NX * NY];
+            let (wx, wy) = ((x1 - x0) / NX as f64, (y1 - y0) / NY as f64);
+            for p in points {
+                let i = (((p.diameter_mm - x0) / wx) as usize).min(NX - 1);
+                let j = (((p.speed - y0) / wy) as usize).min(NY - 1);
+                grid[j * NX + i] += 1;
+            }
+            let max = grid.iter().copied().max().unwrap_or(1).max(1) as f64;
+            c.draw_series(
+                grid.iter()
+                    .enumerate()
+                    .filter(|(_, n)| **n > 0)
+                    .map(|(k, &n)| {
+                        let (i, j) = (k % NX, k / NX);
+                        // Grey level by log count, so single segments stay visible beside dense cells.
+                        let t = 0.15 + 0.85 * ((n as f64).ln_1p() / max.ln_1p());
+                        let g = (235.0 - 200.0 * t) as u8;
+                        let a = (x0 + i as f64 * wx, y0 + j as f64 * wy);
+                        Rectangle::new([a, (a.0 + wx, a.1 + wy)], RGBColor(g, g, g).filled())
+                    }),
+            )
+            .map_err(e2s)?;
+        }
+        for m in materials {
+            let mut by_d: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
+            for p in points.iter().filter(|p| p.material == *m) {
+                by_d.entry(p.diameter_mm.round() as i64)
+                    .or_default()
+                    .push(p.speed);
+            }
+            let line: Vec<(f64, f64)> = by_d
+                .into_iter()
+                .filter_map(|(d, mut v)| {
+                    v.sort_by(f64::total_cmp);
+                    quantile(&v, 0.5).map(|q| (d as f64, q))
+                })
+                .collect();
+            let colour = colour_of(m);
+            c.draw_series(LineSeries::new(line.clone(), colour.stroke_width(2)))
+                .map_err(e2s)?
+                .label(format!("{m} (median per diameter)"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(2))
+                });
+            c.draw_series(line.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
+                .map_err(e2s)?;
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK.mix(0.4))
+            .label_font((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        Ok(())
+    })
+}
+
+/// Horizontal box plots of log10 values per category (whiskers at 1.5 IQR, plotters'
+/// [`Quartiles`]), labelled `name (n)`; `fmt` turns a log10 value into a tick label.
+pub fn log_boxplots(
+    chart: &'static str,
+    groups: &[(String, Vec<f64>)],
+    x_desc: &str,
+    fmt: fn(f64) -> String,
+) -> Result<String, ChartError> {
+    let logs: Vec<(String, Vec<f32>)> = groups
+        .iter()
+        .map(|(name, v)| {
+            let l: Vec<f32> = v
+                .iter()
+                .filter(|x| x.is_finite() && **x > 0.0)
+                .map(|x| x.log10() as f32)
+                .collect();
+            (format!("{name} ({})", l.len()), l)
+        })
+        .filter(|(_, l)| !l.is_empty())
+        .collect();
+    let all = logs.iter().flat_map(|(_, l)| l.iter().copied());
+    let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(f64::from(v)), b.max(f64::from(v)))
+    });
+    let (x0, x1) = padded(lo, hi, 0.05);
+    let n = logs.len().max(1);
+    let height = (60 + 28 * n).clamp(160, 900) as u32;
+    let names: Vec<String> = logs.iter().map(|(n, _)| n.clone()).collect();
+    render(chart, (720, height), |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(170)
+            .build_cartesian_2d(x0 as f32..x1 as f32, -1i32..n as i32)
+            .map_err(e2s)?;
+        c.configure_mesh()
+            .max_light_lines(0)
+            .disable_y_mesh()
+            .x_desc(x_desc)
+            .y_labels(n + 2)
+            .y_label_formatter(&|i| {
+                usize::try_from(*i)
+                    .ok()
+                    .and_then(|i| names.get(i))
+                    .cloned()
+                    .unwrap_or_default()
+            })
+            .x_label_formatter(&|v| fmt(f64::from(*v)))
+            .label_style((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        c.draw_series(logs.iter().enumerate().map(|(i, (_, l))| {
+            Boxplot::new_horizontal(i as i32, &Quartiles::new(l))
+                .width(16)
+                .style(CATEGORY_COLOURS[0])
+        }))
+        .map_err(e2s)?;
+        Ok(())
+    })
+}
+
+/// A fitted curve (line) with the measured points (dots) over it.
+pub fn curve_with_points(
+    chart: &'static str,
+    title: &str,
+    fitted: &[(f64, f64)],
+    measured: &[(f64, f64)],
+    y_desc: &str,
+) -> Result<String, ChartError> {
+    let xs = fitted.iter().chain(measured).map(|p| p.0);
+    let ys = fitted.iter().chain(measured).map(|p| p.1);
+    let x1 = xs.fold(f64::NEG_INFINITY, f64::max);
+    let (ylo, yhi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    let x1 = if x1.is_finite() && x1 > 0.0 {
+        x1 * 1.03
+    } else {
+        1.0
+    };
+    let (y0, y1) = padded(ylo, yhi, 0.08);
+    render(chart, (360, 240), |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(8)
+            .caption(title, (FONT, 13))
+            .x_label_area_size(32)
+            .y_label_area_size(52)
+            .build_cartesian_2d(0f64..x1, y0..y1)
+            .map_err(e2s)?;
+        c.configure_mesh()
+            .max_light_lines(0)
+            .x_desc("frequency (Hz)")
+            .y_desc(y_desc)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| sig(*v, 3))
+            .x_labels(5)
+            .y_labels(5)
+            .label_style((FONT, 11))
+            .draw()
+            .map_err(e2s)?;
+        c.draw_series(LineSeries::new(
+            fitted.iter().copied(),
+            CATEGORY_COLOURS[0].stroke_width(2),
+        ))
+        .map_err(e2s)?;
+        c.draw_series(
+            measured
+                .iter()
+                .map(|&p| Circle::new(p, 3, CATEGORY_COLOURS[1].filled())),
+        )
+        .map_err(e2s)?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(n: usize) -> Vec<SpeedPoint<'static>> {
+        (0..n)
+            .map(|i| SpeedPoint {
+                material: ["CI", "PVC", "DI"][i % 3],
+                diameter_mm: [100.0, 150.0, 200.0][(i / 3) % 3],
+                speed: 400.0 + (i % 800) as f64,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn scatter_above_the_limit_becomes_a_density() {
+        let m = ["CI", "PVC", "DI"];
+        let small = speed_vs_diameter(&points(300), &m).unwrap();
+        // One dot per segment plus one marker per material and diameter (3 x 3).
+        assert_eq!(small.matches("<circle").count(), 300 + 9);
+        let large = speed_vs_diameter(&points(20_000), &m).unwrap();
+        assert_eq!(large.matches("<circle").count(), 9);
+        assert!(large.matches("<rect").count() <= 60 * 40 + 10);
+        assert!(large.len() < 300_000, "{} bytes", large.len());
+    }
+
+    #[test]
+    fn charts_survive_degenerate_data() {
+        assert!(log_histogram("h", &[], "x", &[]).is_ok());
+        assert!(log_histogram("h", &[1.0, 1.0], "x", &[("median", 1.0)]).is_ok());
+        assert!(log_histogram("h", &[f64::NAN, -1.0, 0.0], "x", &[("m", f64::NAN)]).is_ok());
+        assert!(speed_vs_diameter(&points(1), &["CI"]).is_ok());
+        assert!(log_boxplots("b", &[("a".into(), vec![5e7])], "E", |v| v.to_string()).is_ok());
+        assert!(log_boxplots("b", &[], "E", |v| v.to_string()).is_ok());
+        assert!(curve_with_points("c", "t", &[], &[], "m/s").is_ok());
+        assert!(curve_with_points("c", "t", &[(100.0, 1.0)], &[(100.0, 1.0)], "m/s").is_ok());
+    }
+}

@@ -1,0 +1,784 @@
+//! GIS exports read back independently: the GeoPackage with SQLite (and GDAL's ogrinfo when it
+//! is installed), the GeoJSON against RFC 7946, the CSV as a join table; every value compared
+//! with the database.
+
+mod export_fixture;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::process::Command;
+
+use export_fixture as fx;
+use pipewave::db::wkt::LineString;
+use pipewave::db::{self, curves_for, latest_fits, Database, FitRow, ImportOptions, ImportSource};
+use pipewave::export::{self, ExportError, ExportFormat, PROPERTIES};
+use rusqlite::types::Value as Sql;
+use rusqlite::Connection;
+use tempfile::TempDir;
+
+const N: usize = 60;
+
+fn network(n: usize) -> (TempDir, Database) {
+    let dir = tempfile::tempdir().unwrap();
+    let database = fx::build(&dir.path().join("pipewave.sqlite"), n);
+    (dir, database)
+}
+
+/// The database's view of each segment: inventory geometry, latest fit, curve.
+struct Expected {
+    geometry: Option<LineString>,
+    fit: Option<FitRow>,
+    curve: BTreeMap<u64, (Option<f64>, Option<f64>)>,
+    material: String,
+    diameter: f64,
+}
+
+fn expected(database: &Database) -> BTreeMap<String, Expected> {
+    let conn = database.conn();
+    let fits: BTreeMap<String, FitRow> = latest_fits(conn, None)
+        .unwrap()
+        .into_iter()
+        .map(|f| (f.segment_id.clone(), f))
+        .collect();
+    db::load_segments(conn, None)
+        .unwrap()
+        .into_iter()
+        .map(|s| {
+            let fit = fits.get(&s.segment_id).cloned();
+            let curve = fit
+                .as_ref()
+                .map(|f| curves_for(conn, &f.segment_id, f.run_id).unwrap())
+                .unwrap_or_default()
+                .into_iter()
+                .map(|p| {
+                    (
+                        p.frequency_hz.to_bits(),
+                        (p.phase_speed_m_per_s, p.attenuation_db_per_m),
+                    )
+                })
+                .collect();
+            let e = Expected {
+                geometry: s
+                    .geometry_wkt
+                    .as_deref()
+                    .map(|w| LineString::parse_wkt(w).unwrap()),
+                fit,
+                curve,
+                material: s.material.code().to_string(),
+                diameter: s.outer_diameter_mm,
+            };
+            (s.segment_id, e)
+        })
+        .collect()
+}
+
+/// Independent leak-band mean: trapezoid over the stored points in [100, 800] Hz.
+fn band_mean(curve: &BTreeMap<u64, (Option<f64>, Option<f64>)>) -> Option<f64> {
+    let mut pts: Vec<(f64, f64)> = curve
+        .iter()
+        .map(|(f, v)| (f64::from_bits(*f), v.0))
+        .filter(|(f, _)| (100.0..=800.0).contains(f))
+        .map(|(f, c)| c.map(|c| (f, c)))
+        .collect::<Option<_>>()?;
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if pts.first()?.0 != 100.0 || pts.last()?.0 != 800.0 {
+        return None;
+    }
+    let area: f64 = pts
+        .windows(2)
+        .map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0))
+        .sum();
+    Some(area / 700.0)
+}
+
+fn speed_at(e: &Expected, f: f64) -> Option<f64> {
+    e.curve.get(&f.to_bits()).and_then(|v| v.0)
+}
+
+/// Check one property value from an export against the database.
+fn check_value(name: &str, got: &Sql, e: &Expected, id: &str) {
+    let fit = e.fit.as_ref();
+    let real = |v: Option<f64>| v.map_or(Sql::Null, Sql::Real);
+    let text = |v: Option<&str>| v.map_or(Sql::Null, |s| Sql::Text(s.to_string()));
+    let want = match name {
+        "segment_id" => Sql::Text(id.to_string()),
+        "material" => Sql::Text(e.material.clone()),
+        "outer_diameter_mm" => Sql::Real(e.diameter),
+        "status" => Sql::Text(fit.map_or("unfitted", |f| f.status.as_str()).to_string()),
+        "flags" => text(fit.map(|f| f.flags.as_str())),
+        "effects" => text(fit.map(|f| f.effects.as_str())),
+        "run_id" => fit.map_or(Sql::Null, |f| Sql::Integer(f.run_id)),
+        "soil_youngs_modulus_pa" => real(fit.and_then(|f| f.soil_youngs_modulus_pa)),
+        "soil_youngs_modulus_std_pa" => real(fit.and_then(|f| f.soil_youngs_modulus_std_pa)),
+        "soil_poisson" => real(fit.and_then(|f| f.soil_poisson)),
+        "soil_poisson_std" => real(fit.and_then(|f| f.soil_poisson_std)),
+        "contact" => real(fit.and_then(|f| f.contact)),
+        "contact_std" => real(fit.and_then(|f| f.contact_std)),
+        "soil_loss_factor" => real(fit.and_then(|f| f.soil_loss_factor)),
+        "misfit" => real(fit.and_then(|f| f.misfit)),
+        "chi2_per_dof" => real(fit.and_then(|f| f.chi2_per_dof)),
+        "speed_100hz_m_per_s" => real(speed_at(e, 100.0)),
+        "speed_200hz_m_per_s" => real(speed_at(e, 200.0)),
+        "speed_500hz_m_per_s" => real(speed_at(e, 500.0)),
+        "speed_1000hz_m_per_s" => real(speed_at(e, 1000.0)),
+        "attenuation_500hz_db_per_m" => real(e.curve.get(&500f64.to_bits()).and_then(|v| v.1)),
+        "leak_band_speed_m_per_s" => match (got, band_mean(&e.curve)) {
+            (Sql::Real(g), Some(w)) => {
+                assert!((g - w).abs() <= 1e-9 * w, "{id} {name}: {g} vs {w}");
+                return;
+            }
+            (_, w) => real(w),
+        },
+        _ => return,
+    };
+    assert_eq!(got, &want, "{id}: {name}");
+}
+
+fn read_f64(b: &[u8], at: usize) -> f64 {
+    f64::from_le_bytes(b[at..at + 8].try_into().unwrap())
+}
+fn read_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(b[at..at + 4].try_into().unwrap())
+}
+
+#[test]
+fn geopackage_meets_the_standard_and_holds_the_database_values() {
+    let (dir, database) = network(N);
+    let out = dir.path().join("net.gpkg");
+    let summary = export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    assert!(summary.warnings.is_empty(), "{:?}", summary.warnings);
+    assert_eq!(summary.segments, N);
+    let exp = expected(&database);
+    let g = Connection::open(&out).unwrap();
+
+    // Req. 2: application id 'GPKG' and version 1.4.0.
+    let app: i64 = g
+        .query_row("PRAGMA application_id", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(app, 0x4750_4B47);
+    let ver: i64 = g
+        .query_row("PRAGMA user_version", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(ver, 10400);
+    let ok: String = g
+        .query_row("PRAGMA integrity_check", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(ok, "ok");
+    let fk: i64 = g
+        .query_row("SELECT COUNT(*) FROM pragma_foreign_key_check", [], |r| {
+            r.get(0)
+        })
+        .unwrap();
+    assert_eq!(fk, 0);
+
+    // Req. 11: the mandatory SRS rows, and the segments' system with its WKT.
+    let srs: BTreeMap<i64, (String, i64, String)> = g
+        .prepare("SELECT srs_id, organization, organization_coordsys_id, definition FROM gpkg_spatial_ref_sys")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, (r.get(1)?, r.get(2)?, r.get(3)?))))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(
+        srs.keys().copied().collect::<Vec<_>>(),
+        [-1, 0, 4326, 27700]
+    );
+    assert_eq!(srs[&-1].2, "undefined");
+    assert_eq!(srs[&0].2, "undefined");
+    assert!(srs[&4326].2.starts_with("GEOGCS[\"WGS 84\""));
+    assert_eq!((srs[&27700].0.as_str(), srs[&27700].1), ("EPSG", 27700));
+    assert!(srs[&27700]
+        .2
+        .starts_with("PROJCS[\"OSGB 1936 / British National Grid\""));
+    assert!(srs[&27700].2.ends_with("AUTHORITY[\"EPSG\",\"27700\"]]"));
+
+    // gpkg_contents and gpkg_geometry_columns.
+    let (dtype, ident, minx, miny, maxx, maxy, srs_id): (String, String, f64, f64, f64, f64, i64) =
+        g.query_row(
+            "SELECT data_type, identifier, min_x, min_y, max_x, max_y, srs_id FROM gpkg_contents \
+             WHERE table_name = 'pipe_segments'",
+            [],
+            |r| {
+                Ok((
+                    r.get(0)?,
+                    r.get(1)?,
+                    r.get(2)?,
+                    r.get(3)?,
+                    r.get(4)?,
+                    r.get(5)?,
+                    r.get(6)?,
+                ))
+            },
+        )
+        .unwrap();
+    assert_eq!(
+        (dtype.as_str(), ident.as_str(), srs_id),
+        ("features", "pipe_segments", 27700)
+    );
+    let all_pts: Vec<(f64, f64)> = exp
+        .values()
+        .filter_map(|e| e.geometry.as_ref())
+        .flat_map(|l| l.points.iter().copied())
+        .collect();
+    let fold = |f: fn(&(f64, f64)) -> f64, min: bool| {
+        all_pts.iter().map(f).fold(
+            if min {
+                f64::INFINITY
+            } else {
+                f64::NEG_INFINITY
+            },
+            |a, b| {
+                if min {
+                    a.min(b)
+                } else {
+                    a.max(b)
+                }
+            },
+        )
+    };
+    assert_eq!(
+        [minx, miny, maxx, maxy],
+        [
+            fold(|p| p.0, true),
+            fold(|p| p.1, true),
+            fold(|p| p.0, false),
+            fold(|p| p.1, false)
+        ]
+    );
+    let gc: (String, String, String, i64, i64, i64) = g
+        .query_row("SELECT table_name, column_name, geometry_type_name, srs_id, z, m FROM gpkg_geometry_columns", [], |r| {
+            Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?))
+        })
+        .unwrap();
+    assert_eq!(
+        gc,
+        (
+            "pipe_segments".into(),
+            "geom".into(),
+            "LINESTRING".into(),
+            27700,
+            0,
+            0
+        )
+    );
+    let geom_type: String = g
+        .query_row(
+            "SELECT type FROM pragma_table_info('pipe_segments') WHERE name = 'geom'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(geom_type, "LINESTRING");
+
+    // The features: one per segment, geometry and every property as in the database.
+    let cols: Vec<String> = g
+        .prepare("SELECT name FROM pragma_table_info('pipe_segments')")
+        .unwrap()
+        .query_map([], |r| r.get(0))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let mut want_cols = vec!["fid".to_string(), "geom".to_string()];
+    want_cols.extend(PROPERTIES.iter().map(|p| p.name.to_string()));
+    assert_eq!(cols, want_cols);
+    let rows: Vec<Vec<Sql>> = g
+        .prepare("SELECT * FROM pipe_segments ORDER BY fid")
+        .unwrap()
+        .query_map([], |r| {
+            (0..cols.len()).map(|i| r.get::<_, Sql>(i)).collect()
+        })
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(rows.len(), N);
+    let mut seen = BTreeSet::new();
+    let mut n_geom = 0;
+    for row in &rows {
+        let Sql::Text(id) = &row[2] else {
+            panic!("segment_id {:?}", row[2])
+        };
+        assert!(seen.insert(id.clone()), "duplicate {id}");
+        let e = &exp[id];
+        match (&row[1], &e.geometry) {
+            (Sql::Null, None) => {}
+            (Sql::Blob(b), Some(line)) => {
+                n_geom += 1;
+                assert_eq!(&b[..2], b"GP", "{id}");
+                assert_eq!(b[2], 0, "{id}: version");
+                let flags = b[3];
+                assert_eq!(flags & 1, 1, "{id}: little endian");
+                assert_eq!(
+                    (flags >> 1) & 0b111,
+                    1,
+                    "{id}: envelope [minx, maxx, miny, maxy]"
+                );
+                assert_eq!((flags >> 4) & 1, 0, "{id}: not empty");
+                assert_eq!((flags >> 5) & 1, 0, "{id}: standard binary");
+                assert_eq!(flags >> 6, 0, "{id}: reserved bits");
+                assert_eq!(i32::from_le_bytes(b[4..8].try_into().unwrap()), 27700);
+                let xs = line.points.iter().map(|p| p.0);
+                let ys = line.points.iter().map(|p| p.1);
+                let env = [
+                    xs.clone().fold(f64::INFINITY, f64::min),
+                    xs.fold(f64::NEG_INFINITY, f64::max),
+                    ys.clone().fold(f64::INFINITY, f64::min),
+                    ys.fold(f64::NEG_INFINITY, f64::max),
+                ];
+                assert_eq!(
+                    [
+                        read_f64(b, 8),
+                        read_f64(b, 16),
+                        read_f64(b, 24),
+                        read_f64(b, 32)
+                    ],
+                    env
+                );
+                assert_eq!(b[40], 1, "{id}: WKB little endian");
+                assert_eq!(read_u32(b, 41), 2, "{id}: WKB LineString");
+                let n = read_u32(b, 45) as usize;
+                assert_eq!(n, line.points.len());
+                assert_eq!(b.len(), 49 + 16 * n);
+                for (k, p) in line.points.iter().enumerate() {
+                    assert_eq!(
+                        (read_f64(b, 49 + 16 * k), read_f64(b, 57 + 16 * k)),
+                        *p,
+                        "{id}"
+                    );
+                }
+            }
+            (got, want) => panic!("{id}: geometry {got:?}, database {want:?}"),
+        }
+        for (name, v) in cols.iter().zip(row).skip(2) {
+            check_value(name, v, e, id);
+        }
+    }
+    assert_eq!(seen.len(), exp.len());
+    // The fixture covers unfitted, failed, flagged and geometry-less segments.
+    let statuses: BTreeSet<String> = rows
+        .iter()
+        .map(
+            |r| match &r[2 + PROPERTIES.iter().position(|p| p.name == "status").unwrap()] {
+                Sql::Text(s) => s.clone(),
+                v => panic!("{v:?}"),
+            },
+        )
+        .collect();
+    assert_eq!(
+        statuses,
+        ["failed", "flagged", "ok", "unfitted"]
+            .map(String::from)
+            .into()
+    );
+    assert!(n_geom < N && n_geom > 0);
+
+    // R-tree index: one entry per geometry, enclosing its envelope (stored as 32-bit floats,
+    // rounded outwards).
+    let ext: i64 = g
+        .query_row(
+            "SELECT COUNT(*) FROM gpkg_extensions WHERE table_name = 'pipe_segments' AND \
+             column_name = 'geom' AND extension_name = 'gpkg_rtree_index'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(ext, 1);
+    let bad: i64 = g
+        .query_row(
+            "SELECT COUNT(*) FROM pipe_segments p JOIN rtree_pipe_segments_geom r ON r.id = p.fid",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(bad as usize, n_geom);
+    drop(g);
+    // The pipewave database was not touched by the export.
+    assert_eq!(expected(&database).len(), N);
+}
+
+/// GDAL's messages, less the one a GDAL older than GeoPackage 1.4 support (3.6 and before, as in
+/// Debian 12) prints for every 1.4 file, "This version of GeoPackage user_version=0x000028A0
+/// (10400, v1.4.0) ... may only be partially supported": a statement about GDAL, not the file.
+/// Newer GDAL prints nothing, so any other line is a real problem.
+fn gdal_warnings(stderr: &str) -> Vec<&str> {
+    stderr
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .filter(|l| {
+            !(l.contains("user_version=0x000028A0 (10400, v1.4.0)")
+                && l.contains("may only be partially supported"))
+        })
+        .collect()
+}
+
+#[test]
+fn geopackage_opens_in_gdal_without_warnings() {
+    let Ok(v) = Command::new("ogrinfo").arg("--version").output() else {
+        eprintln!(
+            "note: GDAL's ogrinfo is not installed; skipping the GDAL check of the GeoPackage"
+        );
+        return;
+    };
+    assert!(v.status.success());
+    let (dir, database) = network(N);
+    let out = dir.path().join("net.gpkg");
+    export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    let o = Command::new("ogrinfo")
+        .args(["-ro", "-al", "-so"])
+        .arg(&out)
+        .env("CPL_DEBUG", "OFF")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    let warnings = gdal_warnings(&stderr);
+    assert!(warnings.is_empty(), "ogrinfo warned: {warnings:?}");
+    assert!(stdout.contains("Layer name: pipe_segments"), "{stdout}");
+    assert!(stdout.contains("Geometry: Line String"), "{stdout}");
+    assert!(stdout.contains(&format!("Feature Count: {N}")), "{stdout}");
+    assert!(
+        stdout.contains("British National Grid") || stdout.contains("27700"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("leak_band_speed_m_per_s: Real"), "{stdout}");
+    // The full read (every feature, geometry decoded) is also silent.
+    let o = Command::new("ogrinfo")
+        .args(["-ro", "-al", "-q"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && gdal_warnings(&stderr).is_empty(),
+        "{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(
+        stdout.matches("LINESTRING (").count(),
+        (0..N).filter(|&i| fx::has_geometry(i)).count()
+    );
+}
+
+/// One segment at a given geometry in a new database.
+fn single(dir: &Path, name: &str, rows: &[(&str, &str, &str)]) -> Database {
+    let mut database = Database::open(dir.join(name)).unwrap();
+    let mut csv = String::from("segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,geometry_wkt,srid\n");
+    for (id, wkt, srid) in rows {
+        csv.push_str(&format!("{id},DI,160,6,1900,\"{wkt}\",{srid}\n"));
+    }
+    let r = db::import(
+        database.conn_mut(),
+        Some(&ImportSource::from_bytes("segments.csv", csv)),
+        None,
+        ImportOptions::default(),
+    )
+    .unwrap();
+    assert!(r.errors.is_empty(), "{:?}", r.errors);
+    database
+}
+
+/// Metres between two WGS 84 points (equirectangular; exact enough over a few metres).
+fn metres(a: (f64, f64), b: (f64, f64)) -> f64 {
+    const M_PER_DEG: f64 = 111_320.0;
+    let dx = (a.0 - b.0) * M_PER_DEG * b.1.to_radians().cos();
+    let dy = (a.1 - b.1) * M_PER_DEG;
+    dx.hypot(dy)
+}
+
+/// Reference: E 441800, N 111900 (Southampton) on the British National Grid is WGS 84
+/// lon -1.40689879, lat 50.90506588 with EPSG:27700's TOWGS84 Helmert (the transformation
+/// "OSGB36 to WGS 84 (6)", ~2 m accuracy), computed with PROJ 9.1 (Debian proj-bin):
+/// `echo 441800 111900 0 0 | cct -d 8 +proj=pipeline +step +inv +proj=tmerc +lat_0=49 +lon_0=-2
+/// +k=0.9996012717 +x_0=400000 +y_0=-100000 +ellps=airy +step +proj=cart +ellps=airy
+/// +step +proj=helmert +x=446.448 +y=-125.157 +z=542.06 +rx=0.15 +ry=0.247 +rz=0.842 +s=-20.489
+/// +convention=position_vector +step +inv +proj=cart +ellps=WGS84 +step +proj=unitconvert
+/// +xy_in=rad +xy_out=deg`. Without the datum shift the point would land ~120 m away
+/// (lon -1.40546072, lat 50.90450536), so the 1 m tolerance checks the datum handling too.
+const SOUTHAMPTON_WGS84: (f64, f64) = (-1.40689879, 50.90506588);
+
+#[test]
+fn geojson_is_rfc7946_wgs84_lon_lat() {
+    let (dir, database) = network(N);
+    let out = dir.path().join("net.geojson");
+    let summary = export::write(&database, ExportFormat::GeoJson, &out).unwrap();
+    assert!(summary.warnings.is_empty(), "{:?}", summary.warnings);
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!(doc["type"], "FeatureCollection");
+    assert!(doc.get("crs").is_none(), "RFC 7946 §4: no crs member");
+    let feats = doc["features"].as_array().unwrap();
+    assert_eq!(feats.len(), N);
+    let exp = expected(&database);
+    for f in feats {
+        assert_eq!(f["type"], "Feature");
+        let props = f["properties"].as_object().unwrap();
+        let id = props["segment_id"].as_str().unwrap();
+        assert_eq!(f["id"], id);
+        let e = &exp[id];
+        // Same property names, in the same order, as the GeoPackage columns.
+        assert_eq!(
+            props.keys().map(String::as_str).collect::<Vec<_>>().len(),
+            PROPERTIES.len()
+        );
+        for p in PROPERTIES {
+            let v = &props[p.name];
+            let sql = match v {
+                serde_json::Value::Null => Sql::Null,
+                serde_json::Value::String(s) => Sql::Text(s.clone()),
+                serde_json::Value::Number(n)
+                    if p.kind == pipewave::export::record::Kind::Integer =>
+                {
+                    Sql::Integer(n.as_i64().unwrap())
+                }
+                serde_json::Value::Number(n) => Sql::Real(n.as_f64().unwrap()),
+                other => panic!("{id} {}: {other}", p.name),
+            };
+            check_value(p.name, &sql, e, id);
+        }
+        match (&f["geometry"], &e.geometry) {
+            (serde_json::Value::Null, None) => {}
+            (g, Some(line)) => {
+                assert_eq!(g["type"], "LineString");
+                let coords = g["coordinates"].as_array().unwrap();
+                assert_eq!(coords.len(), line.points.len());
+                for c in coords {
+                    let c = c.as_array().unwrap();
+                    assert_eq!(c.len(), 2, "2-D positions");
+                    let (lon, lat) = (c[0].as_f64().unwrap(), c[1].as_f64().unwrap());
+                    assert!((-180.0..=180.0).contains(&lon) && (-90.0..=90.0).contains(&lat));
+                    // Longitude first: Southampton is at about 1.4°W, 50.9°N.
+                    assert!((-1.6..-1.2).contains(&lon), "{id}: lon {lon}");
+                    assert!((50.8..51.0).contains(&lat), "{id}: lat {lat}");
+                    for v in [&c[0], &c[1]] {
+                        let s = v.to_string();
+                        let decimals = s.split('.').nth(1).map_or(0, str::len);
+                        assert!(decimals <= 7, "{id}: {s} has more than 7 decimals");
+                    }
+                }
+            }
+            (g, None) => panic!("{id}: geometry {g} for a segment without one"),
+        }
+    }
+
+    // A known point, within 1 m.
+    let database = single(
+        dir.path(),
+        "one.sqlite",
+        &[("P1", "LINESTRING (441800 111900, 441900 111950)", "27700")],
+    );
+    let out = dir.path().join("one.geojson");
+    export::write(&database, ExportFormat::GeoJson, &out).unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let c = &doc["features"][0]["geometry"]["coordinates"][0];
+    let got = (c[0].as_f64().unwrap(), c[1].as_f64().unwrap());
+    let d = metres(got, SOUTHAMPTON_WGS84);
+    assert!(d < 1.0, "{got:?} is {d:.2} m from {SOUTHAMPTON_WGS84:?}");
+    assert_eq!(doc["features"][0]["properties"]["status"], "unfitted");
+}
+
+#[test]
+fn geometries_in_other_systems_are_reprojected_into_the_geopackage_system() {
+    let dir = tempfile::tempdir().unwrap();
+    let (lon, lat) = SOUTHAMPTON_WGS84;
+    let database = single(
+        dir.path(),
+        "mixed.sqlite",
+        &[
+            ("A", "LINESTRING (441000 111000, 441100 111000)", "27700"),
+            ("B", "LINESTRING (442000 112000, 442100 112050)", "27700"),
+            (
+                "C",
+                &format!("LINESTRING ({lon} {lat}, {} {lat})", lon + 0.001),
+                "4326",
+            ),
+            ("D", "LINESTRING (1 2, 3 4)", "999999"),
+        ],
+    );
+    let out = dir.path().join("mixed.gpkg");
+    let summary = export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    assert_eq!(summary.with_geometry, 3);
+    assert_eq!(summary.warnings.len(), 1, "{:?}", summary.warnings);
+    assert!(summary.warnings[0].contains("segment D") && summary.warnings[0].contains("999999"));
+    let g = Connection::open(&out).unwrap();
+    let blob: Vec<u8> = g
+        .query_row(
+            "SELECT geom FROM pipe_segments WHERE segment_id = 'C'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(i32::from_le_bytes(blob[4..8].try_into().unwrap()), 27700);
+    let (x, y) = (read_f64(&blob, 49), read_f64(&blob, 57));
+    assert!((x - 441_800.0).hypot(y - 111_900.0) < 1.0, "({x}, {y})");
+    let d: Option<Vec<u8>> = g
+        .query_row(
+            "SELECT geom FROM pipe_segments WHERE segment_id = 'D'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert!(d.is_none());
+    let n: i64 = g
+        .query_row("SELECT COUNT(*) FROM pipe_segments", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(n, 4, "segments without usable geometry are kept");
+}
+
+#[test]
+fn csv_is_a_join_table_keyed_by_segment_id() {
+    let (dir, database) = network(N);
+    let out = dir.path().join("net.csv");
+    export::write(&database, ExportFormat::Csv, &out).unwrap();
+    let mut rdr = csv::Reader::from_path(&out).unwrap();
+    let headers: Vec<String> = rdr.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(headers[0], "segment_id");
+    assert_eq!(
+        headers,
+        PROPERTIES
+            .iter()
+            .map(|p| p.name.to_string())
+            .collect::<Vec<_>>()
+    );
+    let exp = expected(&database);
+    let mut ids = BTreeSet::new();
+    for rec in rdr.records() {
+        let rec = rec.unwrap();
+        let id = rec[0].to_string();
+        assert!(ids.insert(id.clone()), "join key {id} repeated");
+        let e = &exp[&id];
+        for (p, cell) in PROPERTIES.iter().zip(rec.iter()) {
+            let v = if cell.is_empty() {
+                Sql::Null
+            } else {
+                match p.kind {
+                    pipewave::export::record::Kind::Text => Sql::Text(cell.to_string()),
+                    pipewave::export::record::Kind::Real => Sql::Real(cell.parse().unwrap()),
+                    pipewave::export::record::Kind::Integer => Sql::Integer(cell.parse().unwrap()),
+                }
+            };
+            // Text columns that are empty in the database read back as empty cells.
+            let v = match (&v, p.kind) {
+                (Sql::Null, pipewave::export::record::Kind::Text)
+                    if e.fit.is_some() && matches!(p.name, "flags" | "effects") =>
+                {
+                    Sql::Text(String::new())
+                }
+                _ => v,
+            };
+            check_value(p.name, &v, e, &id);
+        }
+    }
+    assert_eq!(ids, exp.keys().cloned().collect());
+}
+
+#[test]
+fn export_never_overwrites_a_pipewave_database() {
+    let (dir, database) = network(8);
+    let db_path = dir.path().join("pipewave.sqlite");
+    let before = std::fs::metadata(&db_path).unwrap().len();
+    for f in [ExportFormat::Gpkg, ExportFormat::GeoJson, ExportFormat::Csv] {
+        let e = export::write(&database, f, &db_path).unwrap_err();
+        assert!(
+            matches!(e, ExportError::WouldOverwriteDatabase { .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("pipewave.sqlite"), "{e}");
+    }
+    // Another pipewave database at the out path is refused too.
+    let other = dir.path().join("other.sqlite");
+    drop(Database::open(&other).unwrap());
+    assert!(export::write(&database, ExportFormat::Gpkg, &other).is_err());
+    assert_eq!(std::fs::metadata(&db_path).unwrap().len(), before);
+    assert_eq!(expected(&database).len(), 8);
+    // A directory is refused with a suggestion; an existing GeoPackage is replaced.
+    let e = export::write(&database, ExportFormat::Gpkg, dir.path()).unwrap_err();
+    assert!(matches!(e, ExportError::OutIsDirectory { .. }), "{e}");
+    let out = dir.path().join("x.gpkg");
+    export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    let n: i64 = Connection::open(&out)
+        .unwrap()
+        .query_row("SELECT COUNT(*) FROM pipe_segments", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(n, 8);
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn cli_export_and_audit_exit_codes() {
+    let (dir, database) = network(12);
+    drop(database);
+    let bin = env!("CARGO_BIN_EXE_pipewave");
+    let db_path = dir.path().join("pipewave.sqlite");
+    for (fmt, file) in [
+        ("gpkg", "a.gpkg"),
+        ("geojson", "a.geojson"),
+        ("csv", "a.csv"),
+    ] {
+        let o = Command::new(bin)
+            .args(["export", "--db"])
+            .arg(&db_path)
+            .args(["--format", fmt, "--out"])
+            .arg(dir.path().join(file))
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(String::from_utf8_lossy(&o.stdout).contains("12 segments"));
+    }
+    let o = Command::new(bin)
+        .args(["audit", "--db"])
+        .arg(&db_path)
+        .arg("--out")
+        .arg(dir.path().join("report.html"))
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // A missing database is not created, and exits 2 naming it.
+    let missing = dir.path().join("nope.sqlite");
+    let o = Command::new(bin)
+        .args(["export", "--db"])
+        .arg(&missing)
+        .args(["--format", "csv", "--out"])
+        .arg(dir.path().join("b.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nope.sqlite"));
+    assert!(!missing.exists());
+    // Unknown format, and --out the database itself: exit 2.
+    let o = Command::new(bin)
+        .args(["export", "--db"])
+        .arg(&db_path)
+        .args(["--format", "shp", "--out", "x.shp"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let o = Command::new(bin)
+        .args(["audit", "--db"])
+        .arg(&db_path)
+        .arg("--out")
+        .arg(&db_path)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("refusing"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
