@@ -84,7 +84,7 @@ impl CalibrateArgs {
 /// Run `calibrate`.
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<Outcome> {
     let opts = args.options()?;
-    let mut database = Database::open(&args.db)?;
+    let mut database = super::open_database(&args.db)?;
     execute(&mut database, &opts)
 }
 

@@ -9,7 +9,11 @@ mod import;
 mod run;
 mod synth;
 
+use std::path::Path;
 use std::process::ExitCode;
+
+use anyhow::Context;
+use pipewave::db::{Database, DbError};
 
 use clap::{Parser, Subcommand};
 
@@ -79,5 +83,16 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Synth(args) => synth::run(&args),
         Command::Forward(args) => forward::run(&args),
         Command::Bench(args) => bench::run(&args),
+    }
+}
+
+/// Open a database for a command, naming the file in messages that do not already.
+pub(crate) fn open_database(path: &Path) -> anyhow::Result<Database> {
+    match Database::open(path) {
+        Ok(db) => Ok(db),
+        Err(e @ (DbError::Corrupt(_) | DbError::Busy(_) | DbError::Sqlite(_))) => {
+            Err(anyhow::Error::new(e)).context(format!("cannot use the database {}", path.display()))
+        }
+        Err(e) => Err(e.into()),
     }
 }

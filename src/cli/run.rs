@@ -87,7 +87,7 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
         }
         sources.push(ImportSource::from_path(&p)?);
     }
-    let mut database = Database::open(db_path)?;
+    let mut database = super::open_database(db_path)?;
     let report = db::import(
         database.conn_mut(),
         Some(&sources[0]),
