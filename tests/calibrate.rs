@@ -174,7 +174,10 @@ fn only_stale_segments_are_refitted() {
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 8);
     assert_eq!(count(&db, "SELECT count(*) FROM curves"), 8 * 32);
     assert_eq!(
-        count(&db, "SELECT count(*) FROM runs WHERE status = 'finished' AND n_segments = 8"),
+        count(
+            &db,
+            "SELECT count(*) FROM runs WHERE status = 'finished' AND n_segments = 8"
+        ),
         1
     );
 
@@ -221,7 +224,10 @@ fn only_stale_segments_are_refitted() {
 
     // Other settings make every fit stale; the same settings again refit nothing.
     let seed_model = stdout(&calibrate(&db, &["--model", "seed"]));
-    assert!(seed_model.starts_with("calibrate: 8 fitted"), "{seed_model}");
+    assert!(
+        seed_model.starts_with("calibrate: 8 fitted"),
+        "{seed_model}"
+    );
     assert_eq!(
         count(&db, "SELECT count(*) FROM latest_fits WHERE model = 'seed'"),
         8
@@ -238,11 +244,21 @@ fn only_stale_segments_are_refitted() {
     assert!(stderr(&bad).contains("NOPE-1"), "{}", stderr(&bad));
     // So is an unknown effect name.
     let bad = bin()
-        .args(["calibrate", "--db", s(&db), "--effects", "soil_damping,magic"])
+        .args([
+            "calibrate",
+            "--db",
+            s(&db),
+            "--effects",
+            "soil_damping,magic",
+        ])
         .output()
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
-    assert!(stderr(&bad).contains("unknown effect 'magic'"), "{}", stderr(&bad));
+    assert!(
+        stderr(&bad).contains("unknown effect 'magic'"),
+        "{}",
+        stderr(&bad)
+    );
 }
 
 #[test]
@@ -281,7 +297,9 @@ fn a_killed_run_loses_nothing_and_the_next_run_finishes_it() {
     import(&b, &net);
 
     let mut child = spawn_calibrate(&a, &["--jobs", "1"]);
-    wait_until(Duration::from_secs(120), "the first fit", || fits_so_far(&a) >= 1);
+    wait_until(Duration::from_secs(120), "the first fit", || {
+        fits_so_far(&a) >= 1
+    });
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     let stored = fits_so_far(&a);
@@ -379,14 +397,14 @@ fn a_second_concurrent_run_fails_at_once_or_waits_with_wait() {
     let mut holder = Database::open(&db).unwrap();
     let lock = db::try_acquire_run_lock(holder.conn_mut()).unwrap();
 
-    let refused = bin()
-        .args(["calibrate", "--db", s(&db)])
-        .output()
-        .unwrap();
+    let refused = bin().args(["calibrate", "--db", s(&db)]).output().unwrap();
     assert_eq!(refused.status.code(), Some(2));
     let msg = stderr(&refused);
     assert!(
-        msg.contains(&format!("another calibrate run (pid {}", std::process::id())),
+        msg.contains(&format!(
+            "another calibrate run (pid {}",
+            std::process::id()
+        )),
         "{msg}"
     );
     assert!(msg.contains("--wait"), "{msg}");
@@ -396,7 +414,10 @@ fn a_second_concurrent_run_fails_at_once_or_waits_with_wait() {
     // With --wait it waits, then runs.
     let mut waiting = spawn_calibrate(&db, &["--wait"]);
     std::thread::sleep(Duration::from_millis(600));
-    assert!(waiting.try_wait().unwrap().is_none(), "it should be waiting");
+    assert!(
+        waiting.try_wait().unwrap().is_none(),
+        "it should be waiting"
+    );
     assert_eq!(fits_so_far(&db), 0);
     db::release_run_lock(holder.conn(), &lock).unwrap();
     let out = waiting.wait_with_output().unwrap();
@@ -442,8 +463,16 @@ fn a_corrupt_or_foreign_database_is_refused_with_a_clear_message() {
         .args(["run", s(tmp.path()), "--db", s(&db)])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2), "no segments.csv in the directory");
-    assert!(stderr(&out).contains("segments.csv not found"), "{}", stderr(&out));
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "no segments.csv in the directory"
+    );
+    assert!(
+        stderr(&out).contains("segments.csv not found"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]
@@ -462,7 +491,10 @@ fn run_does_everything_once_and_nothing_the_second_time() {
         "--defects",
         "0",
     ]);
-    let first = bin().args(["run", s(&net), "--jobs", "2"]).output().unwrap();
+    let first = bin()
+        .args(["run", s(&net), "--jobs", "2"])
+        .output()
+        .unwrap();
     // Flagged fits are a success; only a failed fit makes the exit code 1.
     assert_eq!(first.status.code(), Some(0), "{}", stderr(&first));
     let out = stdout(&first);
@@ -494,7 +526,10 @@ fn run_does_everything_once_and_nothing_the_second_time() {
 
     let second = run_ok(&["run", s(&net)]);
     let out = stdout(&second);
-    assert!(out.contains("segments 0 new, 0 updated, 6 unchanged"), "{out}");
+    assert!(
+        out.contains("segments 0 new, 0 updated, 6 unchanged"),
+        "{out}"
+    );
     assert!(out.contains("calibrate: 0 fitted"), "{out}");
     assert!(out.contains("6 up to date"), "{out}");
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 6);
@@ -516,7 +551,10 @@ fn synth_writes_a_network_that_imports_cleanly() {
         "0.5",
     ];
     let out = stdout(&run_ok(&args));
-    assert!(out.starts_with("synth: wrote 14 segments (12 synthetic, "), "{out}");
+    assert!(
+        out.starts_with("synth: wrote 14 segments (12 synthetic, "),
+        "{out}"
+    );
     let db = tmp.path().join("a.sqlite");
     let imported = stdout(&run_ok(&[
         "import",
@@ -529,7 +567,10 @@ fn synth_writes_a_network_that_imports_cleanly() {
     ]));
     assert!(imported.contains("segments 14 new"), "{imported}");
     assert_eq!(
-        count(&db, "SELECT count(*) FROM segments WHERE geometry_wkt IS NOT NULL AND srid = 27700"),
+        count(
+            &db,
+            "SELECT count(*) FROM segments WHERE geometry_wkt IS NOT NULL AND srid = 27700"
+        ),
         12
     );
     // The cast-iron case is given in rad/s; the import derives Hz.
@@ -546,11 +587,19 @@ fn synth_writes_a_network_that_imports_cleanly() {
     assert!(truth.iter().filter(|t| t.defect.is_some()).count() >= 2);
     assert!(truth[12].soil_youngs_modulus_pa.is_none());
     // The published files are copied unchanged.
-    for name in ["seed_cast_iron_table2.csv", "muggleton2004_buried_mdpe.csv", "README.md"] {
+    for name in [
+        "seed_cast_iron_table2.csv",
+        "muggleton2004_buried_mdpe.csv",
+        "README.md",
+    ] {
         assert_eq!(
             std::fs::read(net.join("real").join(name)).unwrap(),
-            std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/published").join(name))
-                .unwrap(),
+            std::fs::read(
+                Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("tests/data/published")
+                    .join(name)
+            )
+            .unwrap(),
             "{name}"
         );
     }

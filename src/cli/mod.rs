@@ -91,7 +91,8 @@ pub(crate) fn open_database(path: &Path) -> anyhow::Result<Database> {
     match Database::open(path) {
         Ok(db) => Ok(db),
         Err(e @ (DbError::Corrupt(_) | DbError::Busy(_) | DbError::Sqlite(_))) => {
-            Err(anyhow::Error::new(e)).context(format!("cannot use the database {}", path.display()))
+            Err(anyhow::Error::new(e))
+                .context(format!("cannot use the database {}", path.display()))
         }
         Err(e) => Err(e.into()),
     }
