@@ -95,9 +95,12 @@ fn fits_per_segment(db: &Path) -> Vec<(String, i64)> {
 /// Columns that legitimately differ between two runs of the same fits.
 const RUN_COLUMNS: [&str; 4] = ["id", "run_id", "elapsed_ms", "created_at"];
 
+/// One fit: (column, value) for every compared column.
+type FitColumns = Vec<(String, Value)>;
+
 /// Every column of every fit except [`RUN_COLUMNS`], by segment, and every curve point; the
 /// values as SQLite holds them (bit-exact REALs).
-fn stored_fits(db: &Path) -> (Vec<Vec<(String, Value)>>, Vec<Vec<Value>>) {
+fn stored_fits(db: &Path) -> (Vec<FitColumns>, Vec<Vec<Value>>) {
     let c = Connection::open(db).unwrap();
     let mut st = c
         .prepare("SELECT * FROM latest_fits ORDER BY segment_id")
