@@ -238,6 +238,29 @@ fn only_stale_segments_are_refitted() {
     let again = stdout(&calibrate(&db, &["--model", "seed", "--seed", "99"]));
     assert!(again.starts_with("calibrate: 0 fitted"), "{again}");
 
+    // Effects: their names and parameters are stored in their columns, the others stay NULL.
+    let effects = stdout(&calibrate(
+        &db,
+        &[
+            "--segment",
+            "WM10002",
+            "--effects",
+            "pipe_loss,soil_damping",
+        ],
+    ));
+    assert!(effects.starts_with("calibrate: 1 fitted"), "{effects}");
+    assert_eq!(
+        count(
+            &db,
+            "SELECT count(*) FROM latest_fits WHERE segment_id = 'WM10002' AND \
+             effects = 'soil_damping,pipe_loss' AND model = 'full' AND \
+             soil_loss_factor BETWEEN 0 AND 0.3 AND pipe_loss_factor BETWEEN 0 AND 0.3 AND \
+             air_fraction IS NULL AND wall_thickness_ratio IS NULL AND \
+             json_array_length(correlations) = 5 AND evaluations > 0 AND misfit >= 0"
+        ),
+        1
+    );
+
     // An unknown segment id is an error that names it.
     let bad = bin()
         .args(["calibrate", "--db", s(&db), "--segment", "NOPE-1"])

@@ -90,14 +90,19 @@ impl Default for CalibrateOptions {
 }
 
 impl CalibrateOptions {
-    /// The fit settings of every segment of the run.
+    /// The fit settings of every segment of the run: the inversion's defaults for the method
+    /// (the paper's method runs its DE once, as the paper does).
     pub fn fit_settings(&self) -> FitSettings {
+        let base = match self.method {
+            Method::Paper => FitSettings::paper(self.model, self.contact_mode),
+            Method::Default => FitSettings::default(),
+        };
         FitSettings {
             method: self.method,
             model: self.model,
             contact_mode: self.contact_mode,
             effects: self.effects.clone(),
-            ..FitSettings::default()
+            ..base
         }
     }
 

@@ -200,7 +200,7 @@ impl RunObserver for CliObserver {
         }
         let bar = ProgressBar::new(plan.to_fit as u64);
         let style = ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} segments, {per_sec}, eta {eta} {msg}",
+            "{elapsed_precise} [{bar:40}] {pos}/{len} segments, eta {eta}, {msg}",
         )
         .map(|s| s.progress_chars("=> "))
         .unwrap_or_else(|_| ProgressStyle::default_bar());
