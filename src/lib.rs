@@ -1,11 +1,13 @@
 //! pipewave: the leak-noise wavenumber of a buried water pipe, and the inversion of the soil
 //! around it from field measurements.
+pub mod batch;
 pub mod bench;
 pub mod db;
 pub mod diagnose;
 pub mod export;
 pub mod forward;
 pub mod invert;
+pub mod network;
 pub mod optimize;
 pub mod physics;
 pub mod report;

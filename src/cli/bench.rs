@@ -1,18 +1,41 @@
 //! `pipewave bench`: print timing figures (speed is measured here, never asserted in tests).
+//!
+//! Without options: forward-model figures. `--calibrate N`: calibrate throughput on N synthetic
+//! segments. `--recovery DIR`: how well the calibration of a synthetic network directory
+//! recovered its truth (imports and calibrates DIR first, as `run` does, if needed).
+
+use std::path::PathBuf;
 
 use clap::Args;
+use pipewave::batch::throughput::calibrate_throughput;
+use pipewave::batch::CalibrateOptions;
+use pipewave::db;
+use pipewave::network::{read_truth, recovery, TRUTH_CSV};
 
+use super::calibrate::{self, RunArgs};
+use super::run::{import_dir, DEFAULT_DB};
 use super::Outcome;
 
 /// Arguments of `bench`.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Repeat factor: larger values time longer batches.
+    /// Repeat factor of the forward-model figures: larger values time longer batches.
     #[arg(long, default_value_t = 1)]
     scale: usize,
     /// Seeds per case for the inversion figures (0 skips them).
     #[arg(long, default_value_t = 100)]
     fits: usize,
+    /// Time a calibrate run of N synthetic segments (in a temporary database).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    calibrate: Option<u32>,
+    /// Compare the fits of a synthetic network directory with its truth.csv.
+    #[arg(long, value_name = "DIR")]
+    recovery: Option<PathBuf>,
+    /// Database of --recovery (default: DIR/pipewave.sqlite).
+    #[arg(long, value_name = "PATH", requires = "recovery")]
+    db: Option<PathBuf>,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 /// Run the benchmarks and print them.
@@ -22,11 +45,60 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
             "note: this is a debug build; run `cargo run --release -- bench` for real figures"
         );
     }
-    let figs = pipewave::bench::forward_figures(args.scale.max(1));
-    pipewave::bench::print_figures("forward model (one core):", &figs);
-    if args.fits > 0 {
-        let fits = pipewave::bench::inversion_figures(args.fits);
-        pipewave::bench::print_fit_figures(&fits);
+    let opts = CalibrateOptions {
+        jobs: args.run.jobs.map(|j| j as usize),
+        seed: args.run.seed,
+        ..CalibrateOptions::default()
+    };
+    let mut outcome = Outcome::Done;
+    if let Some(n) = args.calibrate {
+        let t = calibrate_throughput(n as usize, &opts)?;
+        println!(
+            "calibrate ({} synthetic segments, {} job{}):",
+            n,
+            t.jobs,
+            if t.jobs == 1 { "" } else { "s" }
+        );
+        println!(
+            "  {:>10.2} segments/s       wall clock, including the database writes",
+            t.segments_per_second()
+        );
+        println!(
+            "  {:>10.1} ms per segment   wall clock / segments",
+            t.wall_ms_per_segment()
+        );
+        println!(
+            "  {:>10.1} ms per segment   one worker's time (fit + curve), mean",
+            t.worker_ms_per_segment
+        );
+        match t.peak_rss_kb {
+            Some(kb) => println!(
+                "  {:>10.1} MB peak RSS      VmHWM of the whole process",
+                kb as f64 / 1024.0
+            ),
+            None => println!("           - peak RSS      (no /proc/self/status here)"),
+        }
+        println!(
+            "  {:>10.1} s  setup         generate + import (not timed above)",
+            t.setup_s
+        );
+        println!("  {}", t.summary.line());
     }
-    Ok(Outcome::Done)
+    if let Some(dir) = &args.recovery {
+        let db_path = args.db.clone().unwrap_or_else(|| dir.join(DEFAULT_DB));
+        let truth = read_truth(&dir.join(TRUTH_CSV))?;
+        let mut database = import_dir(dir, &db_path)?;
+        outcome = calibrate::execute(&mut database, &opts)?;
+        let fits = db::latest_fits(database.conn(), None)?;
+        print!("{}", recovery::compare(&fits, &truth));
+    }
+    if args.calibrate.is_none() && args.recovery.is_none() {
+        let figs = pipewave::bench::forward_figures(args.scale.max(1));
+        pipewave::bench::print_figures("forward model (one core):", &figs);
+        if args.fits > 0 {
+            let fits = pipewave::bench::inversion_figures(args.fits);
+            pipewave::bench::print_fit_figures(&fits);
+        }
+    }
+    Ok(outcome)
 }

@@ -88,7 +88,8 @@ fn plural(n: usize) -> &'static str {
     }
 }
 
-fn summary(r: &ImportReport) -> String {
+/// The one-line summary of an import.
+pub(super) fn summary(r: &ImportReport) -> String {
     format!(
         "imported: segments {} new, {} updated, {} unchanged; measurements {} written for {} \
          segment{}; fit inputs changed for {} segment{}",

@@ -4,11 +4,18 @@
 
 mod audit;
 mod bench;
+mod calibrate;
 mod export;
 mod forward;
 mod import;
+mod run;
+mod synth;
 
+use std::path::Path;
 use std::process::ExitCode;
+
+use anyhow::Context;
+use pipewave::db::{Database, DbError};
 
 use clap::{Parser, Subcommand};
 
@@ -19,6 +26,9 @@ pub const EXIT_SOME_FAILED: u8 = 1;
 /// Exit code: the command could not run (bad arguments, unreadable input, database unusable).
 /// clap uses the same code for argument errors.
 pub const EXIT_CANNOT_RUN: u8 = 2;
+/// Exit code: the run was interrupted (Ctrl-C) before it finished; what it stored is kept.
+/// 128 + SIGINT, as a shell reports a process ended by Ctrl-C.
+pub const EXIT_INTERRUPTED: u8 = 130;
 
 /// Soil inversion from leak-noise wavenumbers of buried water pipes.
 #[derive(Debug, Parser)]
@@ -30,8 +40,14 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Import DIR/segments.csv and DIR/measurements.csv, calibrate, export and audit.
+    Run(run::RunDirArgs),
     /// Load or update the inventory (segments.csv) and field measurements (measurements.csv).
     Import(import::ImportArgs),
+    /// Fit every segment whose inputs or settings changed since its last fit.
+    Calibrate(calibrate::CalibrateArgs),
+    /// Write a synthetic network (segments.csv, measurements.csv, truth.csv).
+    Synth(synth::SynthArgs),
     /// Evaluate the forward model for a table of cases (research and validation).
     Forward(forward::ForwardArgs),
     /// Print benchmark figures (build with --release).
@@ -49,6 +65,8 @@ pub enum Outcome {
     Done,
     /// It finished, but some segments failed.
     SomeFailed,
+    /// It was interrupted before it finished.
+    Interrupted,
 }
 
 impl Outcome {
@@ -57,6 +75,7 @@ impl Outcome {
         ExitCode::from(match self {
             Outcome::Done => EXIT_OK,
             Outcome::SomeFailed => EXIT_SOME_FAILED,
+            Outcome::Interrupted => EXIT_INTERRUPTED,
         })
     }
 }
@@ -64,10 +83,25 @@ impl Outcome {
 /// Run the command. An `Err` means it could not run (exit 2); its chain is printed once by main.
 pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
     match cli.command {
+        Command::Run(args) => run::run(&args),
         Command::Import(args) => import::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
+        Command::Synth(args) => synth::run(&args),
         Command::Forward(args) => forward::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Audit(args) => audit::run(&args),
+    }
+}
+
+/// Open a database for a command, naming the file in messages that do not already.
+pub(crate) fn open_database(path: &Path) -> anyhow::Result<Database> {
+    match Database::open(path) {
+        Ok(db) => Ok(db),
+        Err(e @ (DbError::Corrupt(_) | DbError::Busy(_) | DbError::Sqlite(_))) => {
+            Err(anyhow::Error::new(e))
+                .context(format!("cannot use the database {}", path.display()))
+        }
+        Err(e) => Err(e.into()),
     }
 }

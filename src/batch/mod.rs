@@ -1,0 +1,910 @@
+//! The calibrate run: choose the segments that need a fit, fit them in parallel, store each one
+//! as soon as it is done (issue 4).
+//!
+//! Shape (docs/style.md, "Data"): the calling thread holds the database. It takes the run lock,
+//! chooses and loads the segments, and records the run. A rayon pool of `jobs` workers turns each
+//! segment into a fit and its curve and sends it over a channel; the calling thread is the only
+//! writer and commits every segment in its own transaction as it arrives. So a run that is
+//! killed at any moment loses only the segments in flight, and the next run, which selects the
+//! segments whose latest fit is missing or stale, does the rest.
+//!
+//! Determinism: the seed of a segment is `splitmix64(run_seed ^ fnv1a64(segment_id))`, and a fit
+//! depends only on its segment, its settings and that seed, so the stored fits are the same
+//! whatever `jobs` is and in whatever order the workers finish.
+//!
+//! The library prints nothing: progress goes to a [`RunObserver`] the caller supplies, and the
+//! outcome is returned as a [`CalibrateSummary`].
+
+pub mod throughput;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use rayon::prelude::*;
+
+use crate::db::hash::{fnv1a64, Canonical};
+use crate::db::{
+    self, CurvePoint, DbError, FitRow, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
+    SegmentRecord,
+};
+use crate::invert::fit::splitmix64;
+use crate::invert::{self, fit_segment, FitResult, FitSettings, Measurement, Method, Param};
+use crate::physics::curves::{curve, STANDARD_GRID_HZ};
+use crate::physics::effects::{effects_text, Effect};
+use crate::physics::{ContactMode, InputError, Model};
+
+pub use db::Connection;
+
+/// Seed of a run when none is given (`calibrate --seed`).
+pub const DEFAULT_SEED: u64 = 1;
+
+/// How often a run started with `wait_for_lock` asks again for the run lock.
+pub const LOCK_POLL: Duration = Duration::from_millis(250);
+
+/// Version tag of the settings hash: change it (and only then) when the meaning of the hashed
+/// settings changes, so every segment is refitted once.
+const SETTINGS_HASH_TAG: &str = "pipewave-settings-v1";
+
+/// What a calibrate run is asked to do (checked values: the CLI parses the arguments into this).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateOptions {
+    /// Worker threads; `None`: one per core.
+    pub jobs: Option<usize>,
+    /// Run seed; each segment's seed derives from it and the segment id.
+    pub seed: u64,
+    /// Refit every selected segment, even those whose latest fit is current.
+    pub force: bool,
+    /// Inversion method.
+    pub method: Method,
+    /// Model variant.
+    pub model: Model,
+    /// Contact reading.
+    pub contact_mode: ContactMode,
+    /// Effects switched on (sorted, no repeats: as [`crate::physics::effects::parse_effects`]
+    /// returns them).
+    pub effects: Vec<Effect>,
+    /// Only these segments (`None`: every segment with measurements).
+    pub segments: Option<Vec<String>>,
+    /// When another run holds the lock: wait for it (`true`) or fail at once (`false`).
+    pub wait_for_lock: bool,
+}
+
+impl Default for CalibrateOptions {
+    fn default() -> Self {
+        Self {
+            jobs: None,
+            seed: DEFAULT_SEED,
+            force: false,
+            method: Method::Default,
+            model: Model::Full,
+            contact_mode: ContactMode::Reciprocal,
+            effects: Vec::new(),
+            segments: None,
+            wait_for_lock: false,
+        }
+    }
+}
+
+impl CalibrateOptions {
+    /// The fit settings of every segment of the run: the inversion's defaults for the method
+    /// (the paper's method runs its DE once, as the paper does).
+    pub fn fit_settings(&self) -> FitSettings {
+        let base = match self.method {
+            Method::Paper => FitSettings::paper(self.model, self.contact_mode),
+            Method::Default => FitSettings::default(),
+        };
+        FitSettings {
+            method: self.method,
+            model: self.model,
+            contact_mode: self.contact_mode,
+            effects: self.effects.clone(),
+            ..base
+        }
+    }
+
+    /// The hash stored in `fits.settings_hash`: of the settings that change a fit (method,
+    /// model, contact reading, effects), not of the seed or the number of jobs.
+    pub fn settings_hash(&self) -> String {
+        settings_hash(self.method, self.model, self.contact_mode, &self.effects)
+    }
+
+    /// Worker threads this run uses.
+    pub fn worker_count(&self) -> usize {
+        self.jobs.unwrap_or_else(default_jobs).max(1)
+    }
+}
+
+/// One worker per core (or 1 when that cannot be told).
+pub fn default_jobs() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+}
+
+/// FNV-1a 64 of the canonical text of the fit settings, 16 hex digits.
+pub fn settings_hash(
+    method: Method,
+    model: Model,
+    contact_mode: ContactMode,
+    effects: &[Effect],
+) -> String {
+    let mut sorted = effects.to_vec();
+    sorted.sort();
+    sorted.dedup();
+    Canonical::new(SETTINGS_HASH_TAG)
+        .text("method", Some(method.as_str()))
+        .text("model", Some(model.as_str()))
+        .text("contact_mode", Some(contact_mode.as_str()))
+        .text("effects", Some(&effects_text(&sorted)))
+        .hash_hex()
+}
+
+/// The seed of one segment's fit: `splitmix64(run_seed ^ fnv1a64(segment_id))`.
+pub fn segment_seed(run_seed: u64, segment_id: &str) -> u64 {
+    splitmix64(run_seed ^ fnv1a64(segment_id.as_bytes()))
+}
+
+/// What a run found to do, told to the observer before the first fit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunPlan {
+    /// The `runs` row.
+    pub run_id: i64,
+    /// Segments to fit.
+    pub to_fit: usize,
+    /// Segments in scope whose latest fit is current (not refitted).
+    pub up_to_date: usize,
+    /// Worker threads.
+    pub jobs: usize,
+}
+
+/// One segment stored, as told to the observer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentDone<'a> {
+    /// The segment.
+    pub segment_id: &'a str,
+    /// Its fit's status.
+    pub status: FitStatus,
+    /// Comma-separated flag codes (empty: none).
+    pub flags: &'a str,
+    /// Why the fit failed.
+    pub message: Option<&'a str>,
+    /// Time its worker spent, ms.
+    pub elapsed_ms: f64,
+}
+
+/// Watches a run. Every method has an empty default; all are called on the thread that called
+/// [`calibrate`].
+pub trait RunObserver {
+    /// Another run holds the lock and we wait for it (once, when the wait starts).
+    fn waiting_for_lock(&mut self, _pid: i64, _started_at: &str) {}
+    /// We took over the lock of a run that no longer exists.
+    fn took_over_stale_lock(&mut self, _pid: i64, _started_at: &str) {}
+    /// The run is recorded and the workers start.
+    fn started(&mut self, _plan: &RunPlan) {}
+    /// One segment's fit was committed.
+    fn segment_done(&mut self, _done: &SegmentDone<'_>) {}
+}
+
+/// An observer that ignores everything.
+impl RunObserver for () {}
+
+/// What a run did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrateSummary {
+    /// The `runs` row (`None` when the run was interrupted while waiting for the lock).
+    pub run_id: Option<i64>,
+    /// Worker threads.
+    pub jobs: usize,
+    /// The settings hash of the run's fits.
+    pub settings_hash: String,
+    /// Segments selected for fitting.
+    pub selected: usize,
+    /// Segments in scope whose latest fit was current.
+    pub up_to_date: usize,
+    /// Segments named with `segments` that have no measurements (nothing to fit).
+    pub without_measurements: Vec<String>,
+    /// Fits stored with status ok.
+    pub ok: usize,
+    /// Fits stored with status flagged.
+    pub flagged: usize,
+    /// Fits stored with status failed.
+    pub failed: usize,
+    /// Flag codes over the stored fits, with how many fits carry each.
+    pub flag_counts: BTreeMap<String, usize>,
+    /// The failed segments and why, in the order they were stored.
+    pub failures: Vec<(String, String)>,
+    /// True when the run was stopped before every selected segment was fitted.
+    pub interrupted: bool,
+    /// Wall-clock time of the run (from the lock to the end), s.
+    pub elapsed_s: f64,
+    /// Sum of the workers' time over the stored fits, ms.
+    pub worker_ms: f64,
+}
+
+impl CalibrateSummary {
+    /// Fits stored by this run.
+    pub fn stored(&self) -> usize {
+        self.ok + self.flagged + self.failed
+    }
+
+    /// Selected segments not fitted because the run was stopped.
+    pub fn not_attempted(&self) -> usize {
+        self.selected.saturating_sub(self.stored())
+    }
+
+    /// Stored fits per second of wall-clock time.
+    pub fn segments_per_second(&self) -> f64 {
+        if self.elapsed_s > 0.0 {
+            self.stored() as f64 / self.elapsed_s
+        } else {
+            0.0
+        }
+    }
+
+    /// The one-line summary printed at the end of a run, e.g. `calibrate: 12 fitted (9 ok,
+    /// 3 flagged: at_bound 1, modulus_uncertain 3; 0 failed), 4 up to date, in 2.1 s (5.7
+    /// segments/s, 2 jobs)`.
+    pub fn line(&self) -> String {
+        let mut s = format!(
+            "calibrate: {} fitted ({} ok, {} flagged",
+            self.stored(),
+            self.ok,
+            self.flagged
+        );
+        if !self.flag_counts.is_empty() {
+            s.push_str(": ");
+            let parts: Vec<String> = self
+                .flag_counts
+                .iter()
+                .map(|(code, n)| format!("{code} {n}"))
+                .collect();
+            s.push_str(&parts.join(", "));
+        }
+        let _ = write!(
+            s,
+            "; {} failed), {} up to date, in {:.1} s ({:.1} segments/s, {} job{})",
+            self.failed,
+            self.up_to_date,
+            self.elapsed_s,
+            self.segments_per_second(),
+            self.jobs,
+            if self.jobs == 1 { "" } else { "s" }
+        );
+        if self.interrupted {
+            let _ = write!(
+                s,
+                "; interrupted: {} not fitted (the next run fits them)",
+                self.not_attempted()
+            );
+        }
+        s
+    }
+}
+
+/// Why a run could not be done.
+#[derive(Debug, thiserror::Error)]
+pub enum BatchError {
+    /// The database could not be read or written before the fits started (includes
+    /// [`DbError::Locked`]: another run holds the lock).
+    #[error(transparent)]
+    Db(#[from] DbError),
+    /// The worker threads could not be started.
+    #[error("cannot start {jobs} worker threads")]
+    ThreadPool {
+        /// Threads asked for.
+        jobs: usize,
+        /// What rayon said.
+        #[source]
+        source: rayon::ThreadPoolBuildError,
+    },
+    /// A fit could not be stored; the run stopped. The fits stored before are kept.
+    #[error(
+        "could not store the fit of segment {segment_id}; the run stopped ({stored} fits of \
+         run {run_id} were stored and are kept; the next run fits the rest)"
+    )]
+    Write {
+        /// The segment whose fit was being stored.
+        segment_id: String,
+        /// The run.
+        run_id: i64,
+        /// Fits this run had stored before.
+        stored: usize,
+        /// What the database said.
+        #[source]
+        source: Box<DbError>,
+    },
+}
+
+/// One segment ready for a worker.
+struct Job {
+    record: SegmentRecord,
+    seed: u64,
+}
+
+/// One segment computed by a worker, ready for the writer.
+struct Computed {
+    fit: FitRow,
+    curve: Vec<CurvePoint>,
+}
+
+/// Run a calibration on an open, migrated database.
+///
+/// Takes the run lock (waiting for it if `opts.wait_for_lock`), selects the segments, records a
+/// `runs` row, fits the segments on `opts.jobs` threads and stores each fit in its own
+/// transaction, then records the run's counts and status and releases the lock.
+///
+/// `stop` is polled between segments: once it is set no new segment starts, the ones in flight
+/// are finished and stored, and the run is recorded as `interrupted`. Also polled while waiting
+/// for the lock.
+pub fn calibrate(
+    conn: &mut Connection,
+    opts: &CalibrateOptions,
+    observer: &mut dyn RunObserver,
+    stop: &AtomicBool,
+) -> Result<CalibrateSummary, BatchError> {
+    let started = Instant::now();
+    let jobs = opts.worker_count();
+    let settings_hash = opts.settings_hash();
+    let empty = CalibrateSummary {
+        run_id: None,
+        jobs,
+        settings_hash: settings_hash.clone(),
+        selected: 0,
+        up_to_date: 0,
+        without_measurements: Vec::new(),
+        ok: 0,
+        flagged: 0,
+        failed: 0,
+        flag_counts: BTreeMap::new(),
+        failures: Vec::new(),
+        interrupted: false,
+        elapsed_s: 0.0,
+        worker_ms: 0.0,
+    };
+    let Some(lock) = acquire_lock(conn, opts.wait_for_lock, observer, stop)? else {
+        return Ok(CalibrateSummary {
+            interrupted: true,
+            elapsed_s: started.elapsed().as_secs_f64(),
+            ..empty
+        });
+    };
+    if let Some((pid, at)) = &lock.took_over {
+        observer.took_over_stale_lock(*pid, at);
+    }
+    let result = locked_run(conn, opts, observer, stop, empty, started);
+    // Give the lock back whatever happened; a failure to do so is reported only when the run
+    // itself succeeded (a stale lock is taken over by the next run anyway).
+    let released = db::release_run_lock(conn, &lock);
+    let summary = result?;
+    released?;
+    Ok(summary)
+}
+
+/// Take the run lock, waiting for it when asked. `None`: stopped while waiting.
+fn acquire_lock(
+    conn: &mut Connection,
+    wait: bool,
+    observer: &mut dyn RunObserver,
+    stop: &AtomicBool,
+) -> Result<Option<RunLock>, BatchError> {
+    let mut told = false;
+    loop {
+        match db::try_acquire_run_lock(conn) {
+            Ok(lock) => return Ok(Some(lock)),
+            Err(DbError::Locked { pid, started_at }) if wait => {
+                if !told {
+                    observer.waiting_for_lock(pid, &started_at);
+                    told = true;
+                }
+                if stop.load(Ordering::SeqCst) {
+                    return Ok(None);
+                }
+                std::thread::sleep(LOCK_POLL);
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// Everything between taking and releasing the lock.
+fn locked_run(
+    conn: &mut Connection,
+    opts: &CalibrateOptions,
+    observer: &mut dyn RunObserver,
+    stop: &AtomicBool,
+    mut summary: CalibrateSummary,
+    started: Instant,
+) -> Result<CalibrateSummary, BatchError> {
+    let jobs = summary.jobs;
+    // Which segments: those needing a fit, within the named ones if any.
+    let needing = db::segments_needing_fit(conn, &summary.settings_hash, opts.force)?;
+    let with_measurements = db::segments_needing_fit(conn, &summary.settings_hash, true)?;
+    let (selected, in_scope): (Vec<String>, usize) = match &opts.segments {
+        None => (needing, with_measurements.len()),
+        Some(named) => {
+            // Check the names first: an unknown id is an error naming every such id.
+            let records = db::load_segments(conn, Some(named))?;
+            let named: std::collections::BTreeSet<&str> =
+                records.iter().map(|r| r.segment_id.as_str()).collect();
+            summary.without_measurements = records
+                .iter()
+                .filter(|r| r.measurements.is_empty())
+                .map(|r| r.segment_id.clone())
+                .collect();
+            let in_scope = with_measurements
+                .iter()
+                .filter(|id| named.contains(id.as_str()))
+                .count();
+            (
+                needing
+                    .into_iter()
+                    .filter(|id| named.contains(id.as_str()))
+                    .collect(),
+                in_scope,
+            )
+        }
+    };
+    summary.selected = selected.len();
+    summary.up_to_date = in_scope.saturating_sub(selected.len());
+
+    let records = if selected.is_empty() {
+        Vec::new()
+    } else {
+        db::load_segments(conn, Some(&selected))?
+    };
+    let work: Vec<Job> = records
+        .into_iter()
+        .map(|record| Job {
+            seed: segment_seed(opts.seed, &record.segment_id),
+            record,
+        })
+        .collect();
+
+    let run_id = db::start_run(
+        conn,
+        &NewRun {
+            seed: opts.seed,
+            model: opts.model,
+            contact_mode: opts.contact_mode,
+            method: opts.method.as_str().to_string(),
+            effects: effects_text(&opts.effects),
+            program_version: env!("CARGO_PKG_VERSION").to_string(),
+            jobs: i64::try_from(jobs).ok(),
+            n_segments: i64::try_from(work.len()).unwrap_or(i64::MAX),
+        },
+    )?;
+    summary.run_id = Some(run_id);
+    observer.started(&RunPlan {
+        run_id,
+        to_fit: work.len(),
+        up_to_date: summary.up_to_date,
+        jobs,
+    });
+
+    let written = if work.is_empty() {
+        Ok(())
+    } else {
+        fit_and_store(conn, opts, run_id, &work, observer, stop, &mut summary)
+    };
+    summary.interrupted = summary.stored() < summary.selected;
+    summary.elapsed_s = started.elapsed().as_secs_f64();
+    let status = if summary.interrupted || written.is_err() {
+        RunStatus::Interrupted
+    } else {
+        RunStatus::Finished
+    };
+    let counts = RunCounts {
+        n_ok: summary.ok as i64,
+        n_flagged: summary.flagged as i64,
+        n_failed: summary.failed as i64,
+        elapsed_s: Some(summary.elapsed_s),
+    };
+    let finished = db::finish_run(conn, run_id, &counts, status);
+    written?;
+    finished?;
+    Ok(summary)
+}
+
+/// The pool, the workers and the writer loop.
+fn fit_and_store(
+    conn: &mut Connection,
+    opts: &CalibrateOptions,
+    run_id: i64,
+    work: &[Job],
+    observer: &mut dyn RunObserver,
+    stop: &AtomicBool,
+    summary: &mut CalibrateSummary,
+) -> Result<(), BatchError> {
+    let jobs = summary.jobs;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .thread_name(|i| format!("pipewave-fit-{i}"))
+        .build()
+        .map_err(|source| BatchError::ThreadPool { jobs, source })?;
+    let settings = opts.fit_settings();
+    let settings_hash = summary.settings_hash.clone();
+    // Set when the writer fails: the workers stop taking segments.
+    let abort = AtomicBool::new(false);
+    let (tx, rx) = mpsc::sync_channel::<Computed>(2 * jobs);
+    let mut error: Option<BatchError> = None;
+
+    std::thread::scope(|scope| {
+        let (settings, settings_hash, abort) = (&settings, &settings_hash, &abort);
+        let pool = &pool;
+        scope.spawn(move || {
+            pool.install(|| {
+                work.par_iter().for_each_with(tx, |tx, job| {
+                    if stop.load(Ordering::SeqCst) || abort.load(Ordering::SeqCst) {
+                        return;
+                    }
+                    let computed = compute(job, settings, settings_hash, run_id);
+                    // The writer only hangs up after an error, when results are dropped anyway.
+                    let _ = tx.send(computed);
+                });
+            });
+        });
+        for c in rx.iter() {
+            if error.is_some() {
+                continue; // drain what is in flight; nothing more is stored
+            }
+            match db::insert_fit_with_curves(conn, &c.fit, &c.curve) {
+                Ok(_) => {
+                    summary.record(&c.fit);
+                    observer.segment_done(&SegmentDone {
+                        segment_id: &c.fit.segment_id,
+                        status: c.fit.status,
+                        flags: &c.fit.flags,
+                        message: c.fit.message.as_deref(),
+                        elapsed_ms: c.fit.elapsed_ms.unwrap_or(0.0),
+                    });
+                }
+                Err(source) => {
+                    abort.store(true, Ordering::SeqCst);
+                    error = Some(BatchError::Write {
+                        segment_id: c.fit.segment_id.clone(),
+                        run_id,
+                        stored: summary.stored(),
+                        source: Box::new(source),
+                    });
+                }
+            }
+        }
+    });
+    match error {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
+impl CalibrateSummary {
+    /// Count one stored fit.
+    fn record(&mut self, fit: &FitRow) {
+        match fit.status {
+            FitStatus::Ok => self.ok += 1,
+            FitStatus::Flagged => self.flagged += 1,
+            FitStatus::Failed => {
+                self.failed += 1;
+                self.failures.push((
+                    fit.segment_id.clone(),
+                    fit.message
+                        .clone()
+                        .unwrap_or_else(|| "no reason given".into()),
+                ));
+            }
+        }
+        for code in fit.flags.split(',').filter(|c| !c.is_empty()) {
+            *self.flag_counts.entry(code.to_string()).or_insert(0) += 1;
+        }
+        self.worker_ms += fit.elapsed_ms.unwrap_or(0.0);
+    }
+}
+
+/// A worker's job: inputs, fit, curve. Never panics: an invalid stored input or a panic inside
+/// the fit becomes a failed fit with its reason.
+fn compute(job: &Job, settings: &FitSettings, settings_hash: &str, run_id: i64) -> Computed {
+    let t0 = Instant::now();
+    let rec = &job.record;
+    let outcome = catch_unwind(AssertUnwindSafe(|| {
+        segment_data(rec).map(|data| {
+            let result = fit_segment(&data, settings, job.seed);
+            let curve = result.system.as_ref().map(curve_points).unwrap_or_default();
+            (result, curve)
+        })
+    }));
+    let (mut fit, curve) = match outcome {
+        Ok(Ok((result, curve))) => (fit_row(rec, run_id, &result), curve),
+        Ok(Err(e)) => (
+            failed_row(rec, run_id, settings, format!("invalid inputs: {e}")),
+            Vec::new(),
+        ),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            (
+                failed_row(
+                    rec,
+                    run_id,
+                    settings,
+                    format!("internal error in the fit (please report it): {what}"),
+                ),
+                Vec::new(),
+            )
+        }
+    };
+    fit.seed = Some(job.seed);
+    fit.inputs_hash = rec.inputs_hash.clone();
+    fit.settings_hash = settings_hash.to_string();
+    fit.elapsed_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
+    Computed { fit, curve }
+}
+
+/// The checked inputs of a fit from a stored segment.
+pub fn segment_data(rec: &SegmentRecord) -> Result<invert::SegmentData, InputError> {
+    let measurements = rec
+        .measurements
+        .iter()
+        .map(|m| {
+            Measurement::new(
+                m.omega_rad_s,
+                m.k_re_rad_per_m,
+                m.attenuation_np_per_m,
+                m.k_re_std,
+                m.attenuation_std,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(invert::SegmentData {
+        fluid: rec.fluid()?,
+        pipe: rec.pipe()?,
+        soil_density: rec.soil_density()?,
+        material: Some(rec.material),
+        measurements,
+    })
+}
+
+/// The fitted curve on the standard grid; points whose root was not found are stored as NULL.
+fn curve_points(sys: &crate::physics::System) -> Vec<CurvePoint> {
+    let finite = |v: f64| v.is_finite().then_some(v);
+    curve(sys, &STANDARD_GRID_HZ)
+        .into_iter()
+        .map(|p| {
+            let ok = p.status.is_ok();
+            CurvePoint {
+                frequency_hz: p.frequency_hz,
+                phase_speed_m_per_s: if ok { finite(p.phase_speed) } else { None },
+                attenuation_db_per_m: if ok { finite(p.attenuation_db) } else { None },
+            }
+        })
+        .collect()
+}
+
+/// A number, or NULL for NaN (infinities are stored: an infinite condition number means a
+/// singular Jacobian).
+fn not_nan(v: f64) -> Option<f64> {
+    (!v.is_nan()).then_some(v)
+}
+
+fn db_status(s: invert::FitStatus) -> FitStatus {
+    match s {
+        invert::FitStatus::Ok => FitStatus::Ok,
+        invert::FitStatus::Flagged => FitStatus::Flagged,
+        invert::FitStatus::Failed => FitStatus::Failed,
+    }
+}
+
+/// A failed fit whose inputs could not be built.
+fn failed_row(rec: &SegmentRecord, run_id: i64, settings: &FitSettings, msg: String) -> FitRow {
+    let mut f = FitRow::new(
+        rec.segment_id.clone(),
+        run_id,
+        FitStatus::Failed,
+        settings.model,
+        settings.contact_mode,
+    );
+    f.method = settings.method.as_str().to_string();
+    f.effects = effects_text(&settings.effects);
+    f.n_measurements = i64::try_from(rec.measurements.len()).ok();
+    f.evaluations = Some(0);
+    f.message = Some(msg);
+    f
+}
+
+/// The `fits` row of a fit result (segment, run and result columns; the caller adds seed,
+/// hashes and time).
+pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
+    let mut f = FitRow::new(
+        rec.segment_id.clone(),
+        run_id,
+        db_status(r.status),
+        r.model,
+        r.contact_mode,
+    );
+    f.method = r.method.as_str().to_string();
+    f.effects = effects_text(&r.effects);
+    let value = |p: Param| r.get(p).map(|e| e.value).and_then(not_nan);
+    let std = |p: Param| r.get(p).and_then(|e| e.std).and_then(not_nan);
+    f.soil_youngs_modulus_pa = value(Param::SoilModulus);
+    f.soil_poisson = value(Param::SoilPoisson);
+    f.contact = value(Param::Contact);
+    f.soil_youngs_modulus_std_pa = std(Param::SoilModulus);
+    f.soil_poisson_std = std(Param::SoilPoisson);
+    f.contact_std = std(Param::Contact);
+    for &e in &r.effects {
+        let p = Param::Effect(e);
+        let (v, s) = (value(p), std(p));
+        match e {
+            Effect::SoilDamping => (f.soil_loss_factor, f.soil_loss_factor_std) = (v, s),
+            Effect::AirInWater => (f.air_fraction, f.air_fraction_std) = (v, s),
+            Effect::WallThinning => (f.wall_thickness_ratio, f.wall_thickness_ratio_std) = (v, s),
+            Effect::PipeLoss => (f.pipe_loss_factor, f.pipe_loss_factor_std) = (v, s),
+            Effect::FullModel => {}
+        }
+    }
+    f.misfit = not_nan(r.misfit);
+    f.chi2_per_dof = r.chi2_per_dof.and_then(not_nan);
+    f.n_measurements = i64::try_from(r.n_measurements).ok();
+    f.condition_number = r.condition_number.and_then(not_nan);
+    f.correlations =
+        (!r.correlations.is_empty()).then(|| correlations_json(&r.correlations, r.estimates.len()));
+    f.flags = r.flag_codes();
+    f.flag_reasons = r
+        .flags
+        .iter()
+        .map(|fl| fl.to_string())
+        .collect::<Vec<_>>()
+        .join("\n");
+    f.evaluations = i64::try_from(r.evaluations).ok();
+    f.message = r.message.clone();
+    f
+}
+
+/// The correlation matrix as JSON: an array of `n` rows of `n` numbers, in the order of the
+/// fitted parameters (E_m, ν_m, ξ, then the effects' parameters in the order of `fits.effects`);
+/// a flat array when the length is not `n²`. Non-finite entries are `null`. Numbers are written
+/// as the shortest decimal that reads back to the same `f64`.
+pub fn correlations_json(values: &[f64], n: usize) -> String {
+    let num = |v: f64| {
+        if v.is_finite() {
+            // Rust's Display never uses an exponent and never prints "-0" for a JSON reader
+            // to stumble on other than as minus zero, which JSON allows.
+            format!("{v}")
+        } else {
+            "null".to_string()
+        }
+    };
+    let row = |vs: &[f64]| {
+        let items: Vec<String> = vs.iter().map(|&v| num(v)).collect();
+        format!("[{}]", items.join(","))
+    };
+    if n > 0 && values.len() == n * n {
+        let rows: Vec<String> = values.chunks(n).map(row).collect();
+        format!("[{}]", rows.join(","))
+    } else {
+        row(values)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_hash_depends_on_settings_but_not_on_effect_order() {
+        let h = |m, md, c, e: &[Effect]| settings_hash(m, md, c, e);
+        let base = h(Method::Default, Model::Full, ContactMode::Reciprocal, &[]);
+        assert_eq!(base.len(), 16);
+        assert_ne!(
+            base,
+            h(Method::Paper, Model::Full, ContactMode::Reciprocal, &[])
+        );
+        assert_ne!(
+            base,
+            h(Method::Default, Model::Seed, ContactMode::Reciprocal, &[])
+        );
+        assert_ne!(
+            base,
+            h(Method::Default, Model::Full, ContactMode::Blend, &[])
+        );
+        let e1 = h(
+            Method::Default,
+            Model::Full,
+            ContactMode::Reciprocal,
+            &[Effect::SoilDamping, Effect::PipeLoss],
+        );
+        let e2 = h(
+            Method::Default,
+            Model::Full,
+            ContactMode::Reciprocal,
+            &[Effect::PipeLoss, Effect::SoilDamping],
+        );
+        assert_eq!(e1, e2);
+        assert_ne!(e1, base);
+        // The seed and the jobs are not part of it.
+        let a = CalibrateOptions {
+            seed: 5,
+            jobs: Some(1),
+            ..Default::default()
+        };
+        let b = CalibrateOptions {
+            seed: 6,
+            jobs: Some(7),
+            ..Default::default()
+        };
+        assert_eq!(a.settings_hash(), b.settings_hash());
+        assert_eq!(a.settings_hash(), base);
+    }
+
+    /// Pinned: a change would refit every segment of every database after an upgrade.
+    #[test]
+    fn settings_hash_is_pinned() {
+        assert_eq!(
+            CalibrateOptions::default().settings_hash(),
+            settings_hash(Method::Default, Model::Full, ContactMode::Reciprocal, &[])
+        );
+        assert_eq!(
+            CalibrateOptions::default().settings_hash(),
+            crate::db::hash::fnv1a64_hex(
+                "pipewave-settings-v1=s20:pipewave-settings-v1\nmethod=s7:default\n\
+                 model=s4:full\ncontact_mode=s10:reciprocal\neffects=s0:\n"
+            )
+        );
+    }
+
+    #[test]
+    fn segment_seeds_differ_between_segments_and_runs() {
+        let a = segment_seed(1, "WM10001");
+        assert_eq!(a, segment_seed(1, "WM10001"));
+        assert_ne!(a, segment_seed(1, "WM10002"));
+        assert_ne!(a, segment_seed(2, "WM10001"));
+        assert_eq!(a, splitmix64(1 ^ fnv1a64(b"WM10001")));
+    }
+
+    #[test]
+    fn correlations_are_a_json_matrix() {
+        assert_eq!(
+            correlations_json(&[1.0, -0.25, -0.25, 1.0], 2),
+            "[[1,-0.25],[-0.25,1]]"
+        );
+        assert_eq!(correlations_json(&[1.0, f64::NAN], 3), "[1,null]");
+        assert_eq!(correlations_json(&[1e-20], 1), "[[0.00000000000000000001]]");
+    }
+
+    #[test]
+    fn summary_line_names_counts_flags_and_interruption() {
+        let mut s = CalibrateSummary {
+            run_id: Some(3),
+            jobs: 2,
+            settings_hash: String::new(),
+            selected: 5,
+            up_to_date: 7,
+            without_measurements: Vec::new(),
+            ok: 2,
+            flagged: 1,
+            failed: 1,
+            flag_counts: [("at_bound".to_string(), 1)].into_iter().collect(),
+            failures: vec![("A".into(), "no".into())],
+            interrupted: true,
+            elapsed_s: 2.0,
+            worker_ms: 0.0,
+        };
+        assert_eq!(
+            s.line(),
+            "calibrate: 4 fitted (2 ok, 1 flagged: at_bound 1; 1 failed), 7 up to date, in \
+             2.0 s (2.0 segments/s, 2 jobs); interrupted: 1 not fitted (the next run fits them)"
+        );
+        s.interrupted = false;
+        s.jobs = 1;
+        assert!(
+            s.line().ends_with("(2.0 segments/s, 1 job)"),
+            "{}",
+            s.line()
+        );
+    }
+}

@@ -1,0 +1,120 @@
+//! `pipewave synth --out DIR [--segments N] [--seed S] [--defects FRACTION] [--no-real-cases]
+//! [--force]`: write a synthetic network directory.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use clap::Args;
+use pipewave::network::{published, NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV, TRUTH_CSV};
+use pipewave::synth::{generate, SynthOptions, NOISE_ATTENUATION, NOISE_K_RE};
+
+use super::Outcome;
+
+/// Sub-directory of the network that holds copies of the published data files.
+pub const REAL_DIR: &str = "real";
+
+/// Arguments of `synth`.
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Directory to write segments.csv, measurements.csv, truth.csv (and real/) into; created
+    /// if missing.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Number of synthetic segments.
+    #[arg(long, value_name = "N", default_value_t = 200,
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    segments: u32,
+    /// Seed of the generator (the same seed gives the same files).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    seed: u64,
+    /// Fraction of segments given a deliberate defect (outlier, attenuation in dB/m, wrong
+    /// material, a single frequency), 0 - 1.
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.03)]
+    defects: f64,
+    /// Leave out the two published field cases (Lu et al. 2022; Muggleton et al. 2004).
+    #[arg(long)]
+    no_real_cases: bool,
+    /// Replace the files if they exist.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Generate and write the network.
+pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
+    if !(0.0..=1.0).contains(&args.defects) {
+        bail!(
+            "--defects {} is outside 0 - 1 (it is the fraction of segments with a defect)",
+            args.defects
+        );
+    }
+    if !args.force {
+        for name in [SEGMENTS_CSV, MEASUREMENTS_CSV, TRUTH_CSV] {
+            let p = args.out.join(name);
+            if p.exists() {
+                bail!(
+                    "{} already exists; use --force to replace it (or choose another --out)",
+                    p.display()
+                );
+            }
+        }
+    }
+    let opts = SynthOptions {
+        segments: args.segments as usize,
+        seed: args.seed,
+        defect_fraction: args.defects,
+        ..SynthOptions::default()
+    };
+    let synthetic = generate(&opts);
+    let mut tables = NetworkTables::from_synth(&synthetic, opts.srid);
+    if !args.no_real_cases {
+        for case in published::published_cases()? {
+            tables.push_published(case);
+        }
+    }
+    tables.write_dir(&args.out)?;
+    if !args.no_real_cases {
+        write_real_copies(&args.out.join(REAL_DIR))?;
+    }
+    let n_defects = synthetic
+        .iter()
+        .filter(|s| s.defect != pipewave::synth::Defect::None)
+        .count();
+    println!(
+        "synth: wrote {} segments ({} synthetic, {} with a defect, {} published) and {} \
+         measurements (noise {} % on Re k, {} % on attenuation) to {}",
+        tables.segments.len(),
+        synthetic.len(),
+        n_defects,
+        tables.segments.len() - synthetic.len(),
+        tables.measurements.len(),
+        100.0 * NOISE_K_RE,
+        100.0 * NOISE_ATTENUATION,
+        args.out.display()
+    );
+    if synthetic.len() < opts.segments {
+        eprintln!(
+            "note: only {} of {} segments could be generated (the forward model failed for \
+             the others)",
+            synthetic.len(),
+            opts.segments
+        );
+    }
+    Ok(Outcome::Done)
+}
+
+/// Copy the published data files and their README, so the network stands alone.
+fn write_real_copies(dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    for (name, body) in [
+        ("seed_cast_iron_table2.csv", published::LU2022_CSV),
+        (
+            "muggleton2004_buried_mdpe.csv",
+            published::MUGGLETON2004_CSV,
+        ),
+        ("README.md", published::README_MD),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}

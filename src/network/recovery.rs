@@ -1,0 +1,354 @@
+//! How well a calibration recovered the known soil of a synthetic network: the latest fits
+//! against `truth.csv`.
+//!
+//! Errors are reported for the *unflagged* fits (status `ok`), which are the ones a user would
+//! take at face value: the relative error of E_m, and the absolute errors of ν_m and ξ, each as
+//! median and 90th percentile. Flag codes are counted over every fit, and the deliberately
+//! defective segments are checked for having been flagged or failed.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt;
+
+use super::TruthRow;
+use crate::db::{FitRow, FitStatus};
+
+/// Median and 90th percentile of a sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Spread {
+    /// Sample size.
+    pub n: usize,
+    /// Median (NaN for an empty sample).
+    pub median: f64,
+    /// 90th percentile (NaN for an empty sample).
+    pub p90: f64,
+}
+
+impl Spread {
+    /// Of `values` (NaNs are dropped).
+    pub fn of(values: &[f64]) -> Spread {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| !x.is_nan()).collect();
+        v.sort_by(f64::total_cmp);
+        Spread {
+            n: v.len(),
+            median: quantile(&v, 0.5),
+            p90: quantile(&v, 0.9),
+        }
+    }
+}
+
+/// Quantile `p` of sorted values, by linear interpolation between order statistics
+/// (Hyndman & Fan type 7, the default of R and NumPy). NaN when empty.
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    match sorted.len() {
+        0 => f64::NAN,
+        1 => sorted[0],
+        n => {
+            let h = (n - 1) as f64 * p.clamp(0.0, 1.0);
+            let lo = h.floor() as usize;
+            let hi = (lo + 1).min(n - 1);
+            sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+        }
+    }
+}
+
+/// How the defective segments of one kind were caught.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DefectCatch {
+    /// Defective segments with a fit.
+    pub n: usize,
+    /// Of which flagged or failed.
+    pub caught: usize,
+}
+
+/// A fit of a segment whose truth is unknown (the published cases), for the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnknownTruthFit {
+    /// Segment.
+    pub segment_id: String,
+    /// Where the data come from.
+    pub source: String,
+    /// The fit.
+    pub fit: FitRow,
+}
+
+/// Fits compared with the truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecoveryReport {
+    /// Rows of truth.csv with a known soil.
+    pub n_truth: usize,
+    /// Of which with a fit in the database.
+    pub n_fitted: usize,
+    /// Of those, with status ok / flagged / failed.
+    pub n_ok: usize,
+    /// Flagged.
+    pub n_flagged: usize,
+    /// Failed.
+    pub n_failed: usize,
+    /// |E_fit / E_true − 1| over the unflagged fits.
+    pub modulus_rel_err: Spread,
+    /// |ν_fit − ν_true| over the unflagged fits.
+    pub poisson_abs_err: Spread,
+    /// |ξ_fit − ξ_true| over the unflagged fits.
+    pub contact_abs_err: Spread,
+    /// |E_fit / E_true − 1| over the flagged fits (for comparison: the flags should mark the
+    /// poor ones).
+    pub modulus_rel_err_flagged: Spread,
+    /// Unflagged fits of segments with a deliberate defect (the flags missed them).
+    pub unflagged_defective: Vec<String>,
+    /// Flag codes over every fit compared (known or unknown truth), with counts.
+    pub flag_counts: BTreeMap<String, usize>,
+    /// Per defect kind: how many were flagged or failed.
+    pub defects: BTreeMap<String, DefectCatch>,
+    /// The fits of the segments with unknown truth.
+    pub unknown_truth: Vec<UnknownTruthFit>,
+}
+
+/// Compare the latest fits with the truth. Fits of segments not in `truth` are ignored; truth
+/// rows without a fit count in `n_truth` only.
+pub fn compare(fits: &[FitRow], truth: &[TruthRow]) -> RecoveryReport {
+    let by_id: HashMap<&str, &FitRow> = fits.iter().map(|f| (f.segment_id.as_str(), f)).collect();
+    let mut r = RecoveryReport {
+        n_truth: 0,
+        n_fitted: 0,
+        n_ok: 0,
+        n_flagged: 0,
+        n_failed: 0,
+        modulus_rel_err: Spread::of(&[]),
+        poisson_abs_err: Spread::of(&[]),
+        contact_abs_err: Spread::of(&[]),
+        modulus_rel_err_flagged: Spread::of(&[]),
+        unflagged_defective: Vec::new(),
+        flag_counts: BTreeMap::new(),
+        defects: BTreeMap::new(),
+        unknown_truth: Vec::new(),
+    };
+    let (mut e_ok, mut nu_ok, mut xi_ok, mut e_flagged) = (vec![], vec![], vec![], vec![]);
+    for t in truth {
+        let fit = by_id.get(t.segment_id.as_str()).copied();
+        if let Some(f) = fit {
+            for code in f.flags.split(',').filter(|c| !c.is_empty()) {
+                *r.flag_counts.entry(code.to_string()).or_insert(0) += 1;
+            }
+        }
+        let Some(e_true) = t.soil_youngs_modulus_pa else {
+            if let Some(f) = fit {
+                r.unknown_truth.push(UnknownTruthFit {
+                    segment_id: t.segment_id.clone(),
+                    source: t.source.clone(),
+                    fit: f.clone(),
+                });
+            }
+            continue;
+        };
+        r.n_truth += 1;
+        let Some(f) = fit else { continue };
+        r.n_fitted += 1;
+        let rel_e = f.soil_youngs_modulus_pa.map(|e| (e / e_true - 1.0).abs());
+        match f.status {
+            FitStatus::Ok => {
+                r.n_ok += 1;
+                e_ok.extend(rel_e);
+                if let (Some(a), Some(b)) = (f.soil_poisson, t.soil_poisson) {
+                    nu_ok.push((a - b).abs());
+                }
+                if let (Some(a), Some(b)) = (f.contact, t.contact) {
+                    xi_ok.push((a - b).abs());
+                }
+            }
+            FitStatus::Flagged => {
+                r.n_flagged += 1;
+                e_flagged.extend(rel_e);
+            }
+            FitStatus::Failed => r.n_failed += 1,
+        }
+        if let Some(d) = &t.defect {
+            let c = r.defects.entry(d.clone()).or_default();
+            c.n += 1;
+            if f.status == FitStatus::Ok {
+                r.unflagged_defective.push(t.segment_id.clone());
+            } else {
+                c.caught += 1;
+            }
+        }
+    }
+    r.modulus_rel_err = Spread::of(&e_ok);
+    r.poisson_abs_err = Spread::of(&nu_ok);
+    r.contact_abs_err = Spread::of(&xi_ok);
+    r.modulus_rel_err_flagged = Spread::of(&e_flagged);
+    r
+}
+
+fn pct(x: f64) -> String {
+    if x.is_nan() {
+        "-".into()
+    } else {
+        format!("{:.1} %", 100.0 * x)
+    }
+}
+
+fn num(x: f64) -> String {
+    if x.is_nan() {
+        "-".into()
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+impl fmt::Display for RecoveryReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "recovery: {} synthetic segments, {} fitted: {} ok, {} flagged, {} failed",
+            self.n_truth, self.n_fitted, self.n_ok, self.n_flagged, self.n_failed
+        )?;
+        writeln!(
+            f,
+            "  unflagged fits (n = {}):  E rel. error median {}, p90 {};  nu abs. error median \
+             {}, p90 {};  xi abs. error median {}, p90 {}",
+            self.modulus_rel_err.n,
+            pct(self.modulus_rel_err.median),
+            pct(self.modulus_rel_err.p90),
+            num(self.poisson_abs_err.median),
+            num(self.poisson_abs_err.p90),
+            num(self.contact_abs_err.median),
+            num(self.contact_abs_err.p90),
+        )?;
+        writeln!(
+            f,
+            "  flagged fits (n = {}):    E rel. error median {}, p90 {}",
+            self.modulus_rel_err_flagged.n,
+            pct(self.modulus_rel_err_flagged.median),
+            pct(self.modulus_rel_err_flagged.p90),
+        )?;
+        let flags: Vec<String> = self
+            .flag_counts
+            .iter()
+            .map(|(c, n)| format!("{c} {n}"))
+            .collect();
+        writeln!(
+            f,
+            "  flags: {}",
+            if flags.is_empty() {
+                "none".to_string()
+            } else {
+                flags.join(", ")
+            }
+        )?;
+        let defects: Vec<String> = self
+            .defects
+            .iter()
+            .map(|(d, c)| format!("{d} {}/{}", c.caught, c.n))
+            .collect();
+        writeln!(
+            f,
+            "  defective segments flagged or failed: {}{}",
+            if defects.is_empty() {
+                "none in the network".to_string()
+            } else {
+                defects.join(", ")
+            },
+            if self.unflagged_defective.is_empty() {
+                String::new()
+            } else {
+                format!("; missed: {}", self.unflagged_defective.join(", "))
+            }
+        )?;
+        for u in &self.unknown_truth {
+            let g = |v: Option<f64>| v.map(|x| format!("{x:.4}")).unwrap_or("-".into());
+            writeln!(
+                f,
+                "  {} ({}): {}, E = {}, nu = {}, xi = {}, chi2/dof = {}, flags: {}",
+                u.segment_id,
+                u.source,
+                u.fit.status,
+                u.fit
+                    .soil_youngs_modulus_pa
+                    .map(|e| format!("{e:.3e} Pa"))
+                    .unwrap_or("-".into()),
+                g(u.fit.soil_poisson),
+                g(u.fit.contact),
+                g(u.fit.chi2_per_dof),
+                if u.fit.flags.is_empty() {
+                    "none"
+                } else {
+                    &u.fit.flags
+                }
+            )?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{ContactMode, Model};
+
+    #[test]
+    fn quantiles_interpolate_between_order_statistics() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(quantile(&v, 0.5), 3.0);
+        assert!((quantile(&v, 0.9) - 4.6).abs() < 1e-12);
+        assert_eq!(quantile(&[7.0], 0.9), 7.0);
+        assert!(quantile(&[], 0.5).is_nan());
+        let s = Spread::of(&[4.0, f64::NAN, 1.0, 3.0, 2.0]);
+        assert_eq!((s.n, s.median), (4, 2.5));
+    }
+
+    fn truth(id: &str, e: f64, defect: Option<&str>) -> TruthRow {
+        TruthRow {
+            soil_youngs_modulus_pa: Some(e),
+            soil_poisson: Some(0.3),
+            contact: Some(0.5),
+            defect: defect.map(str::to_string),
+            ..TruthRow::unknown(id, "synthetic")
+        }
+    }
+
+    fn fit(id: &str, status: FitStatus, e: f64, flags: &str) -> FitRow {
+        let mut f = FitRow::new(id, 1, status, Model::Full, ContactMode::Reciprocal);
+        f.soil_youngs_modulus_pa = Some(e);
+        f.soil_poisson = Some(0.35);
+        f.contact = Some(0.4);
+        f.flags = flags.into();
+        f
+    }
+
+    #[test]
+    fn compare_splits_by_status_and_counts_flags_and_defects() {
+        let truth = vec![
+            truth("A", 1e7, None),
+            truth("B", 1e7, None),
+            truth("C", 1e7, Some("outlier")),
+            truth("D", 1e7, Some("wrong_material")),
+            truth("E", 1e7, None),
+            TruthRow::unknown("REAL", "published: x"),
+        ];
+        let fits = vec![
+            fit("A", FitStatus::Ok, 1.1e7, ""),
+            fit("B", FitStatus::Ok, 0.8e7, ""),
+            fit("C", FitStatus::Flagged, 3e7, "high_misfit,at_bound"),
+            fit("D", FitStatus::Ok, 1e7, ""),
+            fit("REAL", FitStatus::Flagged, 5e7, "high_misfit"),
+            fit("OTHER", FitStatus::Ok, 1.0, ""),
+        ];
+        let r = compare(&fits, &truth);
+        assert_eq!((r.n_truth, r.n_fitted), (5, 4));
+        assert_eq!((r.n_ok, r.n_flagged, r.n_failed), (3, 1, 0));
+        // Unflagged E errors: 0.1, 0.2, 0.0.
+        assert_eq!(r.modulus_rel_err.n, 3);
+        assert!((r.modulus_rel_err.median - 0.1).abs() < 1e-12);
+        assert!((r.poisson_abs_err.median - 0.05).abs() < 1e-12);
+        assert!((r.contact_abs_err.p90 - 0.1).abs() < 1e-12);
+        assert!((r.modulus_rel_err_flagged.median - 2.0).abs() < 1e-12);
+        assert_eq!(r.flag_counts["high_misfit"], 2);
+        assert_eq!(r.flag_counts["at_bound"], 1);
+        assert_eq!(r.defects["outlier"], DefectCatch { n: 1, caught: 1 });
+        assert_eq!(r.defects["wrong_material"], DefectCatch { n: 1, caught: 0 });
+        assert_eq!(r.unflagged_defective, vec!["D".to_string()]);
+        assert_eq!(r.unknown_truth.len(), 1);
+        let text = r.to_string();
+        assert!(text.contains("E rel. error median 10.0 %"), "{text}");
+        assert!(text.contains("REAL (published: x): flagged"), "{text}");
+    }
+}

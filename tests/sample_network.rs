@@ -1,0 +1,166 @@
+//! The bundled `sample_network/`: that it is what its README's command makes, that it imports,
+//! and how well a calibration recovers its known soil.
+//!
+//! The recovery test calibrates the whole network (202 segments): 21 s on 2 idle cores in a
+//! release build, 35 s when they are shared (measured; see sample_network/README.md), well under
+//! the 2 minutes above which it would leave the default suite.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use pipewave::db::{self, Database};
+use pipewave::network::{read_truth, recovery};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_pipewave"))
+}
+
+fn sample() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_network")
+}
+
+fn run_ok(args: &[&str]) -> Output {
+    let out = bin().args(args).output().expect("run pipewave");
+    assert!(
+        out.status.success(),
+        "pipewave {args:?} failed ({:?}):\n{}\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// The network's files (without a database or outputs that a local run may have left).
+const FILES: [&str; 6] = [
+    "segments.csv",
+    "measurements.csv",
+    "truth.csv",
+    "real/seed_cast_iron_table2.csv",
+    "real/muggleton2004_buried_mdpe.csv",
+    "real/README.md",
+];
+
+/// Copy the network's input files into a fresh directory.
+fn copy_sample(to: &Path) {
+    std::fs::create_dir_all(to.join("real")).unwrap();
+    for f in FILES {
+        std::fs::copy(sample().join(f), to.join(f)).unwrap();
+    }
+}
+
+#[test]
+fn sample_network_is_exactly_what_its_readme_command_makes() {
+    let readme = std::fs::read_to_string(sample().join("README.md")).unwrap();
+    let command = readme
+        .lines()
+        .find(|l| l.trim_start().starts_with("pipewave synth "))
+        .expect("the README gives the synth command");
+    let args: Vec<&str> = command.split_whitespace().skip(1).collect();
+    assert!(args.contains(&"--out") && args.contains(&"sample_network"));
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sample_network");
+    let args: Vec<String> = args
+        .iter()
+        .map(|a| {
+            if *a == "sample_network" {
+                out.to_str().unwrap().to_string()
+            } else {
+                a.to_string()
+            }
+        })
+        .collect();
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    run_ok(&refs);
+    for f in FILES {
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == std::fs::read(sample().join(f)).unwrap(),
+            "sample_network/{f} differs from what `{command}` writes: regenerate it"
+        );
+    }
+}
+
+#[test]
+fn sample_network_imports_cleanly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let db = tmp.path().join("a.sqlite");
+    let out = run_ok(&[
+        "import",
+        "--db",
+        db.to_str().unwrap(),
+        "--segments",
+        sample().join("segments.csv").to_str().unwrap(),
+        "--measurements",
+        sample().join("measurements.csv").to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("segments 202 new"), "{text}");
+    let database = Database::open(&db).unwrap();
+    let segs = db::load_segments(database.conn(), None).unwrap();
+    assert_eq!(segs.len(), 202);
+    assert!(segs.iter().all(|s| !s.measurements.is_empty()));
+    let truth = read_truth(&sample().join("truth.csv")).unwrap();
+    assert_eq!(truth.len(), 202);
+    let mut ids: Vec<&str> = truth.iter().map(|t| t.segment_id.as_str()).collect();
+    ids.sort_unstable();
+    let seg_ids: Vec<&str> = segs.iter().map(|s| s.segment_id.as_str()).collect();
+    assert_eq!(ids, seg_ids, "truth.csv has one row per segment");
+    assert_eq!(truth.iter().filter(|t| t.defect.is_some()).count(), 5);
+}
+
+/// The recovery figures of sample_network/README.md, with margins: a change of the inversion
+/// that makes them clearly worse fails here.
+#[test]
+fn sample_network_recovery() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("net");
+    copy_sample(&dir);
+    let out = run_ok(&["bench", "--recovery", dir.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("calibrate: 202 fitted"), "{text}");
+    assert!(
+        text.contains("recovery: 200 synthetic segments, 200 fitted"),
+        "{text}"
+    );
+
+    let database = Database::open(dir.join("pipewave.sqlite")).unwrap();
+    let fits = db::latest_fits(database.conn(), None).unwrap();
+    let truth = read_truth(&dir.join("truth.csv")).unwrap();
+    let r = recovery::compare(&fits, &truth);
+    assert_eq!(r.n_fitted, 200);
+    // Only a defective segment may fail.
+    let defective: Vec<&str> = truth
+        .iter()
+        .filter(|t| t.defect.is_some())
+        .map(|t| t.segment_id.as_str())
+        .collect();
+    for f in &fits {
+        if f.status == db::FitStatus::Failed {
+            assert!(defective.contains(&f.segment_id.as_str()), "{f:?}");
+        }
+    }
+    // Every deliberate defect is flagged or failed.
+    assert!(r.unflagged_defective.is_empty(), "{r}");
+    assert_eq!(
+        r.defects.values().map(|d| d.caught).sum::<usize>(),
+        5,
+        "{r}"
+    );
+    // Unflagged fits are good ones.
+    assert!(r.modulus_rel_err.n >= 10, "{r}");
+    assert!(r.modulus_rel_err.median < 0.10, "{r}");
+    assert!(r.modulus_rel_err.p90 < 0.30, "{r}");
+    assert!(r.poisson_abs_err.median < 0.05, "{r}");
+    assert!(r.contact_abs_err.median < 0.15, "{r}");
+    // The flags mark the poor fits: flagged fits are worse than unflagged ones.
+    assert!(
+        r.modulus_rel_err_flagged.median > r.modulus_rel_err.median,
+        "{r}"
+    );
+    // The published cases are fitted.
+    assert_eq!(r.unknown_truth.len(), 2, "{r}");
+    assert!(r
+        .unknown_truth
+        .iter()
+        .all(|u| u.fit.soil_youngs_modulus_pa.is_some_and(|e| e > 0.0)));
+}
