@@ -34,7 +34,7 @@ use crate::db::{
 use crate::invert::fit::splitmix64;
 use crate::invert::{self, fit_segment, FitResult, FitSettings, Measurement, Method, Param};
 use crate::physics::curves::{curve, STANDARD_GRID_HZ};
-use crate::physics::effects::{effects_text, Effect};
+use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, InputError, Model};
 
 pub use db::Connection;
@@ -317,12 +317,24 @@ pub enum BatchError {
         #[source]
         source: Box<DbError>,
     },
+    /// A segment's stored effects (table `segment_effects`) name an unknown effect.
+    #[error("segment {segment}: stored effects cannot be read: {message}")]
+    StoredEffects {
+        /// The segment.
+        segment: String,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// One segment ready for a worker.
 struct Job {
     record: SegmentRecord,
     seed: u64,
+    /// The run's settings with this segment's own effects added (table `segment_effects`).
+    settings: FitSettings,
+    /// Hash of `settings`.
+    settings_hash: String,
 }
 
 /// One segment computed by a worker, ready for the writer.
@@ -420,9 +432,38 @@ fn locked_run(
     started: Instant,
 ) -> Result<CalibrateSummary, BatchError> {
     let jobs = summary.jobs;
-    // Which segments: those needing a fit, within the named ones if any.
-    let needing = db::segments_needing_fit(conn, &summary.settings_hash, opts.force)?;
-    let with_measurements = db::segments_needing_fit(conn, &summary.settings_hash, true)?;
+    // Which segments: those needing a fit, within the named ones if any. A segment's settings
+    // are the run's with its own effects added (set by `diagnose`), so its expected settings
+    // hash is computed per segment.
+    let own_effects = db::segment_effects(conn)?;
+    let settings_for = |id: &str| -> Result<(FitSettings, String), BatchError> {
+        let mut effects = opts.effects.clone();
+        if let Some(text) = own_effects.get(id) {
+            let extra = parse_effects(text).map_err(|e| BatchError::StoredEffects {
+                segment: id.to_string(),
+                message: e.to_string(),
+            })?;
+            effects.extend(extra);
+        }
+        effects.sort();
+        effects.dedup();
+        let hash = settings_hash(opts.method, opts.model, opts.contact_mode, &effects);
+        let mut settings = opts.fit_settings();
+        settings.effects = effects;
+        Ok((settings, hash))
+    };
+    let states = db::fit_states(conn)?;
+    let mut needing = Vec::new();
+    let mut with_measurements = Vec::new();
+    for st in states.iter().filter(|st| st.has_measurements) {
+        with_measurements.push(st.segment_id.clone());
+        let (_, hash) = settings_for(&st.segment_id)?;
+        let stale = st.fit_inputs_hash.as_deref() != Some(st.inputs_hash.as_str())
+            || st.fit_settings_hash.as_deref() != Some(hash.as_str());
+        if opts.force || stale {
+            needing.push(st.segment_id.clone());
+        }
+    }
     let (selected, in_scope): (Vec<String>, usize) = match &opts.segments {
         None => (needing, with_measurements.len()),
         Some(named) => {
@@ -458,11 +499,16 @@ fn locked_run(
     };
     let work: Vec<Job> = records
         .into_iter()
-        .map(|record| Job {
-            seed: segment_seed(opts.seed, &record.segment_id),
-            record,
+        .map(|record| {
+            let (settings, settings_hash) = settings_for(&record.segment_id)?;
+            Ok(Job {
+                seed: segment_seed(opts.seed, &record.segment_id),
+                record,
+                settings,
+                settings_hash,
+            })
         })
-        .collect();
+        .collect::<Result<_, BatchError>>()?;
 
     let run_id = db::start_run(
         conn,
@@ -488,7 +534,7 @@ fn locked_run(
     let written = if work.is_empty() {
         Ok(())
     } else {
-        fit_and_store(conn, opts, run_id, &work, observer, stop, &mut summary)
+        fit_and_store(conn, run_id, &work, observer, stop, &mut summary)
     };
     summary.interrupted = summary.stored() < summary.selected;
     summary.elapsed_s = started.elapsed().as_secs_f64();
@@ -512,7 +558,6 @@ fn locked_run(
 /// The pool, the workers and the writer loop.
 fn fit_and_store(
     conn: &mut Connection,
-    opts: &CalibrateOptions,
     run_id: i64,
     work: &[Job],
     observer: &mut dyn RunObserver,
@@ -525,15 +570,13 @@ fn fit_and_store(
         .thread_name(|i| format!("pipewave-fit-{i}"))
         .build()
         .map_err(|source| BatchError::ThreadPool { jobs, source })?;
-    let settings = opts.fit_settings();
-    let settings_hash = summary.settings_hash.clone();
     // Set when the writer fails: the workers stop taking segments.
     let abort = AtomicBool::new(false);
     let (tx, rx) = mpsc::sync_channel::<Computed>(2 * jobs);
     let mut error: Option<BatchError> = None;
 
     std::thread::scope(|scope| {
-        let (settings, settings_hash, abort) = (&settings, &settings_hash, &abort);
+        let abort = &abort;
         let pool = &pool;
         scope.spawn(move || {
             pool.install(|| {
@@ -541,7 +584,7 @@ fn fit_and_store(
                     if stop.load(Ordering::SeqCst) || abort.load(Ordering::SeqCst) {
                         return;
                     }
-                    let computed = compute(job, settings, settings_hash, run_id);
+                    let computed = compute(job, run_id);
                     // The writer only hangs up after an error, when results are dropped anyway.
                     let _ = tx.send(computed);
                 });
@@ -605,7 +648,8 @@ impl CalibrateSummary {
 
 /// A worker's job: inputs, fit, curve. Never panics: an invalid stored input or a panic inside
 /// the fit becomes a failed fit with its reason.
-fn compute(job: &Job, settings: &FitSettings, settings_hash: &str, run_id: i64) -> Computed {
+fn compute(job: &Job, run_id: i64) -> Computed {
+    let (settings, settings_hash) = (&job.settings, job.settings_hash.as_str());
     let t0 = Instant::now();
     let rec = &job.record;
     let outcome = catch_unwind(AssertUnwindSafe(|| {
@@ -670,7 +714,7 @@ pub fn segment_data(rec: &SegmentRecord) -> Result<invert::SegmentData, InputErr
 }
 
 /// The fitted curve on the standard grid; points whose root was not found are stored as NULL.
-fn curve_points(sys: &crate::physics::System) -> Vec<CurvePoint> {
+pub fn curve_points(sys: &crate::physics::System) -> Vec<CurvePoint> {
     let finite = |v: f64| v.is_finite().then_some(v);
     curve(sys, &STANDARD_GRID_HZ)
         .into_iter()

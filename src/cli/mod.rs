@@ -5,6 +5,7 @@
 mod audit;
 mod bench;
 mod calibrate;
+mod diagnose;
 mod export;
 mod forward;
 mod import;
@@ -56,6 +57,8 @@ enum Command {
     Export(export::ExportArgs),
     /// Write the fit-quality report of the network: one self-contained HTML page.
     Audit(audit::AuditArgs),
+    /// Find where model and measurements disagree, name the missing effect, refit with it.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// How a command that ran ended.
@@ -91,6 +94,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Bench(args) => bench::run(&args),
         Command::Export(args) => export::run(&args),
         Command::Audit(args) => audit::run(&args),
+        Command::Diagnose(args) => diagnose::run(&args),
     }
 }
 

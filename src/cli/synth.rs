@@ -37,6 +37,22 @@ pub struct SynthArgs {
     /// Replace the files if they exist.
     #[arg(long)]
     force: bool,
+    /// Hide an effect in the data (for testing `diagnose`): soil_damping, air_in_water,
+    /// wall_thinning or pipe_loss. Its value is in truth.csv.
+    #[arg(long, value_name = "NAME")]
+    hidden_effect: Option<String>,
+    /// Value range of the hidden effect, LO,HI (default: one whose signature shows at the
+    /// synthetic noise in some segments).
+    #[arg(long, value_name = "LO,HI", requires = "hidden_effect")]
+    hidden_range: Option<String>,
+    /// Fraction of the synthetic segments given the hidden effect (the rest are controls).
+    #[arg(
+        long,
+        value_name = "FRACTION",
+        default_value_t = 1.0,
+        requires = "hidden_effect"
+    )]
+    hidden_fraction: f64,
 }
 
 /// Generate and write the network.
@@ -58,10 +74,52 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             }
         }
     }
+    let hidden_effect = match &args.hidden_effect {
+        None => None,
+        Some(name) => {
+            let e: pipewave::physics::effects::Effect = name.parse().context("--hidden-effect")?;
+            let range = match &args.hidden_range {
+                Some(t) => {
+                    let v: Vec<f64> = t
+                        .split(',')
+                        .map(|x| x.trim().parse::<f64>())
+                        .collect::<Result<_, _>>()
+                        .with_context(|| format!("--hidden-range '{t}': expected LO,HI"))?;
+                    match v[..] {
+                        [lo, hi] if lo < hi => (lo, hi),
+                        _ => bail!("--hidden-range '{t}': expected LO,HI with LO < HI"),
+                    }
+                }
+                None => pipewave::synth::default_hidden_range(e).with_context(|| {
+                    format!("{e} has no parameter to hide (generate with full, fit with --model seed instead)")
+                })?,
+            };
+            let p = e.parameter().context("effect without parameter")?;
+            if range.0 < p.lower || range.1 > p.upper {
+                bail!(
+                    "--hidden-range {},{} is outside the range of {} ({} - {})",
+                    range.0,
+                    range.1,
+                    p.name,
+                    p.lower,
+                    p.upper
+                );
+            }
+            Some((e, range.0, range.1))
+        }
+    };
+    if !(0.0..=1.0).contains(&args.hidden_fraction) {
+        bail!(
+            "--hidden-fraction {} is outside 0 - 1",
+            args.hidden_fraction
+        );
+    }
     let opts = SynthOptions {
         segments: args.segments as usize,
         seed: args.seed,
         defect_fraction: args.defects,
+        hidden_effect,
+        hidden_fraction: args.hidden_fraction,
         ..SynthOptions::default()
     };
     let synthetic = generate(&opts);

@@ -32,6 +32,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0002_run_lock.sql",
         sql: include_str!("../../migrations/0002_run_lock.sql"),
     },
+    Migration {
+        version: 3,
+        name: "0003_segment_effects.sql",
+        sql: include_str!("../../migrations/0003_segment_effects.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

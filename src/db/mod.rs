@@ -11,6 +11,7 @@
 //! Schema changes are append-only SQL files in `migrations/`, embedded in the binary and applied
 //! in order in one exclusive transaction, tracked by `PRAGMA user_version` ([`migrate`]).
 
+pub mod effects;
 pub mod hash;
 pub mod import;
 pub mod inventory;
@@ -24,6 +25,7 @@ use std::time::Duration;
 
 pub use rusqlite::Connection;
 
+pub use effects::{effects_of, fit_states, segment_effects, set_segment_effects, FitState};
 pub use import::{import, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError};
 pub use inventory::{load_segment, load_segments, MeasurementRecord, SegmentRecord};
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};

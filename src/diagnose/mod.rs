@@ -18,6 +18,7 @@
 //!    and its value, and a report.
 
 pub mod report;
+pub mod run;
 
 use num_complex::Complex64;
 
@@ -38,6 +39,9 @@ pub const ALPHA: f64 = 1e-3;
 /// A base fit is "structured" (worth naming an effect) when its χ² has upper-tail probability
 /// below this.
 pub const STRUCTURE_P: f64 = 1e-3;
+/// The refit with a named effect must leave a χ² whose upper-tail probability is at least this
+/// (looser than [`STRUCTURE_P`]: a good explanation, not necessarily a perfect one).
+pub const EXPLAINED_P: f64 = 1e-4;
 /// Accepted effects whose χ² after differs by less than this explain the data equally well
 /// (two units of χ²: the AIC's price of a parameter).
 pub const TIE_LR: f64 = 2.0;

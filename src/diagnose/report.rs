@@ -48,9 +48,11 @@ pub fn evidence(d: &Diagnosis) -> String {
                 .min_by(|a, b| a.1.p_value.total_cmp(&b.1.p_value));
             match best {
                 Some((e, r)) => format!(
-                    "no candidate passed: best {e} LR {} (p {}), held-out chi2 {} -> {}",
+                    "no candidate passed: best {e} LR {} (p {}), chi2/dof {} -> {}, held-out chi2 {} -> {}",
                     sig(r.lr, 4),
                     sig(r.p_value, 2),
+                    sig(d.chi2_per_dof_before(), 3),
+                    sig(r.fit.chi2_per_dof.unwrap_or(f64::NAN), 3),
                     sig(r.holdout_base, 3),
                     sig(r.holdout_ext, 3)
                 ),

@@ -1,0 +1,72 @@
+//! `pipewave diagnose --db DB [--segment ID]... --out DIR [--candidates NAME,...] [--no-apply]
+//! [--jobs N]`: the discrepancy workflow (find, name, add, show).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use pipewave::diagnose::run::{diagnose_database, DiagnoseOptions};
+use pipewave::physics::effects::{parse_effects, Effect};
+
+use super::Outcome;
+
+/// Arguments of `diagnose`.
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// The database (its segments must have been calibrated).
+    #[arg(long, value_name = "DB")]
+    db: PathBuf,
+    /// Diagnose only this segment (repeat for several; default: every fitted segment).
+    #[arg(long = "segment", value_name = "ID")]
+    segments: Vec<String>,
+    /// Where to write diagnosis.csv and diagnosis.html.
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Candidate effects, comma-separated (default: all of soil_damping, air_in_water,
+    /// wall_thinning, pipe_loss, full_model).
+    #[arg(long, value_name = "NAME,...")]
+    candidates: Option<String>,
+    /// Report only: do not store the extended fits or switch the named effects on for the
+    /// segments.
+    #[arg(long)]
+    no_apply: bool,
+    /// Worker threads (default: one per core).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
+    jobs: Option<u32>,
+}
+
+/// Run the diagnosis and print its summary.
+pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
+    if !args.db.is_file() {
+        anyhow::bail!(
+            "{} does not exist: diagnose needs a calibrated database (pipewave run DIR, or import and calibrate)",
+            args.db.display()
+        );
+    }
+    let candidates = match &args.candidates {
+        Some(t) => parse_effects(t).context("--candidates")?,
+        None => Effect::ALL.to_vec(),
+    };
+    let mut database = super::open_database(&args.db)?;
+    let opts = DiagnoseOptions {
+        segments: (!args.segments.is_empty()).then(|| args.segments.clone()),
+        jobs: args
+            .jobs
+            .map(|j| j as usize)
+            .unwrap_or_else(pipewave::batch::default_jobs),
+        apply: !args.no_apply,
+        candidates,
+        out_dir: args.out.clone(),
+    };
+    let s = diagnose_database(database.conn_mut(), &opts)?;
+    for (id, why) in &s.skipped {
+        eprintln!("{}: segment {id}: skipped: {why}", args.db.display());
+    }
+    println!("{}", s.line());
+    println!(
+        "report: {} and {}",
+        args.out.join("diagnosis.csv").display(),
+        args.out.join("diagnosis.html").display()
+    );
+    Ok(Outcome::Done)
+}

@@ -1,0 +1,92 @@
+//! Effects switched on for single segments (table `segment_effects`, migration 0003), and the
+//! state of each segment's latest fit, from which `calibrate` decides what to refit.
+
+use std::collections::BTreeMap;
+
+use rusqlite::{params, Connection, OptionalExtension};
+
+use super::DbError;
+
+/// The effects set for each segment that has any: segment id → comma-separated names.
+pub fn segment_effects(conn: &Connection) -> Result<BTreeMap<String, String>, DbError> {
+    let mut stmt = conn.prepare("SELECT segment_id, effects FROM segment_effects")?;
+    let rows = stmt
+        .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))?
+        .collect::<Result<BTreeMap<_, _>, _>>()?;
+    Ok(rows)
+}
+
+/// The effects set for one segment (empty when none).
+pub fn effects_of(conn: &Connection, segment_id: &str) -> Result<String, DbError> {
+    Ok(conn
+        .query_row(
+            "SELECT effects FROM segment_effects WHERE segment_id = ?1",
+            [segment_id],
+            |r| r.get(0),
+        )
+        .optional()?
+        .unwrap_or_default())
+}
+
+/// Set (or replace) the effects of a segment; an empty list removes the row.
+pub fn set_segment_effects(
+    conn: &Connection,
+    segment_id: &str,
+    effects: &str,
+    source: &str,
+    evidence: &str,
+) -> Result<(), DbError> {
+    if effects.trim().is_empty() {
+        conn.execute(
+            "DELETE FROM segment_effects WHERE segment_id = ?1",
+            [segment_id],
+        )?;
+    } else {
+        conn.execute(
+            "INSERT INTO segment_effects (segment_id, effects, source, evidence) \
+             VALUES (?1, ?2, ?3, ?4) \
+             ON CONFLICT(segment_id) DO UPDATE SET effects = excluded.effects, \
+             source = excluded.source, evidence = excluded.evidence, \
+             created_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')",
+            params![segment_id, effects, source, evidence],
+        )?;
+    }
+    Ok(())
+}
+
+/// What `calibrate` needs to know about a segment to decide whether to refit it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FitState {
+    /// The segment.
+    pub segment_id: String,
+    /// Its current inputs hash.
+    pub inputs_hash: String,
+    /// The inputs hash its latest fit was made from (None: never fitted).
+    pub fit_inputs_hash: Option<String>,
+    /// The settings hash of its latest fit.
+    pub fit_settings_hash: Option<String>,
+    /// It has at least one measurement.
+    pub has_measurements: bool,
+}
+
+/// The fit state of every segment, by id.
+pub fn fit_states(conn: &Connection) -> Result<Vec<FitState>, DbError> {
+    let mut stmt = conn.prepare(
+        "SELECT s.segment_id, s.inputs_hash, f.inputs_hash, f.settings_hash, \
+                EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id) \
+         FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
+         ORDER BY s.segment_id",
+    )?;
+    let rows = stmt
+        .query_map([], |r| {
+            Ok(FitState {
+                segment_id: r.get(0)?,
+                inputs_hash: r.get(1)?,
+                fit_inputs_hash: r.get(2)?,
+                fit_settings_hash: r.get(3)?,
+                has_measurements: r.get(4)?,
+            })
+        })?
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(rows)
+}
