@@ -230,7 +230,11 @@ fn opening_twice_and_concurrent_calibrate_lock() {
     let (dir, mut database) = setup();
     // A second connection (another process would do the same) sees a migrated database.
     let mut other = Database::open(dir.path().join("t.sqlite")).unwrap();
-    assert_eq!(other.schema_version().unwrap(), 2);
+    assert_eq!(
+        other.schema_version().unwrap(),
+        pipewave::db::migrate::latest_version()
+    );
+    assert_eq!(pipewave::db::migrate::latest_version(), 3);
     let lock = db::try_acquire_run_lock(database.conn_mut()).unwrap();
     let err = db::try_acquire_run_lock(other.conn_mut()).unwrap_err();
     assert!(

@@ -218,6 +218,7 @@ fn migrations_create_every_table_and_the_view_and_set_user_version() {
         ("table", "fits"),
         ("table", "curves"),
         ("table", "run_lock"),
+        ("table", "segment_effects"),
         ("view", "latest_fits"),
     ] {
         assert!(
@@ -228,7 +229,7 @@ fn migrations_create_every_table_and_the_view_and_set_user_version() {
     let version: i64 = conn
         .query_row("PRAGMA user_version", [], |r| r.get(0))
         .unwrap();
-    assert_eq!(version, 2);
+    assert_eq!(version, 3);
     let mode: String = conn
         .query_row("PRAGMA journal_mode", [], |r| r.get(0))
         .unwrap();
