@@ -114,7 +114,14 @@ pub fn forward_figures(scale: usize) -> Vec<Figure> {
                 let w = w1 + 1e-9 * i as f64;
                 black_box(solve_from_guess_tol(&sys, w, k0 * (w / 3121.958), tol).ok());
             }),
-            note: format!("{} Muller iterations + 3 start evaluations", r.iterations),
+            note: match tol.method {
+                crate::physics::solver::RootMethod::Muller => {
+                    format!("{} Muller iterations + 3 start evaluations", r.iterations)
+                }
+                crate::physics::solver::RootMethod::Newton => {
+                    format!("{} Newton iterations (F and dF/dk1 each)", r.iterations)
+                }
+            },
         });
     }
     for (label, ramp, tol) in [

@@ -72,6 +72,13 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     }
 }
 
+/// P(z) of eq. P16 and its derivative P′(z) = 1 + P² + P/z, which follows from
+/// H₀⁽²⁾′ = −H₁⁽²⁾ and H₁⁽²⁾′ = H₀⁽²⁾ − H₁⁽²⁾/z (DLMF 10.6.2) at no extra Amos cost.
+pub fn hankel_ratio_d(z: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
+    let p = hankel_ratio(z)?;
+    Ok((p, 1.0 + p * p + p / z))
+}
+
 /// J₀(z)/J₁(z) from the scaled pair (the scale e^{−|Im z|} cancels).
 pub fn bessel_j_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
@@ -96,6 +103,20 @@ pub fn psi(z2: Complex64) -> Result<Complex64, SpecialError> {
     }
     let z = principal_sqrt(z2);
     Ok(z * bessel_j_ratio(z)? * 0.5)
+}
+
+/// ψ of eq. P24 as a function of w = z², and dψ/dw. With Q = J₀/J₁, Q′ = −1 − Q² + Q/z
+/// (DLMF 10.6.2), so dψ/dz = Q − z/2 − zQ²/2 and dψ/dw = (dψ/dz)/(2z); the series branch
+/// differentiates 1 − w/8 − w²/192.
+pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
+    if w.norm() < PSI_SERIES_Z2 {
+        return Ok((1.0 - w / 8.0 - w * w / 192.0, -1.0 / 8.0 - w / 96.0));
+    }
+    let z = principal_sqrt(w);
+    let q = bessel_j_ratio(z)?;
+    let psi = z * q * 0.5;
+    let dpsi_dz = q - z * 0.5 - z * q * q * 0.5;
+    Ok((psi, dpsi_dz / (2.0 * z)))
 }
 
 #[cfg(test)]
@@ -225,6 +246,33 @@ mod tests {
             let w = c(x, y);
             let (a, b) = (principal_sqrt(w), w.sqrt());
             assert!((a - b).norm() <= 1e-15 * b.norm(), "sqrt({w}) = {a} vs {b}");
+        }
+    }
+
+    /// The analytic derivatives against central differences.
+    #[test]
+    fn derivatives_match_finite_differences() {
+        for z in [c(0.5, -0.01), c(2.3, -0.1), c(0.02, -3.0), c(12.0, 0.5)] {
+            let h = 1e-6 * z.norm();
+            let (_, d) = hankel_ratio_d(z).unwrap();
+            let fd = (hankel_ratio(z + h).unwrap() - hankel_ratio(z - h).unwrap()) / (2.0 * h);
+            // |P| ~ 1 while P' can be ~1e-3: the differences carry ~1e-9 of Amos noise.
+            assert!(
+                (d - fd).norm() < 1e-8 * d.norm().max(1.0),
+                "P'({z}) = {d} vs {fd}"
+            );
+        }
+        for w in [
+            c(-1.0, 0.0),
+            c(-100.0, 1.0),
+            c(2.5, 0.1),
+            c(3e-7, 1e-7),
+            c(-0.3, -0.02),
+        ] {
+            let h = 1e-6 * w.norm().max(1e-3);
+            let (_, d) = psi_d(w).unwrap();
+            let fd = (psi(w + h).unwrap() - psi(w - h).unwrap()) / (2.0 * h);
+            assert!(rel(d, fd) < 1e-7, "dpsi/dw({w}) = {d} vs {fd}");
         }
     }
 

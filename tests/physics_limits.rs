@@ -477,3 +477,42 @@ fn order_and_repeats_do_not_matter() {
     assert!(rel(shuffled[2].k1, sorted[1].k1) < 1e-13);
     assert!(rel(shuffled[3].k1, sorted[0].k1) < 1e-13);
 }
+
+/// The analytic dF/dk1 used by Newton's method against central differences of F, and F itself
+/// against the reference residual, for every model, contact reading and contact value, with
+/// and without soil (cases A, B, and B in vacuo).
+#[test]
+fn residual_derivative_matches_finite_differences() {
+    for (name, omega, k1) in [
+        ("A", 3121.958, c(2.49, -0.006)),
+        ("B", TAU * 400.0, c(7.1, -0.9)),
+        ("B0", TAU * 200.0, c(3.6, -0.1)),
+    ] {
+        for model in [Model::Seed, Model::Full] {
+            for mode in MODES {
+                for xi in [0.0, 0.5, 1.0] {
+                    let sys = match name {
+                        "A" => case_a(case_a_soil(), xi, model, mode),
+                        "B" => case_b(case_b_soil(), xi, model, mode),
+                        _ => case_b(Soil::none(), xi, model, mode),
+                    };
+                    let ev = Evaluator::new(&sys, omega);
+                    let (f, df) = ev.residual_d(k1).unwrap();
+                    let f0 = ev.residual(k1).unwrap();
+                    assert!(
+                        rel(f, f0) < 1e-13,
+                        "{name} {model} {mode} {xi}: F {f} vs {f0}"
+                    );
+                    let h = 1e-6 * k1.norm();
+                    let fd =
+                        (ev.residual(k1 + h).unwrap() - ev.residual(k1 - h).unwrap()) / (2.0 * h);
+                    let e = rel(df, fd);
+                    assert!(
+                        e < 1e-6,
+                        "{name} {model} {mode} xi={xi}: dF {df} vs {fd} ({e:e})"
+                    );
+                }
+            }
+        }
+    }
+}

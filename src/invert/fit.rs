@@ -329,15 +329,23 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         .system_at(&x)
         .ok_or_else(|| "the best parameters give a non-physical input".to_string())?;
     // The answer is reported on the reference path (spec §5.3–5.4); the search path must agree.
-    let predicted = problem
-        .predict_reference(&sys)
-        .ok_or_else(|| "forward solve failed at the optimum".to_string())?;
-    let path_checked = problem.path == SolvePath::Safe
-        || problem.predict_system(&sys).is_some_and(|k| {
-            k.iter()
-                .zip(&predicted)
-                .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
-        });
+    // If the reference path cannot solve where the fast search ended, the search tracked
+    // another root: the caller searches again on the safe path.
+    let (predicted, path_checked) = match (
+        problem.predict_reference(&sys),
+        problem.predict_system(&sys),
+    ) {
+        (Some(r), fast) => {
+            let agree = fast.is_some_and(|k| {
+                k.iter()
+                    .zip(&r)
+                    .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
+            });
+            (r, problem.path == SolvePath::Safe || agree)
+        }
+        (None, Some(f)) if problem.path == SolvePath::Fast => (f, false),
+        _ => return Err("forward solve failed at the optimum".to_string()),
+    };
 
     // Uncertainty from the Jacobian of the weighted residuals at the optimum.
     let m = problem.n_residuals();

@@ -487,9 +487,15 @@ pub fn predict_fast(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
 /// straight from its in-vacuo root when the root stays within 10 % of it, otherwise (or if any
 /// solve fails) an 8-point continuation ramp (spec §5.4 allows a shorter ramp for the inversion).
 pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
+    // Muller rather than Newton on this path: it is the fallback when the fast path tracked
+    // another root, and Muller's start from three points is the spec's, validated iteration.
+    let tolerance = Tolerance {
+        method: crate::physics::solver::RootMethod::Muller,
+        ..Tolerance::FAST
+    };
     let fast = Continuation {
         ramp_points: 0,
-        tolerance: Tolerance::FAST,
+        tolerance,
     };
     let accept =
         |res: &[Result<crate::physics::Root, crate::physics::SolveError>]| accept_roots(sys, res);
@@ -512,7 +518,7 @@ pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
     }
     let ramp = Continuation {
         ramp_points: INVERSION_RAMP_POINTS,
-        tolerance: Tolerance::FAST,
+        tolerance,
     };
     accept(&solve_curve(sys, omegas, ramp))
 }

@@ -7,7 +7,7 @@
 use num_complex::Complex64;
 
 use super::inputs::{ContactMode, Model, System};
-use crate::special::{hankel_ratio, psi, sqrt_plus, SpecialError};
+use crate::special::{hankel_ratio, hankel_ratio_d, psi, psi_d, sqrt_plus, SpecialError};
 
 const I: Complex64 = Complex64::new(0.0, 1.0);
 
@@ -41,6 +41,15 @@ impl SoilStiffness {
         }
         self.k22 - self.k21 * self.k12 / self.k11
     }
+}
+
+/// The soil stiffness and its derivative with respect to k1 (for Newton's method).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SoilStiffnessD {
+    /// The stiffness at k1.
+    pub k: SoilStiffness,
+    /// d/dk1 of each entry.
+    pub dk: SoilStiffness,
 }
 
 /// The soil's complex Lamé moduli and wavenumbers at one frequency, eqs. P13–P14.
@@ -94,6 +103,47 @@ impl SoilWaves {
             k12,
             k21: -k12, // P20
             k22,
+        })
+    }
+}
+
+impl SoilWaves {
+    /// Eqs. P15–P21 and their derivative with respect to k1, by the chain rule:
+    /// dq/dk1 = −k1/q, dP/dk1 = P′(q a)·a·dq/dk1 with P′ = 1 + P² + P/z.
+    pub fn stiffness_d(&self, k1: Complex64, a: f64) -> Result<SoilStiffnessD, SpecialError> {
+        let k1sq = k1 * k1;
+        let qp = sqrt_plus(self.kp2 - k1sq);
+        let qs = sqrt_plus(self.ks2 - k1sq);
+        let (dqp, dqs) = (-k1 / qp, -k1 / qs);
+        let (p, p1) = hankel_ratio_d(qp * a)?;
+        let (q, q1) = hankel_ratio_d(qs * a)?;
+        let (dp, dq) = (p1 * a * dqp, q1 * a * dqs);
+        let d = p * k1sq + q * qp * qs;
+        let dd = dp * k1sq + p * 2.0 * k1 + dq * qp * qs + q * (dqp * qs + qp * dqs);
+        let (mu, ks2) = (self.mu, self.ks2);
+        let k11 = mu * qp * ks2 / d;
+        let dk11 = mu * ks2 * (dqp * d - qp * dd) / (d * d);
+        let t = 2.0 - ks2 * p / d;
+        let dt = -ks2 * (dp * d - p * dd) / (d * d);
+        let k12 = -I * mu * k1 * t;
+        let dk12 = -I * mu * (t + k1 * dt);
+        let u = qs * p * q / d;
+        let du = (dqs * p * q + qs * dp * q + qs * p * dq) / d - u * dd / d;
+        let k22 = -(mu / a) * (2.0 + a * ks2 * u);
+        let dk22 = -mu * ks2 * du;
+        Ok(SoilStiffnessD {
+            k: SoilStiffness {
+                k11,
+                k12,
+                k21: -k12,
+                k22,
+            },
+            dk: SoilStiffness {
+                k11: dk11,
+                k12: dk12,
+                k21: -dk12,
+                k22: dk22,
+            },
         })
     }
 }
@@ -213,6 +263,83 @@ impl Evaluator {
         let alpha = self.alpha(k1)?;
         let psi = self.psi(k1)?;
         Ok(k1 * k1 / self.kf2 - 1.0 - self.beta * psi / (1.0 - self.omega2 + alpha))
+    }
+
+    /// F(k1) of eq. P32 and dF/dk1, for Newton's method. The derivative follows every step of
+    /// eqs. P15–P37 by the chain rule; `tests/physics_limits.rs` checks it against central
+    /// differences for every model and contact reading.
+    pub fn residual_d(&self, k1: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
+        let (a, nu, kappa, xi) = (self.a, self.nu_p, self.kappa, self.contact);
+        let zero = Complex64::new(0.0, 0.0);
+        let (k, dk) = match &self.soil {
+            Some(s) => {
+                let d = s.stiffness_d(k1, a)?;
+                (d.k, d.dk)
+            }
+            None => (SoilStiffness::ZERO, SoilStiffness::ZERO),
+        };
+        let ka = k1 * a;
+        let delta = match self.model {
+            Model::Full => 1.0,
+            Model::Seed => 0.0,
+        };
+        let d_ax = delta * self.omega2 - ka * ka + xi * kappa * k.k11;
+        let dd_ax = -2.0 * ka * a + xi * kappa * dk.k11;
+        let (alpha, dalpha) = match self.contact_mode {
+            ContactMode::Reciprocal | ContactMode::Blend => {
+                let blend = self.contact_mode == ContactMode::Blend;
+                let f21 = if blend { xi } else { 1.0 };
+                let c_ax = -I * nu * ka + xi * kappa * k.k12;
+                let dc_ax = -I * nu * a + xi * kappa * dk.k12;
+                let c_ra = I * nu * ka + f21 * kappa * k.k21;
+                let dc_ra = I * nu * a + f21 * kappa * dk.k21;
+                let (keff, dkeff) = if blend {
+                    // K_slip = K22 + K12²/K11 (K21 = −K12), zero without soil (P22).
+                    let (ks, dks) = if k.k11 == zero {
+                        (zero, zero)
+                    } else {
+                        (
+                            k.k22 + k.k12 * k.k12 / k.k11,
+                            dk.k22
+                                + (2.0 * k.k12 * dk.k12 * k.k11 - k.k12 * k.k12 * dk.k11)
+                                    / (k.k11 * k.k11),
+                        )
+                    };
+                    (xi * k.k22 + (1.0 - xi) * ks, xi * dk.k22 + (1.0 - xi) * dks)
+                } else {
+                    (k.k22, dk.k22)
+                };
+                let n = c_ra * c_ax;
+                let dn = dc_ra * c_ax + c_ra * dc_ax;
+                (
+                    -kappa * keff + n / d_ax,
+                    -kappa * dkeff + dn / d_ax - n * dd_ax / (d_ax * d_ax),
+                )
+            }
+            ContactMode::Printed => {
+                // ka²(ν + iS/ka)(ν − iξS/ka) = (ν ka + iS)(ν ka − iξS), S = κK21 (P35).
+                let (sv, dsv) = (kappa * k.k21, kappa * dk.k21);
+                let (f1, df1) = (nu * ka + I * sv, nu * a + I * dsv);
+                let (f2, df2) = (nu * ka - I * xi * sv, nu * a - I * xi * dsv);
+                let n = f1 * f2;
+                let dn = df1 * f2 + f1 * df2;
+                (
+                    -kappa * k.k22 + n / d_ax,
+                    -kappa * dk.k22 + dn / d_ax - n * dd_ax / (d_ax * d_ax),
+                )
+            }
+        };
+        let (psi_v, dpsi) = match self.model {
+            Model::Full => {
+                let (p, pw) = psi_d((self.kf2 - k1 * k1) * (a * a))?;
+                (p, pw * (-2.0 * k1 * a * a))
+            }
+            Model::Seed => (Complex64::new(1.0, 0.0), zero),
+        };
+        let den = 1.0 - self.omega2 + alpha;
+        let f = k1 * k1 / self.kf2 - 1.0 - self.beta * psi_v / den;
+        let df = 2.0 * k1 / self.kf2 - self.beta * (dpsi * den - psi_v * dalpha) / (den * den);
+        Ok((f, df))
     }
 
     /// The in-vacuo root, eq. P39: k1² = k_f²[1 + β₀/(1 − Ω₀²)], principal root with Re ≥ 0.

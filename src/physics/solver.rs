@@ -162,6 +162,21 @@ pub struct Tolerance {
     /// F is well conditioned on the s = 1 branch (k1·dF/dk1 = 2(1 + β₀) = O(1–30)), so
     /// |F| ≤ 1e-12 bounds the relative error of k1 near 1e-12 and saves the confirming step.
     pub residual_stop: f64,
+    /// The iteration: Muller's (P40) or Newton's with the analytic dF/dk1.
+    pub method: RootMethod,
+}
+
+/// The root iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RootMethod {
+    /// Muller's method, eq. P40 (the spec's; no derivative; 3 start evaluations).
+    Muller,
+    /// Newton's method with the analytic derivative of F ([`Evaluator::residual_d`]), which
+    /// spec §5.3 allows as an alternative "if it passes the same tests". Stops when a step is
+    /// below `step_rtol`, or as soon as the convergence is visibly quadratic (a step below
+    /// √step_rtol that is under 1 % of the one before), since the next step would then be below
+    /// `step_rtol`. Falls back to Muller if it does not converge.
+    Newton,
 }
 
 impl Tolerance {
@@ -169,12 +184,14 @@ impl Tolerance {
     pub const REFERENCE: Tolerance = Tolerance {
         step_rtol: MULLER_STEP_RTOL,
         residual_stop: 0.0,
+        method: RootMethod::Muller,
     };
     /// For the inversion: stop at |dx| ≤ 1e-10|x| or |F| ≤ 1e-12, far below any measurement
     /// noise yet smooth enough for finite-difference Jacobians with relative steps of 1e-6.
     pub const FAST: Tolerance = Tolerance {
         step_rtol: 1e-10,
         residual_stop: 1e-12,
+        method: RootMethod::Newton,
     };
 }
 
@@ -244,6 +261,62 @@ fn muller(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
     Err(fail(f2.norm()))
 }
 
+/// Newton iterations before falling back to Muller.
+pub const NEWTON_MAX_ITER: u32 = 30;
+
+/// Newton's method on F with the analytic derivative, from the guess g.
+fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
+    let fail = |r: f64| SolveError::NoConvergence {
+        omega: ev.omega,
+        residual: r,
+    };
+    let mut x = g;
+    let mut prev_step = f64::INFINITY;
+    for it in 1..=NEWTON_MAX_ITER {
+        let (f, df) = ev.residual_d(x).map_err(|_| fail(f64::NAN))?;
+        if !(f.is_finite() && df.is_finite()) || df == Complex64::new(0.0, 0.0) {
+            return Err(fail(f64::NAN));
+        }
+        let r = f.norm();
+        if r <= tol.residual_stop {
+            return Ok(MullerOut {
+                k1: x,
+                residual: r,
+                iterations: it,
+            });
+        }
+        let mut dx = -f / df;
+        // A step longer than half the root is not trusted: shorten it (a damped Newton step).
+        if dx.norm() > 0.5 * x.norm() {
+            dx *= 0.5 * x.norm() / dx.norm();
+        }
+        let x_new = x + dx;
+        let step = dx.norm() / x_new.norm();
+        let quadratic = it >= 2 && step <= tol.step_rtol.sqrt() && step <= 0.01 * prev_step;
+        if step <= tol.step_rtol || quadratic {
+            if r > RESIDUAL_ATOL.max(1e3 * step) {
+                return Err(fail(r));
+            }
+            return Ok(MullerOut {
+                k1: x_new,
+                residual: r,
+                iterations: it,
+            });
+        }
+        prev_step = step;
+        x = x_new;
+    }
+    Err(fail(f64::NAN))
+}
+
+/// The root from guess g by the chosen iteration (Newton falls back to Muller on failure).
+fn iterate(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
+    match tol.method {
+        RootMethod::Muller => muller(ev, g, tol),
+        RootMethod::Newton => newton(ev, g, tol).or_else(|_| muller(ev, g, tol)),
+    }
+}
+
 /// Classify a converged root: wrong root (error) or flags (spec §5.6, §3.2).
 fn classify(system: &System, ev: &Evaluator, out: MullerOut) -> Result<Root, SolveError> {
     let k1 = out.k1;
@@ -302,7 +375,7 @@ pub fn solve_from_guess_tol(
         return Err(SolveError::InvalidFrequency { omega });
     }
     let ev = Evaluator::new(system, omega);
-    let out = muller(&ev, guess, tol)?;
+    let out = iterate(&ev, guess, tol)?;
     classify(system, &ev, out)
 }
 
@@ -318,7 +391,7 @@ fn solve_direct_tol(system: &System, omega: f64, tol: Tolerance) -> Result<Root,
     }
     let ev = Evaluator::new(system, omega);
     let g = ev.in_vacuo_root();
-    classify(system, &ev, muller(&ev, g, tol)?)
+    classify(system, &ev, iterate(&ev, g, tol)?)
 }
 
 /// Options of the frequency continuation.
