@@ -461,9 +461,9 @@ pub fn diagnose_segment(
                 &effects,
             )
         };
-        // Without a base fit to compare with, the extension must itself explain the data.
-        let explains =
-            !base_failed || structure(&after, fit.estimates.len()).p_value >= STRUCTURE_P;
+        // The extension must itself explain the data: an effect that removes part of a gross
+        // misfit (a wrong inventory material, a unit mix-up) is not the missing physics.
+        let explains = structure(&after, fit.estimates.len()).p_value >= EXPLAINED_P;
         let accepted = p_value < ALPHA / n_tests
             && explains
             && d_aicc < 0.0
@@ -760,4 +760,57 @@ pub fn pool(diags: &[Diagnosis], groups: &[Vec<String>]) -> Vec<GroupFinding> {
 /// The effect's fitted value and standard error in a fit.
 pub fn effect_value(fit: &FitResult, e: Effect) -> Option<(f64, Option<f64>)> {
     fit.get(Param::Effect(e)).map(|x| (x.value, x.std))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trend_runs_and_aicc() {
+        let x = [100.0, 200.0, 300.0, 400.0, 500.0];
+        // A perfect line has an infinite t statistic; noise around a flat line a small one.
+        assert!(trend_t(&x, &[1.0, 2.0, 3.0, 4.0, 5.0]).is_infinite());
+        let t = trend_t(&x, &[0.1, -0.2, 0.15, -0.1, 0.05]);
+        assert!(t.abs() < 1.0, "{t}");
+        // Hand value: y = [0, 1, 0, 1, 3] on x = 1..5: slope 0.6, residual sum of squares 2.4,
+        // t = 0.6 / sqrt(2.4/3/10).
+        let t = trend_t(&[1.0, 2.0, 3.0, 4.0, 5.0], &[0.0, 1.0, 0.0, 1.0, 3.0]);
+        assert!(
+            (t - 0.6 / (2.4f64 / 3.0 / 10.0).sqrt()).abs() < 1e-12,
+            "{t}"
+        );
+        assert_eq!(runs(&[1.0, 2.0, -1.0, -3.0, 2.0]), 3);
+        assert_eq!(runs(&[]), 0);
+        assert_eq!(aicc(10.0, 12, 3), 10.0 + 6.0 + 24.0 / 8.0);
+        assert!(aicc(1.0, 4, 3).is_infinite());
+    }
+
+    #[test]
+    fn structure_separates_noise_from_misfit() {
+        let f = vec![100.0, 200.0, 300.0, 400.0, 500.0, 600.0];
+        let quiet = Residuals {
+            frequency_hz: f.clone(),
+            re: vec![0.5, -0.8, 0.3, 1.1, -0.4, 0.2],
+            att: vec![-0.9, 0.4, 0.7, -0.2, 1.0, -0.6],
+        };
+        let s = structure(&quiet, 3);
+        assert!(
+            !s.structured && s.pattern == "residuals within the noise",
+            "{s:?}"
+        );
+        // Attenuation far above the data and rising: the signature of a missing loss.
+        let lossy = Residuals {
+            frequency_hz: f,
+            re: vec![0.5, -0.8, 0.3, 1.1, -0.4, 0.2],
+            att: vec![-2.0, -3.5, -5.0, -6.8, -8.1, -9.9],
+        };
+        let s = structure(&lossy, 3);
+        assert!(s.structured, "{s:?}");
+        assert_eq!(
+            s.pattern,
+            "attenuation: model below the data, falling with frequency"
+        );
+        assert_eq!(s.runs, (5, 1));
+    }
 }
