@@ -198,7 +198,6 @@ pub fn paper_case_data() -> crate::invert::SegmentData {
 
 /// A synthetic 4-frequency DN150 ductile-iron segment in loam with stated 1 %/5 % noise.
 pub fn synthetic_iron_data() -> crate::invert::SegmentData {
-    use crate::invert::{Measurement, SegmentData};
     use rand::SeedableRng;
     let pipe = Pipe::new(1.70e11, 0.28, 7100.0, 0.01, 0.082, 0.006).expect("valid");
     let soil = Soil::new(5.0e7, 0.35, 1900.0, 0.0).expect("valid");
@@ -214,31 +213,12 @@ pub fn synthetic_iron_data() -> crate::invert::SegmentData {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let meas = crate::synth::measure(&sys, &[150.0, 400.0, 800.0, 1300.0], &mut rng)
         .expect("forward model solves");
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe,
-        soil_density: 1900.0,
-        material: Some(crate::physics::Material::DuctileIron),
-        measurements: meas
-            .iter()
-            .map(|m| {
-                Measurement::new(
-                    crate::units::hz_to_omega(m.frequency_hz),
-                    m.k_re,
-                    m.attenuation,
-                    Some(m.k_re_std),
-                    Some(m.attenuation_std),
-                )
-                .expect("valid")
-            })
-            .collect(),
-    }
+    crate::synth::segment_data(crate::physics::Material::DuctileIron, pipe, 1900.0, &meas)
 }
 
 /// A synthetic 6-frequency MDPE service pipe (OD 125 mm, SDR 11) in sand, stated noise: a
 /// case whose soil is well identified.
 pub fn synthetic_mdpe_data() -> crate::invert::SegmentData {
-    use crate::invert::{Measurement, SegmentData};
     use rand::SeedableRng;
     let props = crate::physics::Material::Mdpe.typical();
     let pipe = Pipe::from_outside_diameter(props, 0.125, 0.0114).expect("valid");
@@ -255,25 +235,7 @@ pub fn synthetic_mdpe_data() -> crate::invert::SegmentData {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12);
     let meas = crate::synth::measure(&sys, &[80.0, 150.0, 250.0, 350.0, 450.0, 550.0], &mut rng)
         .expect("forward model solves");
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe,
-        soil_density: 1850.0,
-        material: Some(crate::physics::Material::Mdpe),
-        measurements: meas
-            .iter()
-            .map(|m| {
-                Measurement::new(
-                    crate::units::hz_to_omega(m.frequency_hz),
-                    m.k_re,
-                    m.attenuation,
-                    Some(m.k_re_std),
-                    Some(m.attenuation_std),
-                )
-                .expect("valid")
-            })
-            .collect(),
-    }
+    crate::synth::segment_data(crate::physics::Material::Mdpe, pipe, 1850.0, &meas)
 }
 
 /// Fit time, evaluations and global-optimum rate, default against paper method, over `seeds`

@@ -137,6 +137,52 @@ pub struct SynthMeasurement {
     pub attenuation_std: f64,
 }
 
+impl SynthMeasurement {
+    /// The checked measurement the inversion takes (ω from the frequency).
+    pub fn measurement(&self) -> crate::invert::Measurement {
+        crate::invert::Measurement::new(
+            crate::units::hz_to_omega(self.frequency_hz),
+            self.k_re,
+            self.attenuation,
+            Some(self.k_re_std),
+            Some(self.attenuation_std),
+        )
+        .expect("synthetic measurements are valid")
+    }
+}
+
+/// What the fit of a synthetic pipe is given: water, the material's typical wall, the soil
+/// density and the measurements (never the truth).
+pub fn segment_data(
+    material: Material,
+    pipe: Pipe,
+    soil_density: f64,
+    measurements: &[SynthMeasurement],
+) -> crate::invert::SegmentData {
+    crate::invert::SegmentData {
+        fluid: Fluid::water(),
+        pipe,
+        soil_density,
+        material: Some(material),
+        measurements: measurements
+            .iter()
+            .map(SynthMeasurement::measurement)
+            .collect(),
+    }
+}
+
+impl SynthSegment {
+    /// What the fit is given about this segment (its inventory and measurements).
+    pub fn segment_data(&self) -> crate::invert::SegmentData {
+        segment_data(
+            self.material,
+            pipe_of(self.material, &self.size),
+            self.soil_density,
+            &self.measurements,
+        )
+    }
+}
+
 /// A deliberate defect of a "genuinely bad" segment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Defect {

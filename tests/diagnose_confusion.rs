@@ -6,35 +6,10 @@
 use std::collections::BTreeMap;
 
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
-use pipewave::invert::{Measurement, SegmentData};
 use pipewave::physics::effects::Effect;
-use pipewave::physics::{Fluid, Model};
-use pipewave::synth::{generate, pipe_of, SynthOptions, SynthSegment};
-use pipewave::units::hz_to_omega;
+use pipewave::physics::Model;
+use pipewave::synth::{generate, SynthOptions};
 use rayon::prelude::*;
-
-fn data_of(s: &SynthSegment) -> SegmentData {
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe: pipe_of(s.material, &s.size),
-        soil_density: s.soil_density,
-        material: Some(s.material),
-        measurements: s
-            .measurements
-            .iter()
-            .map(|m| {
-                Measurement::new(
-                    hz_to_omega(m.frequency_hz),
-                    m.k_re,
-                    m.attenuation,
-                    Some(m.k_re_std),
-                    Some(m.attenuation_std),
-                )
-                .unwrap()
-            })
-            .collect(),
-    }
-}
 
 /// (true effect, hidden effect and its range, model generating the data).
 type Case = (&'static str, Option<(Effect, f64, f64)>, Model);
@@ -96,7 +71,7 @@ fn confusion_matrix_on_hidden_effects() {
         let res: Vec<Outcome> = net
             .par_iter()
             .map(|s| {
-                let d = diagnose_segment(&data_of(s), None, &settings);
+                let d = diagnose_segment(&s.segment_data(), None, &settings);
                 Outcome {
                     truth,
                     named: d

@@ -5,32 +5,9 @@
 
 use pipewave::invert::*;
 use pipewave::physics::{ContactMode, Fluid, Model, Soil, System};
-use pipewave::synth::{generate, pipe_of, SynthOptions, SynthSegment};
+use pipewave::synth::{generate, pipe_of, SynthOptions};
 use pipewave::units::hz_to_omega;
 use rayon::prelude::*;
-
-fn data_of(s: &SynthSegment) -> SegmentData {
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe: pipe_of(s.material, &s.size),
-        soil_density: s.soil_density,
-        material: Some(s.material),
-        measurements: s
-            .measurements
-            .iter()
-            .map(|m| {
-                Measurement::new(
-                    hz_to_omega(m.frequency_hz),
-                    m.k_re,
-                    m.attenuation,
-                    Some(m.k_re_std),
-                    Some(m.attenuation_std),
-                )
-                .unwrap()
-            })
-            .collect(),
-    }
-}
 
 fn quantile(v: &mut [f64], p: f64) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -48,7 +25,7 @@ fn recovery_over_100_synthetic_segments() {
     assert_eq!(net.len(), 100);
     let fits: Vec<FitResult> = net
         .par_iter()
-        .map(|s| fit_segment(&data_of(s), &FitSettings::default(), 17))
+        .map(|s| fit_segment(&s.segment_data(), &FitSettings::default(), 17))
         .collect();
     let mut e_err_ok = Vec::new();
     let mut nu_err_ok = Vec::new();
@@ -148,7 +125,7 @@ fn default_never_worse_than_paper_on_its_objective() {
     });
     let mut better = 0;
     for s in &net {
-        let d = data_of(s);
+        let d = s.segment_data();
         let def = fit_segment(&d, &FitSettings::default(), 5);
         let pap = fit_segment(
             &d,
