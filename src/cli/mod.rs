@@ -7,6 +7,7 @@ mod bench;
 mod calibrate;
 mod diagnose;
 mod export;
+mod fit;
 mod forward;
 mod import;
 mod run;
@@ -59,6 +60,8 @@ enum Command {
     Audit(audit::AuditArgs),
     /// Find where model and measurements disagree, name the missing effect, refit with it.
     Diagnose(diagnose::DiagnoseArgs),
+    /// Fit segments from CSV files without keeping a database; write the fits as CSV.
+    Fit(fit::FitArgs),
 }
 
 /// How a command that ran ended.
@@ -95,6 +98,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Export(args) => export::run(&args),
         Command::Audit(args) => audit::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
+        Command::Fit(args) => fit::run(&args),
     }
 }
 

@@ -112,6 +112,9 @@ fn num(v: f64) -> String {
     }
 }
 
+/// At most this many segments get a detailed section (plot and candidate table).
+pub const MAX_DETAILED: usize = 200;
+
 /// Escape text for HTML.
 pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -262,8 +265,25 @@ pub fn write_html(
         }
         h.push_str("</table>");
     }
-    h.push_str("<h2>Segments</h2>");
-    for (id, d) in ids.iter().zip(diags) {
+    // Detail for the segments that have something to show, at most MAX_DETAILED of them, so
+    // that the page stays readable for a whole network.
+    let detailed: Vec<(&String, &Diagnosis)> = ids
+        .iter()
+        .zip(diags)
+        .filter(|(_, d)| d.structure.structured || d.named.is_some() || diags.len() <= 50)
+        .take(MAX_DETAILED)
+        .collect();
+    let _ = write!(
+        h,
+        "<h2>Segments</h2><p>Residuals and candidates for {} segments{}.</p>",
+        detailed.len(),
+        if diags.len() > 50 {
+            " with misfit far above the noise or a named effect"
+        } else {
+            ""
+        }
+    );
+    for (id, d) in detailed {
         let _ = write!(h, "<div class=\"seg\" id=\"s-{0}\"><h3>{0}</h3>", esc(id));
         if d.assumed_noise {
             h.push_str("<p><em>No measurement standard deviations were stated: 1 % on Re k and 10 % on the attenuation were assumed.</em></p>");
