@@ -458,9 +458,7 @@ fn locked_run(
     for st in states.iter().filter(|st| st.has_measurements) {
         with_measurements.push(st.segment_id.clone());
         let (_, hash) = settings_for(&st.segment_id)?;
-        let stale = st.fit_inputs_hash.as_deref() != Some(st.inputs_hash.as_str())
-            || st.fit_settings_hash.as_deref() != Some(hash.as_str());
-        if opts.force || stale {
+        if opts.force || st.is_stale(&hash) {
             needing.push(st.segment_id.clone());
         }
     }

@@ -69,6 +69,16 @@ pub struct FitState {
     pub has_measurements: bool,
 }
 
+impl FitState {
+    /// Whether the segment needs a (re)fit under settings whose hash is `settings_hash`: it has
+    /// measurements and no fit yet, or its latest fit was made from other inputs or settings.
+    pub fn is_stale(&self, settings_hash: &str) -> bool {
+        self.has_measurements
+            && (self.fit_inputs_hash.as_deref() != Some(self.inputs_hash.as_str())
+                || self.fit_settings_hash.as_deref() != Some(settings_hash))
+    }
+}
+
 /// The fit state of every segment, by id.
 pub fn fit_states(conn: &Connection) -> Result<Vec<FitState>, DbError> {
     let mut stmt = conn.prepare(

@@ -580,26 +580,21 @@ pub fn curves_for(
     Ok(rows.collect::<Result<_, _>>()?)
 }
 
-/// The segments calibrate must fit, sorted by id: those with at least one measurement whose
-/// latest fit is missing, or was made from other inputs (`inputs_hash`) or other settings
-/// (`settings_hash`). With `force`, every segment with measurements.
+/// The segments to fit under one settings hash for all, sorted by id: those with at least one
+/// measurement whose latest fit is missing, or was made from other inputs (`inputs_hash`) or
+/// other settings (`settings_hash`); with `force`, every segment with measurements. The rule is
+/// [`super::FitState::is_stale`], which `calibrate` applies with each segment's own settings
+/// hash (the run's effects plus the segment's, table `segment_effects`).
 pub fn segments_needing_fit(
     conn: &Connection,
     settings_hash: &str,
     force: bool,
 ) -> Result<Vec<String>, DbError> {
-    let mut stmt = conn.prepare(
-        "SELECT s.segment_id FROM segments s \
-         LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
-         WHERE EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id) \
-           AND (?2 OR f.id IS NULL OR f.inputs_hash <> s.inputs_hash \
-                OR f.settings_hash <> ?1) \
-         ORDER BY s.segment_id",
-    )?;
-    let ids = stmt
-        .query_map(params![settings_hash, force], |r| r.get(0))?
-        .collect::<Result<_, _>>()?;
-    Ok(ids)
+    Ok(super::effects::fit_states(conn)?
+        .into_iter()
+        .filter(|st| st.has_measurements && (force || st.is_stale(settings_hash)))
+        .map(|st| st.segment_id)
+        .collect())
 }
 
 #[cfg(test)]
