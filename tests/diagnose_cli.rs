@@ -3,6 +3,8 @@
 //! `diagnose` names the effect, stores the extended fits and switches the effect on for those
 //! segments, and the next `calibrate` uses it.
 
+mod report_check;
+
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Output};

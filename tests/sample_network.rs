@@ -5,6 +5,8 @@
 //! release build, 35 s when they are shared (measured; see sample_network/README.md), well under
 //! the 2 minutes above which it would leave the default suite.
 
+mod report_check;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -157,6 +159,30 @@ fn sample_network_recovery() {
         r.modulus_rel_err_flagged.median > r.modulus_rel_err.median,
         "{r}"
     );
+    // The audit report of the sample network: every section, every SVG well-formed.
+    let report = dir.join("report.html");
+    run_ok(&[
+        "audit",
+        "--db",
+        dir.join("pipewave.sqlite").to_str().unwrap(),
+        "--out",
+        report.to_str().unwrap(),
+    ]);
+    let html = std::fs::read_to_string(&report).unwrap();
+    for s in report_check::SECTIONS {
+        assert!(
+            html.contains(&format!("<section id=\"{s}\">")),
+            "section {s} missing"
+        );
+    }
+    let svgs = report_check::svgs(&html);
+    assert!(svgs.len() >= 6, "{} SVGs", svgs.len());
+    for svg in svgs {
+        report_check::parse_xml(svg);
+    }
+    // Self-contained: no scripts, nothing fetched.
+    assert!(!html.contains("<script"));
+    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
     // The published cases are fitted.
     assert_eq!(r.unknown_truth.len(), 2, "{r}");
     assert!(r
