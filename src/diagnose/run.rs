@@ -161,32 +161,43 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
     let done: Vec<Result<Done, (String, String)>> = pool.install(|| {
         todo.into_par_iter()
             .map(|(record, settings)| {
-                let data = segment_data(&record)
-                    .map_err(|e| (record.segment_id.clone(), format!("invalid inputs: {e}")))?;
-                // The current fit, reproduced: same settings and seed give the stored fit
-                // bit for bit. Without stated stds the diagnosis refits with assumed noise.
-                let has_stds = data
-                    .measurements
-                    .iter()
-                    .all(|m| m.k_re_std.is_some() && m.attenuation_std.is_some());
-                let base = has_stds.then(|| {
-                    fit_segment(
-                        &data,
-                        &FitSettings {
-                            method: Method::Default,
-                            model: settings.model,
-                            contact_mode: settings.contact_mode,
-                            effects: settings.base_effects.clone(),
-                            ..FitSettings::default()
-                        },
-                        settings.seed,
-                    )
-                });
-                let diagnosis = diagnose_segment(&data, base, &settings);
-                Ok(Done {
-                    record,
-                    settings,
-                    diagnosis,
+                // A panic inside one segment's diagnosis skips that segment with its reason
+                // instead of ending the run.
+                let id = record.segment_id.clone();
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    let data = segment_data(&record)
+                        .map_err(|e| (record.segment_id.clone(), format!("invalid inputs: {e}")))?;
+                    // The current fit, reproduced: same settings and seed give the stored fit
+                    // bit for bit. Without stated stds the diagnosis refits with assumed noise.
+                    let has_stds = data
+                        .measurements
+                        .iter()
+                        .all(|m| m.k_re_std.is_some() && m.attenuation_std.is_some());
+                    let base = has_stds.then(|| {
+                        fit_segment(
+                            &data,
+                            &FitSettings {
+                                method: Method::Default,
+                                model: settings.model,
+                                contact_mode: settings.contact_mode,
+                                effects: settings.base_effects.clone(),
+                                ..FitSettings::default()
+                            },
+                            settings.seed,
+                        )
+                    });
+                    let diagnosis = diagnose_segment(&data, base, &settings);
+                    Ok::<_, (String, String)>(Done {
+                        record,
+                        settings,
+                        diagnosis,
+                    })
+                }))
+                .unwrap_or_else(|_| {
+                    Err((
+                        id,
+                        "internal error in the diagnosis (please report it)".into(),
+                    ))
                 })
             })
             .collect()
