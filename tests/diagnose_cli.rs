@@ -63,6 +63,19 @@ fn diagnose_names_adds_and_the_next_calibrate_uses_the_effect() {
     ]);
     ok(&["run", &s(&net), "--jobs", "2"]);
     let db = net.join("pipewave.sqlite");
+    // The stored fits' chi2/dof, before the diagnosis adds any row.
+    let stored: BTreeMap<String, f64> = {
+        let conn = rusqlite::Connection::open(&db).unwrap();
+        let mut st = conn
+            .prepare("SELECT segment_id, chi2_per_dof FROM latest_fits")
+            .unwrap();
+        let v = st
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
+        v
+    };
     let out = tmp.path().join("diag");
     let d = ok(&[
         "diagnose",
@@ -86,6 +99,9 @@ fn diagnose_names_adds_and_the_next_calibrate_uses_the_effect() {
     for r in &diag {
         let hidden = &truth[&r["segment_id"]];
         let before: f64 = r["chi2_per_dof_before"].parse().unwrap();
+        // The diagnosis starts from the stored fit, reproduced bit for bit (same settings and
+        // seed).
+        assert_eq!(before, stored[&r["segment_id"]], "{}", r["segment_id"]);
         if hidden.is_empty() {
             assert_eq!(
                 r["named_effect"], "none",

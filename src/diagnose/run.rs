@@ -150,7 +150,10 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
                     candidates: opts.candidates.clone(),
                     seed: f.seed.unwrap_or(1),
                 };
-                todo.push((rec, settings));
+                // The stored fit's method, so that its refit below reproduces it ("diagnose"
+                // rows were made by the default method).
+                let method: Method = f.method.parse().unwrap_or(Method::Default);
+                todo.push((rec, settings, method));
             }
         }
     }
@@ -160,7 +163,7 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
         .map_err(|_| DiagnoseError::Threads(opts.jobs))?;
     let done: Vec<Result<Done, (String, String)>> = pool.install(|| {
         todo.into_par_iter()
-            .map(|(record, settings)| {
+            .map(|(record, settings, method)| {
                 // A panic inside one segment's diagnosis skips that segment with its reason
                 // instead of ending the run.
                 let id = record.segment_id.clone();
@@ -177,7 +180,7 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
                         fit_segment(
                             &data,
                             &FitSettings {
-                                method: Method::Default,
+                                method,
                                 model: settings.model,
                                 contact_mode: settings.contact_mode,
                                 effects: settings.base_effects.clone(),
