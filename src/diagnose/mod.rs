@@ -563,11 +563,9 @@ fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) 
         Effect::WallThinning => (1.0, -1.0),
         _ => (par.neutral, 1.0),
     };
-    let h = match e {
-        Effect::AirInWater => 1e-6,
-        Effect::WallThinning => 1e-3,
-        _ => 1e-3,
-    };
+    // One-sided step in the natural parameter: 1e-6 in air fraction (it acts on the scale of
+    // 1e-5, spec §8 E3), 1e-3 in the loss factors and the wall ratio.
+    let h = if e == Effect::AirInWater { 1e-6 } else { 1e-3 };
     let Ok(sys1) = e.apply(&sys0, neutral + dir * h) else {
         return 0.0;
     };

@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::{effect_value, Diagnosis, GroupFinding, Residuals};
+use crate::report::svg::escape as esc;
 use crate::units::sig;
 
 /// Columns of `diagnosis.csv`: the interface's, then details.
@@ -114,14 +115,6 @@ fn num(v: f64) -> String {
 
 /// At most this many segments get a detailed section (plot and candidate table).
 pub const MAX_DETAILED: usize = 200;
-
-/// Escape text for HTML.
-pub fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 /// An inline SVG of normalised residuals against frequency: Re k (circles) and attenuation
 /// (squares), before (hollow) and after (filled), with the ±2σ band.

@@ -5,7 +5,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::flags::{assess, Flag};
-use super::problem::{Method, Param, Problem, SegmentData, SolvePath, Weighting};
+use super::problem::{
+    Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
+};
 use crate::optimize::linalg::covariance_from_jacobian;
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, Objective, OptimizeError,
@@ -302,7 +304,9 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         let res = de
             .minimize(problem, &bounds, &mut rng)
             .map_err(|e| e.to_string())?;
-        if !res.f.is_finite() || (settings.method == Method::Paper && res.f >= 1e3) {
+        if !res.f.is_finite()
+            || (settings.method == Method::Paper && res.f >= FAILED_SOLVE_OBJECTIVE)
+        {
             continue;
         }
         let opt = match settings.method {

@@ -36,19 +36,9 @@ impl Spread {
     }
 }
 
-/// Quantile `p` of sorted values, by linear interpolation between order statistics
-/// (Hyndman & Fan type 7, the default of R and NumPy). NaN when empty.
+/// Quantile `p` of sorted values (type 7, [`crate::report::quantile`]); NaN when empty.
 pub fn quantile(sorted: &[f64], p: f64) -> f64 {
-    match sorted.len() {
-        0 => f64::NAN,
-        1 => sorted[0],
-        n => {
-            let h = (n - 1) as f64 * p.clamp(0.0, 1.0);
-            let lo = h.floor() as usize;
-            let hi = (lo + 1).min(n - 1);
-            sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
-        }
-    }
+    crate::report::quantile(sorted, p).unwrap_or(f64::NAN)
 }
 
 /// How the defective segments of one kind were caught.

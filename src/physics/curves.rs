@@ -13,7 +13,8 @@ pub const STANDARD_GRID_HZ: [f64; 32] = [
     1400.0, 1500.0, 1600.0, 1800.0, 2000.0,
 ];
 
-/// The typical leak-noise band a correlator operator uses, Hz (issue 5).
+/// The typical leak-noise band a correlator operator uses, Hz (issue 5). Its mean speed is
+/// `export::record::band_mean_speed`, from the stored curve.
 pub const LEAK_BAND_HZ: (f64, f64) = (100.0, 800.0);
 
 /// One point of a curve.
@@ -50,22 +51,4 @@ pub fn curve(system: &System, frequencies_hz: &[f64]) -> Vec<CurvePoint> {
             },
         })
         .collect()
-}
-
-/// Mean phase speed over a band (Hz), by the trapezoidal rule on 36 evenly spaced points:
-/// the single figure a correlator operator types in. `None` if any root failed.
-pub fn band_mean_speed(system: &System, band_hz: (f64, f64)) -> Option<f64> {
-    const N: usize = 36;
-    let f: Vec<f64> = (0..N)
-        .map(|i| band_hz.0 + (band_hz.1 - band_hz.0) * i as f64 / (N - 1) as f64)
-        .collect();
-    let pts = curve(system, &f);
-    if pts.iter().any(|p| p.status.is_err()) {
-        return None;
-    }
-    let mut s = 0.0;
-    for w in pts.windows(2) {
-        s += 0.5 * (w[0].phase_speed + w[1].phase_speed) * (w[1].frequency_hz - w[0].frequency_hz);
-    }
-    Some(s / (band_hz.1 - band_hz.0))
 }
