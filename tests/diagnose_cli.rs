@@ -121,9 +121,30 @@ fn diagnose_names_adds_and_the_next_calibrate_uses_the_effect() {
         !named.is_empty(),
         "no thinned segment had a misfit to explain"
     );
-    assert!(std::fs::read_to_string(out.join("diagnosis.html"))
-        .unwrap()
-        .contains("<svg"));
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    let svgs = report_check::svgs(&html);
+    assert_eq!(
+        svgs.len(),
+        8,
+        "one residual plot per segment of a small network"
+    );
+    for svg in svgs {
+        report_check::parse_xml(svg);
+    }
+    // Pooling: each named segment's material group names the same effect.
+    let material: BTreeMap<String, String> = rows(&net.join("segments.csv"))
+        .into_iter()
+        .map(|r| (r["segment_id"].clone(), r["material"].clone()))
+        .collect();
+    let pooled = &html[html.find("Pooled over groups").expect("pooled table")..];
+    let pooled = &pooled[..pooled.find("</table>").unwrap()];
+    for id in &named {
+        let row = pooled
+            .split("<tr>")
+            .find(|r| r.contains(&format!("<td>material={}</td>", material[id])))
+            .unwrap_or_else(|| panic!("no pooled row for {id}'s material"));
+        assert!(row.contains("<td>wall_thinning</td>"), "{row}");
+    }
 
     // Step 3: the extended fits are stored and the effect is switched on for those segments.
     let conn = rusqlite::Connection::open(&db).unwrap();
