@@ -177,25 +177,19 @@ pub struct FitFigure {
     pub runs: usize,
 }
 
-/// The paper's cast-iron case (Table 2, inferred DN125 geometry): 4 frequencies, no stds.
+/// The paper's cast-iron case (Table 2, inferred DN125 geometry): 4 frequencies, no stds, as
+/// in the sample network (`network::published::lu2022`).
 pub fn paper_case_data() -> crate::invert::SegmentData {
-    use crate::invert::{Measurement, SegmentData};
-    let rows = [
-        (3121.958, 2.508, 0.00544),
-        (4167.04, 3.3276, 0.00882),
-        (7221.736, 5.9966, 0.0274),
-        (10314.48, 8.16, 0.0596),
-    ];
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe: Pipe::new(1.22e11, 0.25, 7800.0, 0.01, 0.069, 0.006).expect("valid"),
-        soil_density: 1999.0,
-        material: Some(crate::physics::Material::CastIron),
-        measurements: rows
-            .iter()
-            .map(|&(w, k, a)| Measurement::new(w, k, a, None, None).expect("valid"))
-            .collect(),
-    }
+    crate::network::published::lu2022()
+        .and_then(|c| {
+            c.segment_data()
+                .map_err(|e| crate::network::published::PublishedDataError {
+                    file: "seed_cast_iron_table2.csv",
+                    line: 0,
+                    message: e.to_string(),
+                })
+        })
+        .expect("the embedded published data are valid")
 }
 
 /// A synthetic 4-frequency DN150 ductile-iron segment in loam with stated 1 %/5 % noise.

@@ -2,35 +2,16 @@
 //! assumption (an inferred DN125: a = 69 mm, h = 6 mm; spec §7.7), and the buried MDPE pipe of
 //! Muggleton et al. (2004). Data from `tests/data/published/` (see its README for sources).
 
-mod common;
-
-use common::*;
 use pipewave::invert::problem::Problem;
 use pipewave::invert::*;
-use pipewave::physics::{ContactMode, Fluid, Material, Model, Pipe};
-use pipewave::units::{db_to_np, hz_to_omega};
+use pipewave::physics::{ContactMode, Model};
 
+/// The case as the sample network carries it (the embedded `tests/data/published` files).
 fn paper_data() -> SegmentData {
-    let meas = read_csv("published/seed_cast_iron_table2.csv")
-        .iter()
-        .map(|r| {
-            Measurement::new(
-                r.f("omega_rad_s"),
-                r.f("k_re_rad_per_m"),
-                r.f("attenuation_np_per_m"),
-                None,
-                None,
-            )
-            .unwrap()
-        })
-        .collect();
-    SegmentData {
-        fluid: Fluid::water(),
-        pipe: Pipe::new(1.22e11, 0.25, 7800.0, 0.01, 0.069, 0.006).unwrap(),
-        soil_density: 1999.0,
-        material: Some(Material::CastIron),
-        measurements: meas,
-    }
+    pipewave::network::published::lu2022()
+        .unwrap()
+        .segment_data()
+        .unwrap()
 }
 
 /// The paper's objective f (P52–P53) at (E_m, ν_m, ξ).
@@ -173,42 +154,12 @@ fn paper_estimate_is_not_the_optimum() {
 /// than hide. Issue 6 (diagnose) looks for the missing effect.
 #[test]
 fn mdpe_measurements_fit() {
-    let rows = read_csv("published/muggleton2004_buried_mdpe.csv");
-    let mut meas = Vec::new();
-    for band in 0..13 {
-        let lo = 100.0 + 50.0 * band as f64;
-        let sel: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.f("frequency_hz") >= lo && r.f("frequency_hz") < lo + 50.0)
-            .collect();
-        let n = sel.len() as f64;
-        let mean = |k: &str| sel.iter().map(|r| r.f(k)).sum::<f64>() / n;
-        let sem = |k: &str, m: f64| {
-            (sel.iter().map(|r| (r.f(k) - m).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt()
-        };
-        let (f, k, a) = (
-            mean("frequency_hz"),
-            mean("k_re_rad_per_m"),
-            mean("attenuation_db_per_m"),
-        );
-        meas.push(
-            Measurement::new(
-                hz_to_omega(f),
-                k,
-                db_to_np(a),
-                Some(sem("k_re_rad_per_m", k)),
-                Some(db_to_np(sem("attenuation_db_per_m", a))),
-            )
-            .unwrap(),
-        );
-    }
-    let d = SegmentData {
-        fluid: Fluid::water(),
-        pipe: Pipe::new(2.0e9, 0.4, 900.0, 0.06, 0.0845, 0.011).unwrap(),
-        soil_density: 1500.0,
-        material: Some(Material::Mdpe),
-        measurements: meas,
-    };
+    let d = pipewave::network::published::muggleton2004()
+        .unwrap()
+        .segment_data()
+        .unwrap();
+    assert_eq!(d.measurements.len(), 13);
+    assert!((d.pipe.mean_radius - 0.0845).abs() < 1e-12);
     let r = fit_segment(&d, &FitSettings::default(), 1);
     assert_ne!(r.status, FitStatus::Failed, "{:?}", r.message);
     let e = r.soil_modulus().unwrap();

@@ -48,6 +48,49 @@ pub struct PublishedCase {
     pub truth: TruthRow,
 }
 
+impl PublishedCase {
+    /// What a fit is given about this case: water, the pipe from the material and the row's
+    /// overrides (a = (D_o − h)/2, eq. P6), the soil density and the measurements.
+    pub fn segment_data(&self) -> Result<crate::invert::SegmentData, crate::physics::InputError> {
+        let seg = &self.segment;
+        let typical = seg.material.typical();
+        let props = crate::physics::MaterialProps {
+            youngs_modulus: seg.pipe_youngs_modulus_pa.unwrap_or(typical.youngs_modulus),
+            poisson: seg.pipe_poisson.unwrap_or(typical.poisson),
+            density: seg.pipe_density_kg_m3.unwrap_or(typical.density),
+            loss_factor: seg.pipe_loss_factor.unwrap_or(typical.loss_factor),
+        };
+        let pipe = crate::physics::Pipe::from_outside_diameter(
+            props,
+            crate::units::mm_to_m(seg.outer_diameter_mm),
+            crate::units::mm_to_m(seg.wall_thickness_mm),
+        )?;
+        let measurements = self
+            .measurements
+            .iter()
+            .map(|m| {
+                let omega = m
+                    .omega_rad_s
+                    .unwrap_or_else(|| crate::units::hz_to_omega(m.frequency_hz.unwrap_or(0.0)));
+                crate::invert::Measurement::new(
+                    omega,
+                    m.k_re_rad_per_m,
+                    m.attenuation_np_per_m,
+                    m.k_re_std,
+                    m.attenuation_std,
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(crate::invert::SegmentData {
+            fluid: crate::physics::Fluid::water(),
+            pipe,
+            soil_density: seg.soil_density_kg_m3,
+            material: Some(seg.material),
+            measurements,
+        })
+    }
+}
+
 /// A problem with an embedded data file (only possible if the files in `tests/data/published/`
 /// are edited into an unreadable form).
 #[derive(Debug, thiserror::Error)]
