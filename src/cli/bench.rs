@@ -90,7 +90,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
         let mut database = import_dir(dir, &db_path)?;
         outcome = calibrate::execute(&mut database, &opts)?;
         let fits = db::latest_fits(database.conn(), None)?;
-        print!("{}", recovery::compare(&fits, &truth));
+        print!(
+            "{}",
+            recovery::compare(&fits, &truth, &recovery::soil_densities(database.conn())?)
+        );
     }
     if args.calibrate.is_none() && args.recovery.is_none() {
         let figs = pipewave::bench::forward_figures(args.scale.max(1));
