@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, InputError, Model, Pipe, Soil, System};
 use crate::units::np_to_db;
@@ -137,14 +138,15 @@ pub fn run(input: &Path, output: &Path) -> Result<ForwardReport, ForwardError> {
         path: output.to_path_buf(),
         source,
     };
-    let mut wtr = csv::Writer::from_path(output).map_err(write_err)?;
+    // Safe to open in a spreadsheet: text quoted, a formula-like case id prefixed with `'`.
+    let mut wtr = spreadsheet::writer_from_path(output).map_err(write_err)?;
     wtr.write_record(OUTPUT_COLUMNS).map_err(write_err)?;
     let mut report = ForwardReport::default();
     for rec in rdr.records() {
         let rec = rec.map_err(read_err)?;
         report.rows += 1;
         let line = rec.position().map(|p| p.line()).unwrap_or(0);
-        let case_id = rec.get(idx[0]).unwrap_or("").to_string();
+        let case_id = spreadsheet_safe(rec.get(idx[0]).unwrap_or("")).into_owned();
         let row = match parse_case(&rec, &idx) {
             Ok((sys, omega)) => {
                 let r = solve_curve(&sys, &[omega], Continuation::default())

@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::{effect_value, Diagnosis, GroupFinding, Residuals};
+use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::report::svg::escape as esc;
 use crate::units::sig;
 
@@ -63,14 +64,16 @@ pub fn evidence(d: &Diagnosis) -> String {
     }
 }
 
-/// Write `diagnosis.csv`. `ids[i]` and `groups[i]` belong to `diags[i]`.
+/// Write `diagnosis.csv`. `ids[i]` and `groups[i]` belong to `diags[i]`. Safe to open in a
+/// spreadsheet: text quoted, a formula-like id or group prefixed with `'`
+/// ([`spreadsheet`](crate::export::spreadsheet)).
 pub fn write_csv(
     path: &Path,
     ids: &[String],
     diags: &[Diagnosis],
     groups: &[String],
 ) -> Result<(), csv::Error> {
-    let mut w = csv::Writer::from_path(path)?;
+    let mut w = spreadsheet::writer_from_path(path)?;
     w.write_record(CSV_COLUMNS)?;
     for ((id, d), g) in ids.iter().zip(diags).zip(groups) {
         let (val, std) = d
@@ -80,14 +83,14 @@ pub fn write_csv(
             .unwrap_or_default();
         let r = d.chosen();
         w.write_record([
-            id.as_str(),
+            spreadsheet_safe(id).as_ref(),
             d.named.map(|e| e.name()).unwrap_or("none"),
             &val,
             &std,
             &num(d.chi2_per_dof_before()),
             &num(d.chi2_per_dof_after()),
             &evidence(d),
-            g,
+            spreadsheet_safe(g).as_ref(),
             if d.structure.structured { "1" } else { "0" },
             &d.structure.pattern,
             &d.ambiguous_with

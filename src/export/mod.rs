@@ -5,6 +5,7 @@
 //!   the list of exported properties ([`record::PROPERTIES`]).
 //! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
 //! - [`gpkg`], [`geojson`], [`csv`]: the writers.
+//! - [`spreadsheet`]: the rule every CSV writer follows so a cell never opens as a formula.
 //!
 //! Every writer writes a temporary file beside the target and renames it over the target at the
 //! end, so a failed export never leaves a half-written file, and it refuses to replace the
@@ -15,6 +16,7 @@ pub mod csv;
 pub mod geojson;
 pub mod gpkg;
 pub mod record;
+pub mod spreadsheet;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
