@@ -233,6 +233,9 @@ pub struct FitResult {
     pub curve: Vec<PredictedPoint>,
     /// Mean phase speed over [`LEAK_BAND_HZ`], m/s, with its error.
     pub leak_band_speed: Option<WithError>,
+    /// Wall-clock time of building the result after the search (uncertainty, curve with
+    /// errors, findings), s: what reporting what the data determine costs (`pipewave bench`).
+    pub result_seconds: f64,
 }
 
 impl FitResult {
@@ -287,6 +290,7 @@ impl FitResult {
             s_wave_speed: None,
             curve: Vec::new(),
             leak_band_speed: None,
+            result_seconds: 0.0,
         }
     }
 }
@@ -525,6 +529,7 @@ fn assemble(
     predicted: Vec<Complex64>,
     roots: &[Root],
 ) -> Result<FitResult, String> {
+    let started = std::time::Instant::now();
     let x = &optima[best_i].x;
     let n = problem.specs.len();
     let m = problem.n_residuals();
@@ -609,6 +614,7 @@ fn assemble(
         s_wave_speed: Some(determined.s_wave_speed),
         curve,
         leak_band_speed,
+        result_seconds: started.elapsed().as_secs_f64(),
     })
 }
 
