@@ -42,7 +42,8 @@ struct TestPipe {
 fn make_pipe(rng: &mut ChaCha8Rng, id: &str, material: Material, seconds: f64) -> TestPipe {
     let sizes = pipewave::synth::sizes(material);
     let sz = sizes[rng.gen_range(0..sizes.len())];
-    let (_, e_r, nu_r, rho_r) = pipewave::synth::SOILS[rng.gen_range(0..pipewave::synth::SOILS.len())];
+    let (_, e_r, nu_r, rho_r) =
+        pipewave::synth::SOILS[rng.gen_range(0..pipewave::synth::SOILS.len())];
     let e = (e_r.0.ln() + rng.gen::<f64>() * (e_r.1 / e_r.0).ln()).exp();
     let soil = Soil::new(
         e,
@@ -114,7 +115,6 @@ fn read_rows(path: &Path) -> Vec<Row> {
             "k_re_std",
             "attenuation_std",
             "campaign",
-            "notes"
         ]
     );
     r.records()
@@ -128,7 +128,7 @@ fn read_rows(path: &Path) -> Vec<Row> {
                 a: p(3),
                 ks: p(4),
                 as_: p(5),
-                notes: x[7].to_string(),
+                notes: x[6].to_string(),
             }
         })
         .collect()
@@ -171,8 +171,10 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
             rows.push((p.id.clone(), name.clone(), c, x));
         }
     }
-    let rows_ref: Vec<(&str, &str, usize, f64)> =
-        rows.iter().map(|r| (r.0.as_str(), r.1.as_str(), r.2, r.3)).collect();
+    let rows_ref: Vec<(&str, &str, usize, f64)> = rows
+        .iter()
+        .map(|r| (r.0.as_str(), r.1.as_str(), r.2, r.3))
+        .collect();
     std::fs::write(dir.join("layout.csv"), layout_text(&rows_ref)).unwrap();
     let out = dir.join("measurements.csv");
     let o = run(&[
@@ -214,12 +216,22 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
         100.0 * ca,
         100.0 * median
     );
-    assert!(ck >= 0.90, "k_re inside 2 sigma for {:.1} % of bands", 100.0 * ck);
-    assert!(ca >= 0.85, "attenuation inside 2 sigma for {:.1} % of bands", 100.0 * ca);
+    assert!(
+        ck >= 0.90,
+        "k_re inside 2 sigma for {:.1} % of bands",
+        100.0 * ck
+    );
+    assert!(
+        ca >= 0.85,
+        "attenuation inside 2 sigma for {:.1} % of bands",
+        100.0 * ca
+    );
     assert!(median <= 0.005, "k_re median error {:.3} %", 100.0 * median);
 
     // The measurements calibrate without a failed fit.
-    let mut seg = String::from("segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n");
+    let mut seg = String::from(
+        "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n",
+    );
     for p in &pipes {
         seg.push_str(&format!(
             "{},{},{},{},{}\n",
@@ -243,7 +255,11 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
         "--out".as_ref(),
         fits.as_os_str(),
     ]);
-    assert!(o.status.success(), "fit failed: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "fit failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let mut r = csv::Reader::from_path(&fits).unwrap();
     let h = r.headers().unwrap().clone();
     let col = |name: &str| h.iter().position(|c| c == name);
@@ -287,7 +303,10 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
 fn small_recording() -> (HydrantRecording, Vec<f64>) {
     let sys = System::new(
         Fluid::water(),
-        pipewave::synth::pipe_of(Material::DuctileIron, &pipewave::synth::sizes(Material::DuctileIron)[1]),
+        pipewave::synth::pipe_of(
+            Material::DuctileIron,
+            &pipewave::synth::sizes(Material::DuctileIron)[1],
+        ),
         Soil::new(5e7, 0.3, 1900.0, 0.0).unwrap(),
         0.5,
         Model::Full,
@@ -316,7 +335,11 @@ fn wavenumbers(dir: &Path, layout: &str) -> (Option<i32>, String, PathBuf) {
         "--out".as_ref(),
         out.as_os_str(),
     ]);
-    (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned(), out)
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        out,
+    )
 }
 
 fn mono(rec: &HydrantRecording, c: usize) -> HydrantRecording {
@@ -335,7 +358,11 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
     let g = gain(&rec);
     wav(dir, "ok.wav", &rec, WavFormat::Pcm16, g);
     // A good second segment in the same layout is still written when the first fails.
-    let good = [("G", "ok.wav", 0, 0.0), ("G", "ok.wav", 1, -25.0), ("G", "ok.wav", 2, 40.0)];
+    let good = [
+        ("G", "ok.wav", 0, 0.0),
+        ("G", "ok.wav", 1, -25.0),
+        ("G", "ok.wav", 2, 40.0),
+    ];
     let with_good = |bad: &[(&str, &str, usize, f64)]| {
         let mut v = bad.to_vec();
         v.extend_from_slice(&good);
@@ -345,7 +372,11 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
     // Missing channel.
     let (code, err, out) = wavenumbers(
         dir,
-        &with_good(&[("A", "ok.wav", 0, 0.0), ("A", "ok.wav", 1, -25.0), ("A", "ok.wav", 3, 40.0)]),
+        &with_good(&[
+            ("A", "ok.wav", 0, 0.0),
+            ("A", "ok.wav", 1, -25.0),
+            ("A", "ok.wav", 3, 40.0),
+        ]),
     );
     assert_eq!(code, Some(1), "{err}");
     assert!(
@@ -361,11 +392,17 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
     wav(dir, "mono.wav", &mono(&rec, 0), WavFormat::Pcm16, g);
     let (code, err, _) = wavenumbers(
         dir,
-        &layout_text(&[("A", "mono.wav", 0, 0.0), ("A", "mono.wav", 1, -25.0), ("A", "mono.wav", 2, 40.0)]),
+        &layout_text(&[
+            ("A", "mono.wav", 0, 0.0),
+            ("A", "mono.wav", 1, -25.0),
+            ("A", "mono.wav", 2, 40.0),
+        ]),
     );
     assert_eq!(code, Some(1), "{err}");
     assert!(
-        err.contains("mono.wav (named in ") && err.contains("line 3)") && err.contains("the file is mono"),
+        err.contains("mono.wav (named in ")
+            && err.contains("line 3)")
+            && err.contains("the file is mono"),
         "{err}"
     );
 
@@ -374,7 +411,10 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
     let mut fast = mono(&rec, 1);
     fast.sample_rate = 16_000;
     wav(dir, "m1.wav", &fast, WavFormat::Pcm16, g);
-    let (code, err, _) = wavenumbers(dir, &layout_text(&[("A", "m0.wav", 0, 0.0), ("A", "m1.wav", 0, -25.0)]));
+    let (code, err, _) = wavenumbers(
+        dir,
+        &layout_text(&[("A", "m0.wav", 0, 0.0), ("A", "m1.wav", 0, -25.0)]),
+    );
     assert_eq!(code, Some(1), "{err}");
     assert!(
         err.contains("m1.wav (named in ")
@@ -386,47 +426,76 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
     // Positions on the wrong side: the hydrant sensor and the +40 m sensor swapped.
     let (code, err, _) = wavenumbers(
         dir,
-        &layout_text(&[("A", "ok.wav", 0, 40.0), ("A", "ok.wav", 1, -25.0), ("A", "ok.wav", 2, 0.0)]),
+        &layout_text(&[
+            ("A", "ok.wav", 0, 40.0),
+            ("A", "ok.wav", 1, -25.0),
+            ("A", "ok.wav", 2, 0.0),
+        ]),
     );
     assert_eq!(code, Some(1), "{err}");
     assert!(
         err.contains("segment A (")
-            && err.contains("positions on the wrong side or swapped: the sensor of line 2 (ok.wav channel 0, position 40.0 m) hears the source")
-            && err.contains("before the sensor of line 4 (ok.wav channel 2, position 0 m)"),
+            && err.contains("positions on the wrong side or swapped: the sensor of line 3 (ok.wav channel 1, position -25.0 m) hears the source")
+            && err.contains("before the sensor of line 4 (ok.wav channel 2, position 0 m), although it is stated farther"),
         "{err}"
     );
 
     // Zero distance: two sensors on one side at the same distance (a layout error: exit 2).
     let (code, err, _) = wavenumbers(
         dir,
-        &layout_text(&[("A", "ok.wav", 0, 0.0), ("A", "ok.wav", 1, 40.0), ("A", "ok.wav", 2, 40.0)]),
+        &layout_text(&[
+            ("A", "ok.wav", 0, 0.0),
+            ("A", "ok.wav", 1, 40.0),
+            ("A", "ok.wav", 2, 40.0),
+        ]),
     );
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("layout.csv line 4, column position_m: segment A: zero distance"), "{err}");
+    assert!(
+        err.contains("layout.csv line 4, column position_m: segment A: zero distance"),
+        "{err}"
+    );
 
     // A clipped recording.
     wav(dir, "loud.wav", &rec, WavFormat::Pcm24, 6.0 * g);
     let (code, err, _) = wavenumbers(
         dir,
-        &layout_text(&[("A", "loud.wav", 0, 0.0), ("A", "loud.wav", 1, -25.0), ("A", "loud.wav", 2, 40.0)]),
+        &layout_text(&[
+            ("A", "loud.wav", 0, 0.0),
+            ("A", "loud.wav", 1, -25.0),
+            ("A", "loud.wav", 2, 40.0),
+        ]),
     );
     assert_eq!(code, Some(1), "{err}");
     assert!(
-        err.contains("loud.wav (named in ") && err.contains("clipped recording: channel 0 has") && err.contains("full-scale samples"),
+        err.contains("loud.wav (named in ")
+            && err.contains("clipped recording: channel 0 has")
+            && err.contains("full-scale samples"),
         "{err}"
     );
 
     // Not a WAV file at all, and a file that does not exist: messages, no panic.
     std::fs::write(dir.join("notes.wav"), "field notes, not audio").unwrap();
-    let (code, err, _) = wavenumbers(dir, &layout_text(&[("A", "notes.wav", 0, 0.0), ("A", "gone.wav", 0, 20.0)]));
+    let (code, err, _) = wavenumbers(
+        dir,
+        &layout_text(&[("A", "notes.wav", 0, 0.0), ("A", "gone.wav", 0, 20.0)]),
+    );
     assert_eq!(code, Some(1), "{err}");
-    assert!(err.contains("notes.wav (named in ") && err.contains("not a readable WAV file"), "{err}");
+    assert!(
+        err.contains("notes.wav (named in ") && err.contains("not a readable WAV file"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 
     // Bad cells of the layout: line and column named, exit 2.
-    let (code, err, _) = wavenumbers(dir, "segment_id,file,channel,position_m\nA,ok.wav,one,0\nA,ok.wav,1,\n");
+    let (code, err, _) = wavenumbers(
+        dir,
+        "segment_id,file,channel,position_m\nA,ok.wav,one,0\nA,ok.wav,1,\n",
+    );
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("line 2, column channel: 'one'") && err.contains("line 3, column position_m"), "{err}");
+    assert!(
+        err.contains("line 2, column channel: 'one'") && err.contains("line 3, column position_m"),
+        "{err}"
+    );
 }
 
 /// The noise-robust estimator: reference noise does not bias the attenuation (P77), while H1
@@ -437,20 +506,29 @@ fn three_channel_estimate_is_free_of_the_reference_noise_bias() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     wav(dir, "r.wav", &rec, WavFormat::Float32, gain(&rec));
-    let three: Vec<(&str, &str, usize, f64)> = (0..3).map(|c| ("A", "r.wav", c, positions[c])).collect();
+    let three: Vec<(&str, &str, usize, f64)> =
+        (0..3).map(|c| ("A", "r.wav", c, positions[c])).collect();
     let (code, err, out) = wavenumbers(dir, &layout_text(&three));
     assert_eq!(code, Some(0), "{err}");
     let p77 = read_rows(&out);
     let (code, err, out) = wavenumbers(dir, &layout_text(&[three[0], three[2]]));
     assert_eq!(code, Some(0), "{err}");
     let h1 = read_rows(&out);
-    assert!(h1.iter().all(|r| r.notes.contains("h1_reference_noise_bias")));
+    assert!(h1
+        .iter()
+        .all(|r| r.notes.contains("h1_reference_noise_bias")));
     let truth: &TruthCurve = &rec.truth;
     let mean_ratio = |rows: &[Row]| {
-        rows.iter().map(|r| r.a / -truth.at(r.f).unwrap().im).sum::<f64>() / rows.len() as f64
+        rows.iter()
+            .map(|r| r.a / -truth.at(r.f).unwrap().im)
+            .sum::<f64>()
+            / rows.len() as f64
     };
     let (r77, r1) = (mean_ratio(&p77), mean_ratio(&h1));
     eprintln!("attenuation / truth: P77 {r77:.3}, H1 {r1:.3}");
     assert!((r77 - 1.0).abs() < 0.05, "P77 attenuation / truth {r77}");
-    assert!(r1 > r77 + 0.03, "H1 {r1} should be biased high against P77 {r77}");
+    assert!(
+        r1 > r77 + 0.03,
+        "H1 {r1} should be biased high against P77 {r77}"
+    );
 }

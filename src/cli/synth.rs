@@ -146,7 +146,11 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         let dir = args.out.join("recordings");
         pipewave::recordings::synth::write_recordings(&dir, &rec)
             .with_context(|| format!("cannot write the recordings in {}", dir.display()))?;
-        println!("synth: wrote recordings of {} segments to {}", rec.len(), dir.display());
+        println!(
+            "synth: wrote recordings of {} segments to {}",
+            rec.len(),
+            dir.display()
+        );
         if args.recordings_only {
             return Ok(Outcome::Done);
         }

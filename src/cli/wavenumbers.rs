@@ -3,7 +3,9 @@
 //! hydrant-test recordings (physics §10).
 //!
 //! Writes the `measurements.csv` columns of docs/interface.md for the bands that carry
-//! information, plus a `notes` column (`reflection_suspected`, ...) that `import` ignores.
+//! information, ready for `import` (which accepts no other columns). A band's notes
+//! (`reflection_suspected`, ...) are put in its `campaign` text in brackets, e.g.
+//! `layout (reflection_suspected)`.
 //! A segment whose recordings cannot be used is reported (file, line, what) and left out; the
 //! others are written, and the exit code is 1.
 
@@ -13,7 +15,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use pipewave::recordings::{self, analyse_segment, read_layout, EstimateOptions, SegmentWavenumbers};
+use pipewave::recordings::{
+    self, analyse_segment, read_layout, EstimateOptions, SegmentWavenumbers,
+};
 
 use super::Outcome;
 
@@ -148,8 +152,13 @@ fn progress_bar(segments: &[recordings::SegmentLayout]) -> Option<ProgressBar> {
 }
 
 /// The one place the output file is written (its text cells: segment ids, campaign, notes).
-fn write_measurements(path: &Path, results: &[SegmentWavenumbers], campaign: &str) -> anyhow::Result<()> {
-    let mut w = csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
+fn write_measurements(
+    path: &Path,
+    results: &[SegmentWavenumbers],
+    campaign: &str,
+) -> anyhow::Result<()> {
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("cannot write {}", path.display()))?;
     w.write_record([
         "segment_id",
         "frequency_hz",
@@ -158,7 +167,6 @@ fn write_measurements(path: &Path, results: &[SegmentWavenumbers], campaign: &st
         "k_re_std",
         "attenuation_std",
         "campaign",
-        "notes",
     ])?;
     for r in results {
         for b in &r.bands {
@@ -169,11 +177,15 @@ fn write_measurements(path: &Path, results: &[SegmentWavenumbers], campaign: &st
                 b.attenuation.to_string(),
                 b.k_re_std.to_string(),
                 b.attenuation_std.to_string(),
-                campaign.to_string(),
-                b.notes.join(","),
+                if b.notes.is_empty() {
+                    campaign.to_string()
+                } else {
+                    format!("{campaign} ({})", b.notes.join(", "))
+                },
             ])?;
         }
     }
-    w.flush().with_context(|| format!("cannot write {}", path.display()))?;
+    w.flush()
+        .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }

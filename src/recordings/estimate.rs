@@ -51,9 +51,11 @@ pub const MAX_FREQUENCY_FRACTION: f64 = 0.45;
 pub const UNWRAP_MAX_SIGMA_RAD: f64 = 0.5;
 /// The unwrapping stops at a gap wider than this, Hz, in the usable bins: the phase trend
 /// cannot be carried safely across it.
-pub const UNWRAP_MAX_GAP_HZ: f64 = 50.0;
-/// Bins back over which the unwrapping measures the phase slope it extrapolates.
-pub const UNWRAP_SLOPE_BINS: usize = 8;
+pub const UNWRAP_MAX_GAP_HZ: f64 = 20.0;
+/// The unwrapping predicts each bin from a straight line fitted to this many preceding usable
+/// bins: with a phase error of 0.5 rad per bin the line's slope is good to 0.01 rad per bin, so a
+/// gap of [`UNWRAP_MAX_GAP_HZ`] adds well under π.
+pub const UNWRAP_LINE_BINS: usize = 32;
 /// Half-width, bins, of the running mean that smooths the variance estimates before they are
 /// used as weights (a weight taken from a bin's own noisy coherence would favour bins whose
 /// cross-spectrum happens to be high, and bias ln|H|; physics §10).
@@ -104,12 +106,23 @@ impl Default for EstimateOptions {
 
 impl EstimateOptions {
     /// Checked options.
-    pub fn new(band_hz: f64, min_coherence: f64, fmin_hz: f64, fmax_hz: Option<f64>) -> Result<Self, String> {
+    pub fn new(
+        band_hz: f64,
+        min_coherence: f64,
+        fmin_hz: f64,
+        fmax_hz: Option<f64>,
+    ) -> Result<Self, String> {
         if !(band_hz.is_finite() && band_hz >= 2.0 * WELCH_SEGMENT_S.recip()) {
-            return Err(format!("--band-hz {} must be at least 2 Hz (two 1-Hz bins)", short(band_hz)));
+            return Err(format!(
+                "--band-hz {} must be at least 2 Hz (two 1-Hz bins)",
+                short(band_hz)
+            ));
         }
         if !(min_coherence > 0.0 && min_coherence < 1.0) {
-            return Err(format!("--min-coherence {} must be between 0 and 1", short(min_coherence)));
+            return Err(format!(
+                "--min-coherence {} must be between 0 and 1",
+                short(min_coherence)
+            ));
         }
         if !(fmin_hz.is_finite() && fmin_hz >= 0.0) {
             return Err(format!("--fmin {} must be 0 or more Hz", short(fmin_hz)));
@@ -268,11 +281,16 @@ fn delay(sp: &Spectra, r: usize, x: usize, max_bin: usize) -> Option<f64> {
     }
     let mut out = inv.make_output_vec();
     inv.process(&mut spec, &mut out).ok()?;
-    let (imax, _) = out
-        .iter()
-        .enumerate()
-        .fold((0, f64::NEG_INFINITY), |acc, (i, &v)| if v > acc.1 { (i, v) } else { acc });
-    let lag = if imax <= n / 2 { imax as f64 } else { imax as f64 - n as f64 };
+    let (imax, _) =
+        out.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |acc, (i, &v)| if v > acc.1 { (i, v) } else { acc },
+        );
+    let lag = if imax <= n / 2 {
+        imax as f64
+    } else {
+        imax as f64 - n as f64
+    };
     Some(lag / sp.sample_rate)
 }
 
@@ -289,7 +307,9 @@ fn sensor_text(s: &Sensor) -> String {
 /// The chains of sensors from the source outward on each side (a sensor at position 0 starts
 /// both), as indices into `sensors`.
 fn side_chains(sensors: &[Sensor]) -> Vec<(i8, Vec<usize>)> {
-    let at_source: Vec<usize> = (0..sensors.len()).filter(|&i| sensors[i].position_m == 0.0).collect();
+    let at_source: Vec<usize> = (0..sensors.len())
+        .filter(|&i| sensors[i].position_m == 0.0)
+        .collect();
     let mut out = Vec::new();
     for side in [-1i8, 1] {
         let mut chain: Vec<usize> = (0..sensors.len())
@@ -303,6 +323,22 @@ fn side_chains(sensors: &[Sensor]) -> Vec<(i8, Vec<usize>)> {
         }
     }
     out
+}
+
+/// The unwrapped phase at bin `k` predicted by a least-squares line through the last
+/// [`UNWRAP_LINE_BINS`] unwrapped bins `done` (the last value when there is only one).
+fn line_prediction(done: &[usize], psi: &[f64], k: usize) -> f64 {
+    let last = &done[done.len().saturating_sub(UNWRAP_LINE_BINS)..];
+    let n = last.len() as f64;
+    let mx = last.iter().map(|&i| i as f64).sum::<f64>() / n;
+    let my = last.iter().map(|&i| psi[i]).sum::<f64>() / n;
+    let sxx: f64 = last.iter().map(|&i| (i as f64 - mx).powi(2)).sum();
+    let sxy: f64 = last.iter().map(|&i| (i as f64 - mx) * (psi[i] - my)).sum();
+    if sxx > 0.0 {
+        my + sxy / sxx * (k as f64 - mx)
+    } else {
+        my
+    }
 }
 
 /// Estimate a segment's wavenumbers from its channels (one per sensor, layout order).
@@ -347,10 +383,17 @@ pub fn analyse_audio(
         .min_by(|&i, &j| sensors[i].distance_m().total_cmp(&sensors[j].distance_m()))
         .unwrap_or(0);
     let raw: Vec<&[f64]> = audio.channels.iter().map(Vec::as_slice).collect();
-    let sp_d = welch(&raw, fs, nfft_delay, progress).ok_or_else(|| pos_err("the recordings are too short".into()))?;
+    let sp_d = welch(&raw, fs, nfft_delay, progress)
+        .ok_or_else(|| pos_err("the recordings are too short".into()))?;
     let max_bin_d = ((fmax / sp_d.bin_hz()).floor() as usize).min(sp_d.bins() - 1);
     let delays: Vec<Option<f64>> = (0..sensors.len())
-        .map(|x| if x == refi { Some(0.0) } else { delay(&sp_d, refi, x, max_bin_d) })
+        .map(|x| {
+            if x == refi {
+                Some(0.0)
+            } else {
+                delay(&sp_d, refi, x, max_bin_d)
+            }
+        })
         .collect();
     for (_, chain) in &chains {
         for w in chain.windows(2) {
@@ -369,13 +412,18 @@ pub fn analyse_audio(
         }
     }
     // 2. Align the channels by whole samples.
-    let shifts: Vec<i64> = delays.iter().map(|d| d.map_or(0, |t| (t * fs).round() as i64)).collect();
+    let shifts: Vec<i64> = delays
+        .iter()
+        .map(|d| d.map_or(0, |t| (t * fs).round() as i64))
+        .collect();
     let base = shifts.iter().copied().min().unwrap_or(0);
     let shifts: Vec<usize> = shifts.iter().map(|&d| (d - base) as usize).collect();
     let max_shift = shifts.iter().copied().max().unwrap_or(0);
     let n_all = audio.channels.iter().map(Vec::len).min().unwrap_or(0);
     if n_all <= max_shift + 2 * nfft {
-        return Err(pos_err("the recordings are too short for the delays between the sensors".into()));
+        return Err(pos_err(
+            "the recordings are too short for the delays between the sensors".into(),
+        ));
     }
     let n_common = n_all - max_shift;
     let aligned: Vec<&[f64]> = audio
@@ -384,7 +432,8 @@ pub fn analyse_audio(
         .zip(&shifts)
         .map(|(c, &d)| &c[d..d + n_common])
         .collect();
-    let sp = welch(&aligned, fs, nfft, progress).ok_or_else(|| pos_err("the recordings are too short".into()))?;
+    let sp = welch(&aligned, fs, nfft, progress)
+        .ok_or_else(|| pos_err("the recordings are too short".into()))?;
     let max_bin = ((fmax / sp.bin_hz()).floor() as usize).min(sp.bins() - 1);
     let lo_bin = ((opts.fmin_hz / sp.bin_hz()).ceil() as usize).max(1);
     // 3. Pairs and their per-bin estimates.
@@ -406,10 +455,34 @@ pub fn analyse_audio(
                 score(c1).total_cmp(&score(c2))
             });
             let terms = match third {
-                Some(c) => vec![Term { x: c, y: b, s: 1.0 }, Term { x: c, y: a, s: -1.0 }],
-                None => vec![Term { x: a, y: b, s: 1.0 }, Term { x: a, y: a, s: -1.0 }],
+                Some(c) => vec![
+                    Term { x: c, y: b, s: 1.0 },
+                    Term {
+                        x: c,
+                        y: a,
+                        s: -1.0,
+                    },
+                ],
+                None => vec![
+                    Term { x: a, y: b, s: 1.0 },
+                    Term {
+                        x: a,
+                        y: a,
+                        s: -1.0,
+                    },
+                ],
             };
-            pairs.push(pair_curve(&sp, a, b, *side, delta, terms, max_bin, shifts[b] as f64 - shifts[a] as f64, opts));
+            pairs.push(pair_curve(
+                &sp,
+                a,
+                b,
+                *side,
+                delta,
+                terms,
+                max_bin,
+                shifts[b] as f64 - shifts[a] as f64,
+                opts,
+            ));
         }
     }
     // 4. Bands.
@@ -490,14 +563,8 @@ fn pair_curve(
                 }
                 break;
             }
-            Some(&p) => {
-                let slope = if done.len() >= 2 {
-                    let q = done[done.len().saturating_sub(UNWRAP_SLOPE_BINS + 1)];
-                    (psi[p] - psi[q]) / (p - q) as f64
-                } else {
-                    0.0
-                };
-                let pred = psi[p] + slope * (k - p) as f64;
+            Some(_) => {
+                let pred = line_prediction(&done, &psi, k);
                 w + std::f64::consts::TAU * ((pred - w) / std::f64::consts::TAU).round()
             }
         };
@@ -539,13 +606,20 @@ struct PairBand {
 
 fn pair_band(sp: &Spectra, p: &Pair, k_lo: usize, k_hi: usize) -> Option<PairBand> {
     let all = k_hi.saturating_sub(k_lo);
-    let bins: Vec<usize> = (k_lo..k_hi.min(p.usable.len())).filter(|&k| p.usable[k] && p.k[k].is_finite()).collect();
+    let bins: Vec<usize> = (k_lo..k_hi.min(p.usable.len()))
+        .filter(|&k| p.usable[k] && p.k[k].is_finite())
+        .collect();
     if all == 0 || (bins.len() as f64) < MIN_BAND_FILL * all as f64 {
         return None;
     }
-    let w: Vec<f64> = bins.iter().map(|&k| 2.0 / (p.var_k[k] + p.var_att[k])).collect();
+    let w: Vec<f64> = bins
+        .iter()
+        .map(|&k| 2.0 / (p.var_k[k] + p.var_att[k]))
+        .collect();
     let wsum: f64 = w.iter().sum();
-    let mean = |v: &dyn Fn(usize) -> f64| bins.iter().zip(&w).map(|(&k, wi)| wi * v(k)).sum::<f64>() / wsum;
+    let mean = |v: &dyn Fn(usize) -> f64| {
+        bins.iter().zip(&w).map(|(&k, wi)| wi * v(k)).sum::<f64>() / wsum
+    };
     Some(PairBand {
         f: mean(&|k| k as f64 * sp.bin_hz()),
         k: mean(&|k| p.k[k]),
@@ -557,7 +631,14 @@ fn pair_band(sp: &Spectra, p: &Pair, k_lo: usize, k_hi: usize) -> Option<PairBan
 }
 
 /// Covariances (k, attenuation) of two pairs' band means, neighbouring-bin correlation counted.
-fn band_cov(sp: &Spectra, p: &Pair, bp: &PairBand, q: &Pair, bq: &PairBand, same: bool) -> (f64, f64) {
+fn band_cov(
+    sp: &Spectra,
+    p: &Pair,
+    bp: &PairBand,
+    q: &Pair,
+    bq: &PairBand,
+    same: bool,
+) -> (f64, f64) {
     // Per-bin correlation coefficient of the two estimators (1 for a pair with itself).
     let rho = |k: usize| -> (f64, f64) {
         if same {
@@ -566,8 +647,17 @@ fn band_cov(sp: &Spectra, p: &Pair, bp: &PairBand, q: &Pair, bq: &PairBand, same
         let (c_re, c_im) = ln_h_cov(sp, &p.terms, &q.terms, k);
         let (pr, pi) = ln_h_cov(sp, &p.terms, &p.terms, k);
         let (qr, qi) = ln_h_cov(sp, &q.terms, &q.terms, k);
-        let clamp = |x: f64| if x.is_finite() { x.clamp(-0.99, 0.99) } else { 0.0 };
-        (clamp(c_im / (pi * qi).sqrt()), clamp(c_re / (pr * qr).sqrt()))
+        let clamp = |x: f64| {
+            if x.is_finite() {
+                x.clamp(-0.99, 0.99)
+            } else {
+                0.0
+            }
+        };
+        (
+            clamp(c_im / (pi * qi).sqrt()),
+            clamp(c_re / (pr * qr).sqrt()),
+        )
     };
     let (mut ck, mut ca) = (0.0, 0.0);
     let mut j0 = 0usize;
@@ -581,7 +671,12 @@ fn band_cov(sp: &Spectra, p: &Pair, bp: &PairBand, q: &Pair, bq: &PairBand, same
                 break;
             }
             let r = sp.bin_correlation[ki.abs_diff(kj)];
-            let (rk, ra) = if ki == kj { (ri_k, ri_a) } else { let (a, b) = rho(kj); ((ri_k + a) / 2.0, (ri_a + b) / 2.0) };
+            let (rk, ra) = if ki == kj {
+                (ri_k, ri_a)
+            } else {
+                let (a, b) = rho(kj);
+                ((ri_k + a) / 2.0, (ri_a + b) / 2.0)
+            };
             let ww = bp.w[i] * bq.w[j] * r;
             ck += ww * rk * (p.var_k[ki] * q.var_k[kj]).sqrt();
             ca += ww * ra * (p.var_att[ki] * q.var_att[kj]).sqrt();
@@ -613,7 +708,9 @@ fn gls(e: &[f64], c: &[f64]) -> (f64, f64, Vec<f64>) {
 
 /// Sub-matrix of `c` (n × n) on the index list `idx`.
 fn sub(c: &[f64], n: usize, idx: &[usize]) -> Vec<f64> {
-    idx.iter().flat_map(|&i| idx.iter().map(move |&j| c[i * n + j])).collect()
+    idx.iter()
+        .flat_map(|&i| idx.iter().map(move |&j| c[i * n + j]))
+        .collect()
 }
 
 /// The estimate of one band, or `None` when no pair has information there.
@@ -728,18 +825,30 @@ mod tests {
         let n = 64_000;
         let mut state = 12345u64;
         let mut rnd = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
         };
         let a: Vec<f64> = (0..n).map(|_| rnd()).collect();
         let b: Vec<f64> = a.iter().map(|x| 2.0 * x + 1.5 * rnd()).collect();
         let sp = welch(&[&a, &b], 1000.0, 256, &|_| {}).unwrap();
-        let terms = [Term { x: 0, y: 1, s: 1.0 }, Term { x: 0, y: 0, s: -1.0 }];
+        let terms = [
+            Term { x: 0, y: 1, s: 1.0 },
+            Term {
+                x: 0,
+                y: 0,
+                s: -1.0,
+            },
+        ];
         for k in [5, 40, 100] {
             let g2 = sp.coherence(0, 1, k);
             let p75 = (1.0 - g2) / (2.0 * sp.n_eff * g2);
             let (vr, vi) = ln_h_cov(&sp, &terms, &terms, k);
-            assert!((vr - p75).abs() < 1e-9 * p75 && (vi - p75).abs() < 1e-9 * p75, "{vr} {vi} {p75}");
+            assert!(
+                (vr - p75).abs() < 1e-9 * p75 && (vi - p75).abs() < 1e-9 * p75,
+                "{vr} {vi} {p75}"
+            );
         }
     }
 

@@ -110,12 +110,20 @@ pub fn read_layout(path: &Path) -> Result<Layout, Vec<RecordingError>> {
         let mut ok = true;
         let segment_id = get(0).to_string();
         if segment_id.is_empty() {
-            errors.push(cell_err(line, "segment_id", "empty (expected the pipe's asset id)".into()));
+            errors.push(cell_err(
+                line,
+                "segment_id",
+                "empty (expected the pipe's asset id)".into(),
+            ));
             ok = false;
         }
         let file = get(1).to_string();
         if file.is_empty() {
-            errors.push(cell_err(line, "file", "empty (expected a WAV file relative to the layout's folder)".into()));
+            errors.push(cell_err(
+                line,
+                "file",
+                "empty (expected a WAV file relative to the layout's folder)".into(),
+            ));
             ok = false;
         }
         let channel = match get(2).parse::<u16>() {
@@ -136,7 +144,10 @@ pub fn read_layout(path: &Path) -> Result<Layout, Vec<RecordingError>> {
                 errors.push(cell_err(
                     line,
                     "position_m",
-                    format!("{} is not a position (expected signed metres from the source)", short(x)),
+                    format!(
+                        "{} is not a position (expected signed metres from the source)",
+                        short(x)
+                    ),
                 ));
                 ok = false;
                 0.0
@@ -145,7 +156,10 @@ pub fn read_layout(path: &Path) -> Result<Layout, Vec<RecordingError>> {
                 errors.push(cell_err(
                     line,
                     "position_m",
-                    format!("'{}' is not a number (expected signed metres from the source)", get(3)),
+                    format!(
+                        "'{}' is not a number (expected signed metres from the source)",
+                        get(3)
+                    ),
                 ));
                 ok = false;
                 0.0
@@ -259,7 +273,10 @@ mod tests {
         assert_eq!(l.segments[0].sensors.len(), 3);
         assert_eq!(l.segments[0].sensors[1].position_m, -20.5);
         assert_eq!(l.segments[0].sensors[2].line, 5);
-        assert_eq!(l.segments[0].sensors[2].path, p.parent().unwrap().join("a.wav"));
+        assert_eq!(
+            l.segments[0].sensors[2].path,
+            p.parent().unwrap().join("a.wav")
+        );
     }
 
     #[test]
@@ -267,16 +284,29 @@ mod tests {
         let (_d, p) = write("segment_id,file,channel,position_m\nA,a.wav,x,0\nA,a.wav,1,far\n");
         let e = read_layout(&p).unwrap_err();
         let text: Vec<String> = e.iter().map(|e| e.to_string()).collect();
-        assert!(text[0].contains("line 2, column channel") && text[0].contains("'x'"), "{text:?}");
-        assert!(text[1].contains("line 3, column position_m") && text[1].contains("'far'"), "{text:?}");
+        assert!(
+            text[0].contains("line 2, column channel") && text[0].contains("'x'"),
+            "{text:?}"
+        );
+        assert!(
+            text[1].contains("line 3, column position_m") && text[1].contains("'far'"),
+            "{text:?}"
+        );
     }
 
     #[test]
     fn zero_distance_on_one_side_is_an_error_but_mirror_positions_are_not() {
-        let (_d, p) = write("segment_id,file,channel,position_m\nA,a.wav,0,0\nA,a.wav,1,20\nA,a.wav,2,20\n");
+        let (_d, p) =
+            write("segment_id,file,channel,position_m\nA,a.wav,0,0\nA,a.wav,1,20\nA,a.wav,2,20\n");
         let e = read_layout(&p).unwrap_err();
-        assert!(e[0].to_string().contains("line 4, column position_m: segment A: zero distance"), "{}", e[0]);
-        let (_d, p) = write("segment_id,file,channel,position_m\nA,a.wav,0,0\nA,a.wav,1,20\nA,a.wav,2,-20\n");
+        assert!(
+            e[0].to_string()
+                .contains("line 4, column position_m: segment A: zero distance"),
+            "{}",
+            e[0]
+        );
+        let (_d, p) =
+            write("segment_id,file,channel,position_m\nA,a.wav,0,0\nA,a.wav,1,20\nA,a.wav,2,-20\n");
         assert!(read_layout(&p).is_ok());
     }
 
@@ -284,6 +314,10 @@ mod tests {
     fn missing_column_is_named() {
         let (_d, p) = write("segment_id,file,position_m\nA,a.wav,0\n");
         let e = read_layout(&p).unwrap_err();
-        assert!(e[0].to_string().contains("missing column channel"), "{}", e[0]);
+        assert!(
+            e[0].to_string().contains("missing column channel"),
+            "{}",
+            e[0]
+        );
     }
 }

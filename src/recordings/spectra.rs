@@ -80,7 +80,12 @@ pub fn hann(n: usize) -> Vec<f64> {
 /// Welch spectra of equally long channels, segments of `nfft` samples overlapping by half.
 /// `None` when the channels hold fewer than two segments. `progress` is called with the frames
 /// consumed.
-pub fn welch(channels: &[&[f64]], sample_rate: f64, nfft: usize, progress: &dyn Fn(u64)) -> Option<Spectra> {
+pub fn welch(
+    channels: &[&[f64]],
+    sample_rate: f64,
+    nfft: usize,
+    progress: &dyn Fn(u64),
+) -> Option<Spectra> {
     let m = channels.len();
     let n = channels.iter().map(|c| c.len()).min()?;
     let hop = nfft / 2;
@@ -140,7 +145,10 @@ pub fn welch(channels: &[&[f64]], sample_rate: f64, nfft: usize, progress: &dyn 
             .iter()
             .enumerate()
             .map(|(i, v)| {
-                Complex64::from_polar(v * v, -std::f64::consts::TAU * (mm * i) as f64 / nfft as f64)
+                Complex64::from_polar(
+                    v * v,
+                    -std::f64::consts::TAU * (mm * i) as f64 / nfft as f64,
+                )
             })
             .sum();
         *r = (z / w2).norm_sqr();

@@ -109,11 +109,17 @@ pub enum SynthRecordingError {
 /// the first frequency where it fails.
 pub fn truth_curve(sys: &System, hi_hz: f64) -> Result<TruthCurve, SynthRecordingError> {
     let n = ((hi_hz - SOURCE_LO_HZ) / TRUTH_STEP_HZ).floor() as usize + 1;
-    let freqs: Vec<f64> = (0..n).map(|i| SOURCE_LO_HZ + TRUTH_STEP_HZ * i as f64).collect();
+    let freqs: Vec<f64> = (0..n)
+        .map(|i| SOURCE_LO_HZ + TRUTH_STEP_HZ * i as f64)
+        .collect();
     let omegas: Vec<f64> = freqs.iter().map(|&f| hz_to_omega(f)).collect();
     let k1: Vec<Complex64> = solve_curve(sys, &omegas, Continuation::default())
         .into_iter()
-        .map_while(|r| r.ok().filter(|r| !r.flags.growing_wave && r.k1.re > 0.0).map(|r| r.k1))
+        .map_while(|r| {
+            r.ok()
+                .filter(|r| !r.flags.growing_wave && r.k1.re > 0.0)
+                .map(|r| r.k1)
+        })
         .collect();
     if k1.len() < 2 {
         return Err(SynthRecordingError::NoRoot(hi_hz));
@@ -142,7 +148,10 @@ fn source_amplitude(f: f64, hi: f64) -> f64 {
 }
 
 /// Make the recordings of a hydrant test on the pipe `sys`.
-pub fn hydrant_test(sys: &System, spec: &RecordingSpec) -> Result<HydrantRecording, SynthRecordingError> {
+pub fn hydrant_test(
+    sys: &System,
+    spec: &RecordingSpec,
+) -> Result<HydrantRecording, SynthRecordingError> {
     let fs = spec.sample_rate as f64;
     if spec.positions_m.is_empty() || !(spec.seconds > 0.0) || spec.sample_rate < 100 {
         return Err(SynthRecordingError::Spec(
@@ -194,13 +203,21 @@ pub fn hydrant_test(sys: &System, spec: &RecordingSpec) -> Result<HydrantRecordi
         clean.push(out);
     }
     let nearest = (0..spec.positions_m.len())
-        .min_by(|&i, &j| spec.positions_m[i].abs().total_cmp(&spec.positions_m[j].abs()))
+        .min_by(|&i, &j| {
+            spec.positions_m[i]
+                .abs()
+                .total_cmp(&spec.positions_m[j].abs())
+        })
         .unwrap_or(0);
     let rms = (clean[nearest].iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
     let sigma = spec.noise_fraction * rms;
     let channels = clean
         .into_iter()
-        .map(|c| c.into_iter().map(|v| v + sigma * normal(&mut rng)).collect())
+        .map(|c| {
+            c.into_iter()
+                .map(|v| v + sigma * normal(&mut rng))
+                .collect()
+        })
         .collect();
     Ok(HydrantRecording {
         sample_rate: spec.sample_rate,
@@ -309,7 +326,12 @@ pub fn write_recordings(dir: &Path, segments: &[RecordedSegment]) -> std::io::Re
     let mut layout = csv::Writer::from_path(dir.join(LAYOUT_CSV))?;
     layout.write_record(super::layout::LAYOUT_COLUMNS)?;
     let mut truth = csv::Writer::from_path(dir.join(TRUTH_WAVENUMBERS_CSV))?;
-    truth.write_record(["segment_id", "frequency_hz", "k_re_rad_per_m", "attenuation_np_per_m"])?;
+    truth.write_record([
+        "segment_id",
+        "frequency_hz",
+        "k_re_rad_per_m",
+        "attenuation_np_per_m",
+    ])?;
     for s in segments {
         let file = format!("{}.wav", s.segment_id);
         let chans: Vec<&[f64]> = s.recording.channels.iter().map(Vec::as_slice).collect();
@@ -325,7 +347,12 @@ pub fn write_recordings(dir: &Path, segments: &[RecordedSegment]) -> std::io::Re
             layout.write_record([s.segment_id.as_str(), &file, &c.to_string(), &x.to_string()])?;
         }
         for (f, k, a) in truth_rows(&s.recording.truth) {
-            truth.write_record([s.segment_id.as_str(), &f.to_string(), &k.to_string(), &a.to_string()])?;
+            truth.write_record([
+                s.segment_id.as_str(),
+                &f.to_string(),
+                &k.to_string(),
+                &a.to_string(),
+            ])?;
         }
     }
     layout.flush()?;
@@ -423,10 +450,9 @@ pub fn record_network_segments(
 ) -> Result<Vec<RecordedSegment>, String> {
     ids.iter()
         .map(|id| {
-            let seg = network
-                .iter()
-                .find(|s| &s.id == id)
-                .ok_or_else(|| format!("segment {id} is not in the synthetic network (ids WM10001 ...)"))?;
+            let seg = network.iter().find(|s| &s.id == id).ok_or_else(|| {
+                format!("segment {id} is not in the synthetic network (ids WM10001 ...)")
+            })?;
             let sys = system_of(seg, opts)?;
             let seed = opts.seed ^ id_hash(id);
             let mut rng = ChaCha8Rng::seed_from_u64(seed);

@@ -131,7 +131,8 @@ pub fn read_segment(
         let mut run = vec![0usize; wanted.len()];
         let mut clipped: Vec<Option<(usize, usize)>> = vec![None; wanted.len()]; // (first frame, runs)
         let bits = spec.bits_per_sample;
-        let read_err = |e: hound::Error| wav_err(sensor.line, format!("cannot read its samples ({e})"));
+        let read_err =
+            |e: hound::Error| wav_err(sensor.line, format!("cannot read its samples ({e})"));
         let mut frame = 0usize;
         let mut pos = 0usize;
         macro_rules! consume {
@@ -162,7 +163,12 @@ pub fn read_segment(
         match spec.sample_format {
             SampleFormat::Float => {
                 if bits != 32 {
-                    return Err(wav_err(sensor.line, format!("{bits}-bit float samples (expected 32-bit float or 16/24-bit PCM)")));
+                    return Err(wav_err(
+                        sensor.line,
+                        format!(
+                            "{bits}-bit float samples (expected 32-bit float or 16/24-bit PCM)"
+                        ),
+                    ));
                 }
                 for s in reader.samples::<f32>() {
                     let x = s.map_err(read_err)? as f64;
@@ -171,7 +177,12 @@ pub fn read_segment(
             }
             SampleFormat::Int => {
                 if !(8..=32).contains(&bits) {
-                    return Err(wav_err(sensor.line, format!("{bits}-bit PCM samples (expected 16 or 24-bit PCM, or 32-bit float)")));
+                    return Err(wav_err(
+                        sensor.line,
+                        format!(
+                            "{bits}-bit PCM samples (expected 16 or 24-bit PCM, or 32-bit float)"
+                        ),
+                    ));
                 }
                 let scale = 2f64.powi(bits as i32 - 1);
                 let max = (1i64 << (bits - 1)) - 1;
