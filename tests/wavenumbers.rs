@@ -532,3 +532,78 @@ fn three_channel_estimate_is_free_of_the_reference_noise_bias() {
         "H1 {r1} should be biased high against P77 {r77}"
     );
 }
+
+/// sample_network/recordings is exactly what its README command writes, and gives usable
+/// wavenumbers close to its truth file.
+#[test]
+fn sample_network_recordings_are_what_the_readme_makes_and_give_wavenumbers() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_network");
+    let readme = std::fs::read_to_string(sample.join("README.md")).unwrap();
+    let line = readme
+        .lines()
+        .find(|l| l.contains("--recordings WM"))
+        .expect("the README gives the recordings command");
+    let command = line.trim().trim_matches('`');
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("net");
+    let args: Vec<std::ffi::OsString> = command
+        .split_whitespace()
+        .skip(1)
+        .map(|a| {
+            if a == "sample_network" {
+                out.clone().into_os_string()
+            } else {
+                a.into()
+            }
+        })
+        .collect();
+    let o = bin().args(&args).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        !out.join("segments.csv").exists(),
+        "--recordings-only writes only the recordings"
+    );
+    for f in ["layout.csv", "WM10003.wav", "truth_wavenumbers.csv"] {
+        assert!(
+            std::fs::read(out.join("recordings").join(f)).unwrap()
+                == std::fs::read(sample.join("recordings").join(f)).unwrap(),
+            "sample_network/recordings/{f} differs from what `{command}` writes: regenerate it"
+        );
+    }
+    let m = tmp.path().join("m.csv");
+    let o = run(&[
+        "wavenumbers".as_ref(),
+        "--layout".as_ref(),
+        sample.join("recordings/layout.csv").as_os_str(),
+        "--out".as_ref(),
+        m.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = read_rows(&m);
+    assert!(rows.len() >= 4, "{} bands", rows.len());
+    // The truth file, every 10 Hz, interpolated linearly.
+    let mut r = csv::Reader::from_path(sample.join("recordings/truth_wavenumbers.csv")).unwrap();
+    let truth: Vec<(f64, f64)> = r
+        .records()
+        .map(|x| {
+            let x = x.unwrap();
+            (x[1].parse().unwrap(), x[2].parse().unwrap())
+        })
+        .collect();
+    let mut rel: Vec<f64> = rows
+        .iter()
+        .map(|b| {
+            let i = truth.iter().rposition(|t| t.0 <= b.f).unwrap();
+            let (f0, k0) = truth[i];
+            let (f1, k1) = truth[i + 1];
+            let k = k0 + (k1 - k0) * (b.f - f0) / (f1 - f0);
+            ((b.k - k) / k).abs()
+        })
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    assert!(
+        rel[rel.len() / 2] < 0.005,
+        "median k_re error {}",
+        rel[rel.len() / 2]
+    );
+}
