@@ -17,7 +17,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// The seed of the acceptance recordings: chosen when the test was written, after the estimator
-/// was tuned on seeds 1–10 of examples/wavenumbers_timing.rs's generator; not changed since.
+/// was tuned on seeds 1–10 of examples/wavenumbers_coverage.rs; not changed since.
 const ACCEPTANCE_SEED: u64 = 0x15_2026_1122;
 
 fn bin() -> Command {
@@ -606,4 +606,65 @@ fn sample_network_recordings_are_what_the_readme_makes_and_give_wavenumbers() {
         "median k_re error {}",
         rel[rel.len() / 2]
     );
+}
+
+/// Sides that disagree (the pipe changes at the hydrant: a stiffer soil on the + side) are noted
+/// `reflection_suspected`; the same test with one pipe on both sides is not.
+#[test]
+fn disagreeing_sides_are_noted() {
+    let pipe = pipewave::synth::pipe_of(
+        Material::DuctileIron,
+        &pipewave::synth::sizes(Material::DuctileIron)[1],
+    );
+    let sys = |e: f64| {
+        System::new(
+            Fluid::water(),
+            pipe,
+            Soil::new(e, 0.3, 1900.0, 0.0).unwrap(),
+            0.5,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap()
+    };
+    let spec = RecordingSpec {
+        sample_rate: 8000,
+        seconds: 10.0,
+        positions_m: vec![0.0, -30.0, 30.0],
+        noise_fraction: 0.3,
+        seed: 11,
+    };
+    // The same seed gives the same source and noise: only the + side's pipe differs.
+    let a = hydrant_test(&sys(3e7), &spec).unwrap();
+    let b = hydrant_test(&sys(3e8), &spec).unwrap();
+    assert_eq!(a.channels[0], b.channels[0]);
+    let mixed = HydrantRecording {
+        sample_rate: 8000,
+        channels: vec![
+            a.channels[0].clone(),
+            a.channels[1].clone(),
+            b.channels[2].clone(),
+        ],
+        truth: a.truth.clone(),
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let share = |rec: &HydrantRecording, name: &str| {
+        wav(dir, name, rec, WavFormat::Float32, gain(rec));
+        let rows: Vec<(&str, &str, usize, f64)> = (0..3)
+            .map(|c| ("A", name, c, spec.positions_m[c]))
+            .collect();
+        let (code, err, out) = wavenumbers(dir, &layout_text(&rows));
+        assert_eq!(code, Some(0), "{err}");
+        let rows = read_rows(&out);
+        let noted = rows
+            .iter()
+            .filter(|r| r.notes.contains("reflection_suspected"))
+            .count();
+        noted as f64 / rows.len() as f64
+    };
+    let (same, differ) = (share(&a, "same.wav"), share(&mixed, "mixed.wav"));
+    eprintln!("bands noted reflection_suspected: one pipe {same:.2}, two pipes {differ:.2}");
+    assert!(same < 0.05, "one pipe: {same}");
+    assert!(differ > 0.5, "two pipes: {differ}");
 }
