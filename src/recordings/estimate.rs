@@ -215,7 +215,7 @@ fn ln_h(sp: &Spectra, terms: &[Term], k: usize) -> Option<Complex64> {
     let mut z = Complex64::new(0.0, 0.0);
     for t in terms {
         let g = sp.g(t.x, t.y, k);
-        if !(g.norm() > 0.0) || !g.re.is_finite() || !g.im.is_finite() {
+        if g.norm().is_nan() || g.norm() <= 0.0 || !g.re.is_finite() || !g.im.is_finite() {
             return None;
         }
         z += t.s * g.ln();

@@ -53,7 +53,7 @@ impl TruthCurve {
     /// k1 at `f_hz` by linear interpolation, `None` outside the curve.
     pub fn at(&self, f_hz: f64) -> Option<Complex64> {
         let x = (f_hz - self.f0_hz) / self.step_hz;
-        if !(x >= 0.0) || x > (self.k1.len() - 1) as f64 {
+        if x.is_nan() || x < 0.0 || x > (self.k1.len() - 1) as f64 {
             return None;
         }
         let i = (x.floor() as usize).min(self.k1.len().saturating_sub(2));
@@ -153,7 +153,11 @@ pub fn hydrant_test(
     spec: &RecordingSpec,
 ) -> Result<HydrantRecording, SynthRecordingError> {
     let fs = spec.sample_rate as f64;
-    if spec.positions_m.is_empty() || !(spec.seconds > 0.0) || spec.sample_rate < 100 {
+    if spec.positions_m.is_empty()
+        || spec.seconds.is_nan()
+        || spec.seconds <= 0.0
+        || spec.sample_rate < 100
+    {
         return Err(SynthRecordingError::Spec(
             "a recording needs sensor positions, a positive length and a sample rate of 100 Hz or more".into(),
         ));
@@ -366,31 +370,6 @@ pub fn seed_layout<R: Rng + ?Sized>(rng: &mut R, range_m: (f64, f64)) -> Vec<f64
     vec![0.0, -d(), d()]
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn source_taper_is_continuous_and_flat_inside() {
-        assert_eq!(source_amplitude(SOURCE_LO_HZ, 1000.0), 0.0);
-        assert!((source_amplitude(2.0 * SOURCE_LO_HZ - 1e-9, 1000.0) - 1.0).abs() < 1e-6);
-        assert_eq!(source_amplitude(500.0, 1000.0), 1.0);
-        assert!(source_amplitude(999.999, 1000.0) < 1e-2);
-    }
-
-    #[test]
-    fn truth_interpolates_linearly() {
-        let t = TruthCurve {
-            f0_hz: 2.0,
-            step_hz: 1.0,
-            k1: vec![Complex64::new(1.0, -0.1), Complex64::new(2.0, -0.3)],
-        };
-        assert_eq!(t.at(2.5), Some(Complex64::new(1.5, -0.2)));
-        assert_eq!(t.at(1.9), None);
-        assert_eq!(t.at(3.0), Some(Complex64::new(2.0, -0.3)));
-    }
-}
-
 /// Sensor distances from the source, m, of the synthetic tests: plastics attenuate within tens
 /// of metres in the leak band, so field teams put sensors closer on them.
 pub fn sensor_range_m(material: crate::physics::Material) -> (f64, f64) {
@@ -472,4 +451,29 @@ pub fn record_network_segments(
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn source_taper_is_continuous_and_flat_inside() {
+        assert_eq!(source_amplitude(SOURCE_LO_HZ, 1000.0), 0.0);
+        assert!((source_amplitude(2.0 * SOURCE_LO_HZ - 1e-9, 1000.0) - 1.0).abs() < 1e-6);
+        assert_eq!(source_amplitude(500.0, 1000.0), 1.0);
+        assert!(source_amplitude(999.999, 1000.0) < 1e-2);
+    }
+
+    #[test]
+    fn truth_interpolates_linearly() {
+        let t = TruthCurve {
+            f0_hz: 2.0,
+            step_hz: 1.0,
+            k1: vec![Complex64::new(1.0, -0.1), Complex64::new(2.0, -0.3)],
+        };
+        assert_eq!(t.at(2.5), Some(Complex64::new(1.5, -0.2)));
+        assert_eq!(t.at(1.9), None);
+        assert_eq!(t.at(3.0), Some(Complex64::new(2.0, -0.3)));
+    }
 }
