@@ -10,6 +10,7 @@ pub mod invert;
 pub mod network;
 pub mod optimize;
 pub mod physics;
+pub mod recordings;
 pub mod report;
 pub mod seed;
 pub mod special;

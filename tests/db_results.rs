@@ -258,7 +258,13 @@ fn opening_twice_and_concurrent_calibrate_lock() {
     // One version per file in migrations/.
     let files = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/migrations"))
         .unwrap()
-        .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "sql"))
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "sql")
+        })
         .count();
     assert_eq!(pipewave::db::migrate::latest_version(), files as i64);
     let lock = db::try_acquire_run_lock(database.conn_mut()).unwrap();

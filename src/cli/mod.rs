@@ -12,6 +12,7 @@ mod forward;
 mod import;
 mod run;
 mod synth;
+mod wavenumbers;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -62,6 +63,8 @@ enum Command {
     Diagnose(diagnose::DiagnoseArgs),
     /// Fit segments from CSV files without keeping a database; write the fits as CSV.
     Fit(fit::FitArgs),
+    /// Field wavenumbers from hydrant-test recordings (WAV files and a layout.csv).
+    Wavenumbers(wavenumbers::WavenumbersArgs),
 }
 
 /// How a command that ran ended.
@@ -99,6 +102,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Audit(args) => audit::run(&args),
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Fit(args) => fit::run(&args),
+        Command::Wavenumbers(args) => wavenumbers::run(&args),
     }
 }
 

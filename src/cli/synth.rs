@@ -53,6 +53,17 @@ pub struct SynthArgs {
         requires = "hidden_effect"
     )]
     hidden_fraction: f64,
+    /// Also write hydrant-test recordings of these segments (comma-separated ids) into
+    /// DIR/recordings/: layout.csv, one WAV per segment, truth_wavenumbers.csv.
+    #[arg(long, value_name = "ID,...")]
+    recordings: Option<String>,
+    /// Write only the recordings, not segments.csv, measurements.csv and truth.csv.
+    #[arg(long, requires = "recordings")]
+    recordings_only: bool,
+    /// Length of each recording, s.
+    #[arg(long, value_name = "S", requires = "recordings",
+          default_value_t = pipewave::recordings::synth::DEFAULT_SECONDS)]
+    recording_seconds: f64,
 }
 
 /// Generate and write the network.
@@ -63,7 +74,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             args.defects
         );
     }
-    if !args.force {
+    if !args.force && !args.recordings_only {
         for name in [SEGMENTS_CSV, MEASUREMENTS_CSV, TRUTH_CSV] {
             let p = args.out.join(name);
             if p.exists() {
@@ -123,6 +134,27 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         ..SynthOptions::default()
     };
     let synthetic = generate(&opts);
+    if let Some(ids) = &args.recordings {
+        let ids: Vec<String> = ids.split(',').map(|s| s.trim().to_string()).collect();
+        let rec = pipewave::recordings::synth::record_network_segments(
+            &synthetic,
+            &opts,
+            &ids,
+            args.recording_seconds,
+        )
+        .map_err(anyhow::Error::msg)?;
+        let dir = args.out.join("recordings");
+        pipewave::recordings::synth::write_recordings(&dir, &rec)
+            .with_context(|| format!("cannot write the recordings in {}", dir.display()))?;
+        println!(
+            "synth: wrote recordings of {} segments to {}",
+            rec.len(),
+            dir.display()
+        );
+        if args.recordings_only {
+            return Ok(Outcome::Done);
+        }
+    }
     let mut tables = NetworkTables::from_synth(&synthetic, opts.srid);
     if !args.no_real_cases {
         for case in published::published_cases()? {

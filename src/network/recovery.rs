@@ -168,20 +168,28 @@ pub fn compare(
             f.status != FitStatus::Failed,
         ) {
             let (cp, cs) = crate::invert::uncertainty::soil_speeds(e_true, nu, rho);
-            let within = |v: Option<f64>, s: Option<f64>, truth: f64| {
-                matches!((v, s), (Some(v), Some(s)) if (v - truth).abs() <= 2.0 * s)
-            };
-            let between = |lo: Option<f64>, hi: Option<f64>, truth: f64| {
-                matches!((lo, hi), (Some(lo), Some(hi)) if lo <= truth && truth <= hi)
-            };
+            let within = |v: Option<f64>, s: Option<f64>, truth: f64| matches!((v, s), (Some(v), Some(s)) if (v - truth).abs() <= 2.0 * s);
+            let between = |lo: Option<f64>, hi: Option<f64>, truth: f64| matches!((lo, hi), (Some(lo), Some(hi)) if lo <= truth && truth <= hi);
             if let Some(v) = f.soil_p_wave_speed_m_per_s {
                 cp_err.push((v / cp - 1.0).abs());
             }
             r.n_judged += 1;
             let hits = [
-                within(f.soil_p_wave_speed_m_per_s, f.soil_p_wave_speed_std_m_per_s, cp),
-                within(f.soil_s_wave_speed_m_per_s, f.soil_s_wave_speed_std_m_per_s, cs),
-                between(f.soil_youngs_modulus_lo_pa, f.soil_youngs_modulus_hi_pa, e_true),
+                within(
+                    f.soil_p_wave_speed_m_per_s,
+                    f.soil_p_wave_speed_std_m_per_s,
+                    cp,
+                ),
+                within(
+                    f.soil_s_wave_speed_m_per_s,
+                    f.soil_s_wave_speed_std_m_per_s,
+                    cs,
+                ),
+                between(
+                    f.soil_youngs_modulus_lo_pa,
+                    f.soil_youngs_modulus_hi_pa,
+                    e_true,
+                ),
                 between(f.soil_poisson_lo, f.soil_poisson_hi, nu),
                 between(f.contact_lo, f.contact_hi, xi),
             ];
