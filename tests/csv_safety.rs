@@ -348,4 +348,49 @@ fn every_csv_is_safe_in_a_spreadsheet_and_reports_stay_escaped() {
         rows.iter().all(|r| r[5] == "ok"),
         "the reference cases solve: {rows:?}"
     );
+
+    // `wavenumbers --out`: the sample network's recording under a hostile segment id and
+    // campaign.
+    let rec = tmp.path().join("rec");
+    std::fs::create_dir_all(&rec).unwrap();
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/sample_network/recordings/WM10003.wav"
+        ),
+        rec.join("WM10003.wav"),
+    )
+    .unwrap();
+    std::fs::write(
+        rec.join("layout.csv"),
+        "segment_id,file,channel,position_m\n\
+         \"=HYPERLINK(\"\"http://x\"\")\",WM10003.wav,0,0\n\
+         \"=HYPERLINK(\"\"http://x\"\")\",WM10003.wav,1,-70.5\n\
+         \"=HYPERLINK(\"\"http://x\"\")\",WM10003.wav,2,59.7\n",
+    )
+    .unwrap();
+    let wn = tmp.path().join("wavenumbers.csv");
+    ok(bin()
+        .arg("wavenumbers")
+        .arg("--layout")
+        .arg(rec.join("layout.csv"))
+        .args(["--campaign", "@SUM(A1)", "--out"])
+        .arg(&wn));
+    check_csv(
+        &wn,
+        &[
+            "frequency_hz",
+            "k_re_rad_per_m",
+            "attenuation_np_per_m",
+            "k_re_std",
+            "attenuation_std",
+        ],
+        &[("segment_id", &set(&["'=HYPERLINK(\"http://x\")"]))],
+    );
+    let (header, rows) = read(&wn);
+    let campaign = header.iter().position(|h| h == "campaign").unwrap();
+    assert!(
+        rows.iter().all(|r| r[campaign].starts_with("'@SUM(A1)")),
+        "{rows:?}"
+    );
 }
