@@ -67,6 +67,10 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
         required: false,
     },
     ColumnSpec {
+        name: "soil_zone",
+        required: false,
+    },
+    ColumnSpec {
         name: "geometry_wkt",
         required: false,
     },
@@ -222,6 +226,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
     let length_m = c.positive("length_m", v, " m");
     let soil_type = c.owned_text("soil_type");
     let install_year = c.integer("install_year");
+    let soil_zone = c.owned_text("soil_zone");
 
     let geometry_wkt = c.text("geometry_wkt").and_then(|t| {
         LineString::parse_wkt(t)
@@ -270,6 +275,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         length_m,
         soil_type,
         install_year,
+        soil_zone,
         geometry_wkt,
         srid,
         inputs_hash: String::new(),
