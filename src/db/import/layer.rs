@@ -197,7 +197,9 @@ fn line_of(g: Geometry) -> Result<Option<LineString>, String> {
                         ));
                     }
                     if points.iter().any(|(x, y)| !x.is_finite() || !y.is_finite()) {
-                        return Err(format!("the {kind} has a coordinate that is not a finite number"));
+                        return Err(format!(
+                            "the {kind} has a coordinate that is not a finite number"
+                        ));
                     }
                     Ok(Some(LineString { points }))
                 }
@@ -223,7 +225,9 @@ fn read_gpkg(path: &Path, wanted: Option<&str>) -> Result<Layer, String> {
         .map_err(|e| format!("cannot open the GeoPackage: {e}"))?;
     let sql = |e: rusqlite::Error| format!("cannot read the GeoPackage: {e}");
     let layers: Vec<String> = conn
-        .prepare("SELECT table_name FROM gpkg_contents WHERE data_type = 'features' ORDER BY table_name")
+        .prepare(
+            "SELECT table_name FROM gpkg_contents WHERE data_type = 'features' ORDER BY table_name",
+        )
         .and_then(|mut s| s.query_map([], |r| r.get(0))?.collect())
         .map_err(|e| format!("not a GeoPackage (no readable gpkg_contents table: {e})"))?;
     let name = match wanted {
@@ -420,7 +424,11 @@ pub(super) fn gpkg_geometry(blob: &[u8]) -> Result<Geometry, String> {
         1 => 32,
         2 | 3 => 48,
         4 => 64,
-        k => return Err(format!("the geometry blob has an invalid envelope code {k}")),
+        k => {
+            return Err(format!(
+                "the geometry blob has an invalid envelope code {k}"
+            ))
+        }
     };
     r.take(envelope)?;
     if flags & 0b0001_0000 != 0 {
@@ -465,9 +473,7 @@ fn wkb_header(r: &mut Bytes<'_>) -> Result<(bool, u32, usize), String> {
 fn wkb_points(r: &mut Bytes<'_>, le: bool, dims: usize) -> Result<Vec<(f64, f64)>, String> {
     let n = r.u32(le)? as usize;
     if n.saturating_mul(dims * 8) > r.remaining() {
-        return Err(format!(
-            "the geometry blob says {n} points but holds fewer"
-        ));
+        return Err(format!("the geometry blob says {n} points but holds fewer"));
     }
     let mut pts = Vec::with_capacity(n);
     for _ in 0..n {
@@ -492,9 +498,7 @@ fn wkb(r: &mut Bytes<'_>) -> Result<Geometry, String> {
             let n = r.u32(le)? as usize;
             // Each part takes at least 9 bytes (its header and point count).
             if n.saturating_mul(9) > r.remaining() {
-                return Err(format!(
-                    "the geometry blob says {n} parts but holds fewer"
-                ));
+                return Err(format!("the geometry blob says {n} parts but holds fewer"));
             }
             let mut parts = Vec::with_capacity(n);
             for _ in 0..n {
@@ -668,7 +672,11 @@ fn read_shapefile(
         .map_err(|e| format!("the .shp cannot be read: {e}"))?;
     let mut table = shapefile::dbase::Reader::new(Cursor::new(dbf))
         .map_err(|e| format!("the .dbf cannot be read: {e}"))?;
-    let fields: Vec<String> = table.fields().iter().map(|f| f.name().to_string()).collect();
+    let fields: Vec<String> = table
+        .fields()
+        .iter()
+        .map(|f| f.name().to_string())
+        .collect();
     let records = table
         .read()
         .map_err(|e| format!("the .dbf cannot be read: {e}"))?;
@@ -833,7 +841,9 @@ pub(super) fn prj_epsg(wkt: &str) -> Option<i64> {
             .filter(|s| !s.is_empty())
             .collect();
         // Only the outermost node's authority names the system itself: it closes the WKT.
-        let closes = tail[end..].trim_matches(|c: char| c == ']' || c.is_whitespace()).is_empty();
+        let closes = tail[end..]
+            .trim_matches(|c: char| c == ']' || c.is_whitespace())
+            .is_empty();
         if let ["AUTHORITY", "EPSG", code] = parts.as_slice() {
             if closes {
                 if let Ok(c) = code.parse::<i64>() {
@@ -923,16 +933,26 @@ mod tests {
 
     #[test]
     fn epsg_codes_from_prj_files_and_crs_names() {
-        let bng = "PROJCS[\"British_National_Grid\",GEOGCS[\"GCS_OSGB_1936\",DATUM[\"D_OSGB_1936\",\
+        let bng =
+            "PROJCS[\"British_National_Grid\",GEOGCS[\"GCS_OSGB_1936\",DATUM[\"D_OSGB_1936\",\
                    SPHEROID[\"Airy_1830\",6377563.396,299.3249646]],PRIMEM[\"Greenwich\",0.0],\
                    UNIT[\"Degree\",0.0174532925199433]],PROJECTION[\"Transverse_Mercator\"],\
                    UNIT[\"Meter\",1.0]]";
         assert_eq!(prj_epsg(bng), Some(27700));
         let with_auth = "PROJCS[\"x\",GEOGCS[\"y\",AUTHORITY[\"EPSG\",\"4277\"]],AUTHORITY[\"EPSG\",\"27700\"]]";
         assert_eq!(prj_epsg(with_auth), Some(27700));
-        assert_eq!(prj_epsg("PROJCS[\"WGS_1984_UTM_Zone_32N\",GEOGCS[]]"), Some(32632));
-        assert_eq!(prj_epsg("PROJCS[\"WGS_1984_UTM_Zone_18S\",GEOGCS[]]"), Some(32718));
-        assert_eq!(prj_epsg("PROJCS[\"ETRS_1989_UTM_Zone_33N\",GEOGCS[]]"), Some(25833));
+        assert_eq!(
+            prj_epsg("PROJCS[\"WGS_1984_UTM_Zone_32N\",GEOGCS[]]"),
+            Some(32632)
+        );
+        assert_eq!(
+            prj_epsg("PROJCS[\"WGS_1984_UTM_Zone_18S\",GEOGCS[]]"),
+            Some(32718)
+        );
+        assert_eq!(
+            prj_epsg("PROJCS[\"ETRS_1989_UTM_Zone_33N\",GEOGCS[]]"),
+            Some(25833)
+        );
         assert_eq!(prj_epsg("GEOGCS[\"GCS_WGS_1984\",DATUM[]]"), Some(4326));
         assert_eq!(prj_epsg("PROJCS[\"Local grid\"]"), None);
         assert_eq!(prj_epsg(""), None);

@@ -78,7 +78,12 @@ pub(super) struct ReadOutcome {
 const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
 
 /// A RowError in `raw`'s file and layer.
-fn raw_error(raw: &RawTable, line: u64, column: Option<ColumnRef>, msg: impl Into<String>) -> RowError {
+fn raw_error(
+    raw: &RawTable,
+    line: u64,
+    column: Option<ColumnRef>,
+    msg: impl Into<String>,
+) -> RowError {
     let mut e = RowError::new(&raw.file, line, column, msg);
     e.layer.clone_from(&raw.layer);
     e
@@ -86,7 +91,11 @@ fn raw_error(raw: &RawTable, line: u64, column: Option<ColumnRef>, msg: impl Int
 
 impl Table {
     /// Read and check `source` against `specs`: a CSV, or the GIS layer it holds.
-    pub fn read(source: &ImportSource, specs: &[ColumnSpec], options: &ImportOptions) -> ReadOutcome {
+    pub fn read(
+        source: &ImportSource,
+        specs: &[ColumnSpec],
+        options: &ImportOptions,
+    ) -> ReadOutcome {
         let raw = match &source.kind {
             SourceKind::Csv => read_csv(source, specs),
             _ => super::layer::read(source, options.layer.as_deref()),
@@ -112,12 +121,20 @@ impl Table {
     }
 
     /// Check the header of `raw` against `specs` (with the `--map` pairs and strictness).
-    pub fn from_raw(raw: RawTable, specs: &[ColumnSpec], options: HeaderOptions<'_>) -> ReadOutcome {
+    pub fn from_raw(
+        raw: RawTable,
+        specs: &[ColumnSpec],
+        options: HeaderOptions<'_>,
+    ) -> ReadOutcome {
         let mut errors = Vec::new();
         let mut index: HashMap<&'static str, usize> = HashMap::new();
         let mut labels: HashMap<&'static str, String> = HashMap::new();
         let mut unknown: Vec<(usize, String)> = Vec::new();
-        let what = if raw.layer.is_some() { "field" } else { "column" };
+        let what = if raw.layer.is_some() {
+            "field"
+        } else {
+            "column"
+        };
         for (i, name) in raw.header.iter().enumerate() {
             let name = name.trim();
             let col = Some(ColumnRef::new(i, name));
@@ -126,7 +143,9 @@ impl Table {
                     &raw,
                     raw.header_line,
                     col,
-                    format!("this {what} has no name (a stray separator at the end of the header?)"),
+                    format!(
+                        "this {what} has no name (a stray separator at the end of the header?)"
+                    ),
                 ));
                 continue;
             }
@@ -137,16 +156,26 @@ impl Table {
                 .iter()
                 .find(|(_, field)| field.trim().eq_ignore_ascii_case(name))
                 .and_then(|(c, _)| specs.iter().find(|s| s.name.eq_ignore_ascii_case(c.trim())));
+            let in_header = |f: &str| {
+                raw.header
+                    .iter()
+                    .any(|h| h.trim().eq_ignore_ascii_case(f.trim()))
+            };
             let direct = specs.iter().find(|s| {
                 s.name.eq_ignore_ascii_case(name)
-                    && !options
-                        .map
-                        .iter()
-                        .any(|(c, f)| c.trim().eq_ignore_ascii_case(s.name) && !f.trim().eq_ignore_ascii_case(name))
+                    && !options.map.iter().any(|(c, f)| {
+                        c.trim().eq_ignore_ascii_case(s.name)
+                            && !f.trim().eq_ignore_ascii_case(name)
+                            && in_header(f)
+                    })
             });
             let Some(spec) = mapped.or(direct) else {
                 // A field mapped to a column of the other file is not unknown there.
-                if !options.map.iter().any(|(_, f)| f.trim().eq_ignore_ascii_case(name)) {
+                if !options
+                    .map
+                    .iter()
+                    .any(|(_, f)| f.trim().eq_ignore_ascii_case(name))
+                {
                     unknown.push((i, name.to_string()));
                 }
                 continue;
@@ -175,21 +204,6 @@ impl Table {
                 labels.insert(spec.name, label);
             }
         }
-        for (c, f) in options.map {
-            let known = specs.iter().any(|s| s.name.eq_ignore_ascii_case(c.trim()));
-            let present = raw.header.iter().any(|h| h.trim().eq_ignore_ascii_case(f.trim()));
-            if known && !present {
-                errors.push(raw_error(
-                    &raw,
-                    raw.header_line,
-                    None,
-                    format!(
-                        "--map {c}={f}: there is no {what} '{f}'; the {what}s are: {}",
-                        raw.header.join(", ")
-                    ),
-                ));
-            }
-        }
         let mut notes = Vec::new();
         if options.strict {
             for (i, name) in &unknown {
@@ -207,7 +221,8 @@ impl Table {
                 None => raw.file.clone(),
             };
             notes.push(format!(
-                "{place}: ignored {} {what}{} pipewave does not use: {} (--map COLUMN=FIELD uses                  one; --strict rejects them)",
+                "{place}: ignored {} {what}{} pipewave does not use: {} (--map COLUMN=FIELD uses \
+                 one; --strict rejects them)",
                 names.len(),
                 if names.len() == 1 { "" } else { "s" },
                 names.join(", ")
@@ -222,11 +237,13 @@ impl Table {
                     .filter(|(d, _)| *d <= 3)
                     .min();
                 let hint = match near {
-                    Some((_, n)) => format!(
-                        " (the file has '{n}': a typo? or --map {}={n})",
+                    Some((_, n)) => {
+                        format!(" (the file has '{n}': a typo? or --map {}={n})", spec.name)
+                    }
+                    None => format!(
+                        "; if the file names it otherwise, use --map {}=FIELD",
                         spec.name
                     ),
-                    None => format!("; if the file names it otherwise, use --map {}=FIELD", spec.name),
                 };
                 errors.push(raw_error(
                     &raw,
@@ -321,7 +338,14 @@ fn read_csv(
     let header = match records.next() {
         Some(Ok(h)) => h,
         Some(Err(e)) => return Err(vec![csv_error(&file, &e)]),
-        None => return Err(vec![RowError::new(&file, 1, None, "the file has no header line")]),
+        None => {
+            return Err(vec![RowError::new(
+                &file,
+                1,
+                None,
+                "the file has no header line",
+            )])
+        }
     };
     let header_line = header.position().map_or(1, |p| p.line());
     let mut names = Vec::with_capacity(header.len());
@@ -551,7 +575,10 @@ impl<'t> RowCheck<'t> {
         if v > 0.0 {
             Some(v)
         } else {
-            self.err(col, format!("must be greater than 0{unit}, got {}", short(v)));
+            self.err(
+                col,
+                format!("must be greater than 0{unit}, got {}", short(v)),
+            );
             None
         }
     }
