@@ -667,6 +667,7 @@ fn read_shapefile(
     let dbf = dbf.ok_or_else(|| {
         format!("the Shapefile has no {stem}.dbf beside it (its attribute table)")
     })?;
+    check_shp(shp)?;
     let shapes = shapefile::ShapeReader::new(Cursor::new(shp))
         .and_then(|r| r.read())
         .map_err(|e| format!("the .shp cannot be read: {e}"))?;
@@ -734,6 +735,68 @@ fn read_shapefile(
         srid_problem,
         features,
     })
+}
+
+/// Check the record structure of a `.shp` (ESRI Shapefile Technical Description, 1998) before
+/// the `shapefile` crate reads it: every record inside the file, and every part and point count
+/// non-negative and within its record. The crate trusts these counts (a negative part count
+/// makes it allocate without bound and panic), so a damaged file must be refused here.
+fn check_shp(shp: &[u8]) -> Result<(), String> {
+    const HEADER: usize = 100;
+    let be = |at: usize| -> Option<i64> {
+        Some(i64::from(i32::from_be_bytes(
+            shp.get(at..at + 4)?.try_into().ok()?,
+        )))
+    };
+    let le = |at: usize| -> Option<i64> {
+        Some(i64::from(i32::from_le_bytes(
+            shp.get(at..at + 4)?.try_into().ok()?,
+        )))
+    };
+    if shp.len() < HEADER || be(0) != Some(9994) {
+        return Err("the .shp is not an ESRI Shapefile (no 100-byte header with code 9994)".into());
+    }
+    let mut at = HEADER;
+    let mut record = 0;
+    while at < shp.len() {
+        record += 1;
+        let bad = |why: &str| format!("the .shp is damaged at record {record}: {why}");
+        let len = be(at + 4).ok_or_else(|| bad("the record header is cut short"))?;
+        if len < 2 {
+            return Err(bad("its length is less than a shape type"));
+        }
+        let bytes = usize::try_from(len * 2).map_err(|_| bad("its length is too large"))?;
+        let start = at + 8;
+        let end = start
+            .checked_add(bytes)
+            .filter(|&e| e <= shp.len())
+            .ok_or_else(|| bad("it runs past the end of the file"))?;
+        let shape_type = le(start).ok_or_else(|| bad("no shape type"))?;
+        // (offset of the part count or None, offset of the point count, bytes per part index)
+        let counts = match shape_type {
+            3 | 5 | 13 | 15 | 23 | 25 => Some((Some(36), 40, 4, 44)),
+            31 => Some((Some(36), 40, 8, 44)),
+            8 | 18 | 28 => Some((None, 36, 0, 40)),
+            _ => None,
+        };
+        if let Some((parts_at, points_at, per_part, base)) = counts {
+            let parts = match parts_at {
+                Some(p) => le(start + p).ok_or_else(|| bad("the part count is cut short"))?,
+                None => 0,
+            };
+            let points =
+                le(start + points_at).ok_or_else(|| bad("the point count is cut short"))?;
+            if parts < 0 || points < 0 {
+                return Err(bad("a negative part or point count"));
+            }
+            let need = base + parts * per_part + points * 16;
+            if need > len * 2 {
+                return Err(bad("its part and point counts do not fit in it"));
+            }
+        }
+        at = end;
+    }
+    Ok(())
 }
 
 fn shape_geometry(shape: shapefile::Shape) -> Geometry {
@@ -929,6 +992,62 @@ mod tests {
         assert!(gpkg_geometry(&blob(&lie, 1)).is_err());
         // Empty flag.
         assert_eq!(gpkg_geometry(&blob(&[], 0b1_0001)).unwrap(), Geometry::None);
+    }
+
+    fn fuzz_config() -> proptest::test_runner::Config {
+        let cases = std::env::var("PROPTEST_CASES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(256);
+        proptest::test_runner::Config {
+            cases,
+            failure_persistence: None,
+            ..Default::default()
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(fuzz_config())]
+
+        /// No panic on any blob, and a huge count never allocates: an error instead.
+        #[test]
+        fn geopackage_blobs_of_arbitrary_bytes(
+            flags in proptest::num::u8::ANY,
+            tail in proptest::collection::vec(proptest::num::u8::ANY, 0..200),
+        ) {
+            let mut b = vec![b'G', b'P', 0, flags];
+            b.extend_from_slice(&tail);
+            if let Ok(Ok(Some(l))) = gpkg_geometry(&b).map(line_of) {
+                proptest::prop_assert!(l.points.len() >= 2);
+            }
+            let _ = gpkg_geometry(&tail);
+        }
+
+        #[test]
+        fn prj_files_of_arbitrary_text(t in ".{0,120}") {
+            let _ = prj_epsg(&t);
+            let _ = crs_name_epsg(&t);
+        }
+    }
+
+    #[test]
+    fn a_damaged_shp_is_refused_before_the_crate_reads_it() {
+        let mut shp = vec![0u8; 100];
+        shp[..4].copy_from_slice(&9994i32.to_be_bytes());
+        let mut rec = Vec::new();
+        rec.extend_from_slice(&1i32.to_be_bytes());
+        rec.extend_from_slice(&22i32.to_be_bytes()); // 44 bytes of content
+        rec.extend_from_slice(&3i32.to_le_bytes()); // polyline
+        rec.extend_from_slice(&[0u8; 32]);
+        rec.extend_from_slice(&(-5i32).to_le_bytes());
+        rec.extend_from_slice(&0i32.to_le_bytes());
+        shp.extend_from_slice(&rec);
+        let e = check_shp(&shp).unwrap_err();
+        assert!(
+            e.contains("record 1: a negative part or point count"),
+            "{e}"
+        );
+        assert!(check_shp(b"not a shapefile").is_err());
     }
 
     #[test]
