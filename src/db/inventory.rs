@@ -7,14 +7,11 @@ use rusqlite::{params, Connection, OptionalExtension, Row};
 
 use super::hash::Canonical;
 use super::DbError;
-use crate::physics::inputs::{check_range, WATER_BULK_MODULUS, WATER_DENSITY};
+use crate::physics::inputs::{SOIL_DENSITY_RANGE, WATER_BULK_MODULUS, WATER_DENSITY};
 use crate::physics::{Fluid, InputError, Material, MaterialProps, Pipe};
 
 /// Millimetres to metres.
 pub const M_PER_MM: f64 = 1e-3;
-
-/// Valid soil density ρ_m, kg/m³ (spec §3.1: fixed from a soil test, never fitted).
-pub const SOIL_DENSITY_RANGE: (f64, f64) = (1000.0, 2600.0);
 
 /// One row of `segments`: the inventory of one pipe segment, in the units of `segments.csv`,
 /// with its measurements.
@@ -122,13 +119,7 @@ impl SegmentRecord {
 
     /// The soil density ρ_m, kg/m³, checked against spec §3.1.
     pub fn soil_density(&self) -> Result<f64, InputError> {
-        check_range(
-            "soil density (kg/m3)",
-            self.soil_density_kg_m3,
-            SOIL_DENSITY_RANGE.0,
-            SOIL_DENSITY_RANGE.1,
-            "1000 - 2600",
-        )
+        SOIL_DENSITY_RANGE.check(self.soil_density_kg_m3)
     }
 
     /// The canonical text of everything a fit of this segment depends on: the id, the pipe,

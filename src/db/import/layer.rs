@@ -793,6 +793,20 @@ fn check_shp(shp: &[u8]) -> Result<(), String> {
             if need > len * 2 {
                 return Err(bad("its part and point counts do not fit in it"));
             }
+            // Each part starts at a point index: increasing, from 0, within the points.
+            let mut previous = 0;
+            for k in 0..parts {
+                let first = usize::try_from(k * 4)
+                    .ok()
+                    .map(|o| start + base as usize + o);
+                let first = first
+                    .and_then(le)
+                    .ok_or_else(|| bad("a part index is cut short"))?;
+                if first < previous || first > points || (k == 0 && first != 0) {
+                    return Err(bad("its part indices are not increasing point numbers"));
+                }
+                previous = first;
+            }
         }
         at = end;
     }
@@ -1048,6 +1062,16 @@ mod tests {
             "{e}"
         );
         assert!(check_shp(b"not a shapefile").is_err());
+        // A part index past the points (found by the fuzz test: the crate's subtraction
+        // overflowed).
+        let n = shp.len();
+        shp[n - 8..n - 4].copy_from_slice(&1i32.to_le_bytes());
+        shp[n - 4..].copy_from_slice(&2i32.to_le_bytes());
+        shp[107] = 40; // 80 bytes: the counts, one part index and two points
+        shp.extend_from_slice(&256i32.to_le_bytes());
+        shp.extend_from_slice(&[0u8; 32]);
+        let e = check_shp(&shp).unwrap_err();
+        assert!(e.contains("part indices"), "{e}");
     }
 
     #[test]

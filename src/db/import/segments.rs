@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use super::aliases;
 use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, RowError};
-use crate::db::inventory::{SegmentRecord, SOIL_DENSITY_RANGE};
+use crate::db::inventory::SegmentRecord;
 use crate::db::wkt::LineString;
 use crate::physics::InputError;
 use crate::units::short;
@@ -82,24 +82,15 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
     },
 ];
 
-/// A valid-range check: (quantity for the message, low, high, range text).
-type Range = (&'static str, f64, f64, &'static str);
-
-// Valid ranges of spec §3.1 ("reject outside"), the same as the checked constructors in
-// `physics::inputs`; checking each override here names the offending column. The pipe and the
-// fluid are then built by those constructors, which remain the authority.
-const PIPE_YOUNGS_MODULUS: Range = ("pipe Young's modulus (Pa)", 1e8, 3e11, "1e8 - 3e11");
-const PIPE_POISSON: Range = ("pipe Poisson's ratio", 0.0, 0.49, "0 - 0.49");
-const PIPE_DENSITY: Range = ("pipe density (kg/m3)", 500.0, 9000.0, "500 - 9000");
-const PIPE_LOSS_FACTOR: Range = ("pipe loss factor", 0.0, 0.3, "0 - 0.3");
-const FLUID_DENSITY: Range = ("fluid density (kg/m3)", 500.0, 1100.0, "500 - 1100");
-const FLUID_BULK_MODULUS: Range = ("fluid bulk modulus (Pa)", 1e6, 2.5e9, "1e6 - 2.5e9");
-const SOIL_DENSITY: Range = (
-    "soil density (kg/m3)",
-    SOIL_DENSITY_RANGE.0,
-    SOIL_DENSITY_RANGE.1,
-    "1000 - 2600",
-);
+// Valid ranges of spec §3.1, from `physics::inputs` (their one place); checking each override
+// here names the offending column. The pipe and the fluid are then built by the checked
+// constructors, which remain the authority.
+use crate::physics::inputs::{
+    FLUID_BULK_MODULUS_RANGE as FLUID_BULK_MODULUS, FLUID_DENSITY_RANGE as FLUID_DENSITY,
+    PIPE_DENSITY_RANGE as PIPE_DENSITY, PIPE_LOSS_FACTOR_RANGE as PIPE_LOSS_FACTOR,
+    PIPE_POISSON_RANGE as PIPE_POISSON, PIPE_YOUNGS_MODULUS_RANGE as PIPE_YOUNGS_MODULUS,
+    SOIL_DENSITY_RANGE as SOIL_DENSITY,
+};
 
 /// One data row of the file.
 #[derive(Debug)]

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use super::{ColumnRef, ImportOptions, ImportSource, RowError, SourceKind};
-use crate::physics::inputs::check_range;
+use crate::physics::inputs::ValidRange;
 use crate::units::short;
 
 /// A column an import file may have.
@@ -583,15 +583,15 @@ impl<'t> RowCheck<'t> {
         }
     }
 
-    /// Keep `v` only if it is within `[lo, hi]` (spec §3.1 ranges).
+    /// Keep `v` only if it is within `range` (spec §3.1 ranges).
     pub fn in_range(
         &mut self,
         col: &'static str,
         v: Option<f64>,
-        (name, lo, hi, range): (&'static str, f64, f64, &'static str),
+        range: ValidRange,
     ) -> Option<f64> {
         let v = v?;
-        match check_range(name, v, lo, hi, range) {
+        match range.check(v) {
             Ok(v) => Some(v),
             Err(e) => {
                 self.err(col, e.to_string());
