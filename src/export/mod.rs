@@ -17,6 +17,7 @@ pub mod geojson;
 pub mod gpkg;
 pub mod record;
 pub mod spreadsheet;
+pub mod style;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -29,7 +30,8 @@ pub use record::{load_records, SegmentExport, PROPERTIES};
 /// The output formats of `pipewave export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ExportFormat {
-    /// OGC GeoPackage 1.4 (`.gpkg`), in the segments' own coordinate system.
+    /// OGC GeoPackage 1.2 (`.gpkg`), in the segments' own coordinate system, with a default
+    /// QGIS style.
     Gpkg,
     /// RFC 7946 GeoJSON, WGS 84 longitude/latitude.
     GeoJson,
@@ -172,6 +174,10 @@ pub fn write(
         ExportFormat::GeoJson => geojson::write(&records, out_path)?,
         ExportFormat::Csv => csv::write(&records, out_path)?,
     };
+    if format != ExportFormat::Gpkg {
+        // The default QGIS style beside the file (the GeoPackage holds its own).
+        write_file_atomically(&style::qml_path(out_path), style::qml(&records).as_bytes())?;
+    }
     warnings.append(&mut summary.warnings);
     summary.warnings = warnings;
     Ok(summary)

@@ -10,7 +10,7 @@ use std::str::FromStr;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
     /// A value outside its valid range.
-    #[error("{name} = {value} is outside the valid range {range}")]
+    #[error("{name} = {} is outside the valid range {range}", crate::units::short(*.value))]
     OutOfRange {
         /// Name of the quantity, with its unit.
         name: &'static str,
@@ -20,7 +20,7 @@ pub enum InputError {
         range: &'static str,
     },
     /// A value that is not a finite number.
-    #[error("{name} is not a finite number ({value})")]
+    #[error("{name} is not a finite number ({})", crate::units::short(*.value))]
     NotFinite {
         /// Name of the quantity.
         name: &'static str,
@@ -38,7 +38,7 @@ pub enum InputError {
         expected: &'static str,
     },
     /// The wall is too thick for the thin-shell model.
-    #[error("wall thickness {h} m is more than a quarter of the mean radius {a} m (h/a = {ratio:.3} > 0.25): the thin-shell model does not apply")]
+    #[error("wall thickness {} m is more than a quarter of the mean radius {} m (h/a = {ratio:.3} > 0.25): the thin-shell model does not apply", crate::units::short(*.h), crate::units::short(*.a))]
     WallTooThick {
         /// Wall thickness, m.
         h: f64,
@@ -48,6 +48,90 @@ pub enum InputError {
         ratio: f64,
     },
 }
+
+/// The valid range of one input quantity (spec §3.1, "reject outside"). Each range is written
+/// once, below; the checked constructors, the importer (which names the offending column) and
+/// the synthetic networks all read these.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ValidRange {
+    /// The quantity with its unit, for messages.
+    pub name: &'static str,
+    /// Lowest valid value.
+    pub lo: f64,
+    /// Highest valid value.
+    pub hi: f64,
+    /// The range as written in messages.
+    pub text: &'static str,
+}
+
+impl ValidRange {
+    /// `value` if finite and in the range.
+    pub fn check(&self, value: f64) -> Result<f64, InputError> {
+        check_range(self.name, value, self.lo, self.hi, self.text)
+    }
+
+    /// Is `value` finite and in the range?
+    pub fn contains(&self, value: f64) -> bool {
+        self.check(value).is_ok()
+    }
+}
+
+/// Fluid density ρ_f, kg/m³ (spec §3.1).
+pub const FLUID_DENSITY_RANGE: ValidRange = ValidRange {
+    name: "fluid density (kg/m3)",
+    lo: 500.0,
+    hi: 1100.0,
+    text: "500 - 1100",
+};
+/// Fluid bulk modulus B_f, Pa (spec §3.1).
+pub const FLUID_BULK_MODULUS_RANGE: ValidRange = ValidRange {
+    name: "fluid bulk modulus (Pa)",
+    lo: 1e6,
+    hi: 2.5e9,
+    text: "1e6 - 2.5e9",
+};
+/// Pipe Young's modulus E_p, Pa (spec §3.1).
+pub const PIPE_YOUNGS_MODULUS_RANGE: ValidRange = ValidRange {
+    name: "pipe Young's modulus (Pa)",
+    lo: 1e8,
+    hi: 3e11,
+    text: "1e8 - 3e11",
+};
+/// Pipe Poisson's ratio ν_p (spec §3.1).
+pub const PIPE_POISSON_RANGE: ValidRange = ValidRange {
+    name: "pipe Poisson's ratio",
+    lo: 0.0,
+    hi: 0.49,
+    text: "0 - 0.49",
+};
+/// Pipe density ρ_p, kg/m³ (spec §3.1).
+pub const PIPE_DENSITY_RANGE: ValidRange = ValidRange {
+    name: "pipe density (kg/m3)",
+    lo: 500.0,
+    hi: 9000.0,
+    text: "500 - 9000",
+};
+/// Pipe loss factor η_p (spec §3.1).
+pub const PIPE_LOSS_FACTOR_RANGE: ValidRange = ValidRange {
+    name: "pipe loss factor",
+    lo: 0.0,
+    hi: 0.3,
+    text: "0 - 0.3",
+};
+/// Mean radius a, m (spec §3.1).
+pub const MEAN_RADIUS_RANGE: ValidRange = ValidRange {
+    name: "mean radius (m)",
+    lo: 0.005,
+    hi: 1.5,
+    text: "0.005 - 1.5",
+};
+/// Soil density ρ_m, kg/m³ (spec §3.1: from a soil test, never fitted).
+pub const SOIL_DENSITY_RANGE: ValidRange = ValidRange {
+    name: "soil density (kg/m3)",
+    lo: 1000.0,
+    hi: 2600.0,
+    text: "1000 - 2600",
+};
 
 /// Check that `value` is finite and in `[lo, hi]`.
 pub(crate) fn check_range(
@@ -83,20 +167,8 @@ pub const WATER_BULK_MODULUS: f64 = 2.25e9;
 impl Fluid {
     /// A checked fluid: ρ_f in 500–1100 kg/m³, B_f in 1e6–2.5e9 Pa (spec §3.1).
     pub fn new(density: f64, bulk_modulus: f64) -> Result<Self, InputError> {
-        check_range(
-            "fluid density (kg/m3)",
-            density,
-            500.0,
-            1100.0,
-            "500 - 1100",
-        )?;
-        check_range(
-            "fluid bulk modulus (Pa)",
-            bulk_modulus,
-            1e6,
-            2.5e9,
-            "1e6 - 2.5e9",
-        )?;
+        FLUID_DENSITY_RANGE.check(density)?;
+        FLUID_BULK_MODULUS_RANGE.check(bulk_modulus)?;
         Ok(Self {
             density,
             bulk_modulus,
@@ -145,17 +217,11 @@ impl Pipe {
         mean_radius: f64,
         wall_thickness: f64,
     ) -> Result<Self, InputError> {
-        check_range(
-            "pipe Young's modulus (Pa)",
-            youngs_modulus,
-            1e8,
-            3e11,
-            "1e8 - 3e11",
-        )?;
-        check_range("pipe Poisson's ratio", poisson, 0.0, 0.49, "0 - 0.49")?;
-        check_range("pipe density (kg/m3)", density, 500.0, 9000.0, "500 - 9000")?;
-        check_range("pipe loss factor", loss_factor, 0.0, 0.3, "0 - 0.3")?;
-        check_range("mean radius (m)", mean_radius, 0.005, 1.5, "0.005 - 1.5")?;
+        PIPE_YOUNGS_MODULUS_RANGE.check(youngs_modulus)?;
+        PIPE_POISSON_RANGE.check(poisson)?;
+        PIPE_DENSITY_RANGE.check(density)?;
+        PIPE_LOSS_FACTOR_RANGE.check(loss_factor)?;
+        MEAN_RADIUS_RANGE.check(mean_radius)?;
         if !wall_thickness.is_finite() {
             return Err(InputError::NotFinite {
                 name: "wall thickness (m)",
@@ -268,13 +334,7 @@ impl Soil {
                 "0 (no soil) or 1e3 - 1e10",
             )?;
         }
-        check_range(
-            "soil density (kg/m3)",
-            density,
-            1000.0,
-            2600.0,
-            "1000 - 2600",
-        )?;
+        SOIL_DENSITY_RANGE.check(density)?;
         Self::new_unbounded(youngs_modulus, poisson, density, loss_factor)
     }
 

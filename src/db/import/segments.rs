@@ -2,11 +2,13 @@
 
 use std::collections::BTreeMap;
 
+use super::aliases;
 use super::table::{ColumnSpec, RowCheck, Table};
-use super::{ImportSource, RowError};
-use crate::db::inventory::{SegmentRecord, SOIL_DENSITY_RANGE};
+use super::{ImportOptions, ImportSource, RowError};
+use crate::db::inventory::SegmentRecord;
 use crate::db::wkt::LineString;
-use crate::physics::{InputError, Material};
+use crate::physics::InputError;
+use crate::units::short;
 
 /// The columns of `segments.csv`.
 pub(super) const COLUMNS: &[ColumnSpec] = &[
@@ -67,6 +69,10 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
         required: false,
     },
     ColumnSpec {
+        name: "soil_zone",
+        required: false,
+    },
+    ColumnSpec {
         name: "geometry_wkt",
         required: false,
     },
@@ -76,24 +82,15 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
     },
 ];
 
-/// A valid-range check: (quantity for the message, low, high, range text).
-type Range = (&'static str, f64, f64, &'static str);
-
-// Valid ranges of spec §3.1 ("reject outside"), the same as the checked constructors in
-// `physics::inputs`; checking each override here names the offending column. The pipe and the
-// fluid are then built by those constructors, which remain the authority.
-const PIPE_YOUNGS_MODULUS: Range = ("pipe Young's modulus (Pa)", 1e8, 3e11, "1e8 - 3e11");
-const PIPE_POISSON: Range = ("pipe Poisson's ratio", 0.0, 0.49, "0 - 0.49");
-const PIPE_DENSITY: Range = ("pipe density (kg/m3)", 500.0, 9000.0, "500 - 9000");
-const PIPE_LOSS_FACTOR: Range = ("pipe loss factor", 0.0, 0.3, "0 - 0.3");
-const FLUID_DENSITY: Range = ("fluid density (kg/m3)", 500.0, 1100.0, "500 - 1100");
-const FLUID_BULK_MODULUS: Range = ("fluid bulk modulus (Pa)", 1e6, 2.5e9, "1e6 - 2.5e9");
-const SOIL_DENSITY: Range = (
-    "soil density (kg/m3)",
-    SOIL_DENSITY_RANGE.0,
-    SOIL_DENSITY_RANGE.1,
-    "1000 - 2600",
-);
+// Valid ranges of spec §3.1, from `physics::inputs` (their one place); checking each override
+// here names the offending column. The pipe and the fluid are then built by the checked
+// constructors, which remain the authority.
+use crate::physics::inputs::{
+    FLUID_BULK_MODULUS_RANGE as FLUID_BULK_MODULUS, FLUID_DENSITY_RANGE as FLUID_DENSITY,
+    PIPE_DENSITY_RANGE as PIPE_DENSITY, PIPE_LOSS_FACTOR_RANGE as PIPE_LOSS_FACTOR,
+    PIPE_POISSON_RANGE as PIPE_POISSON, PIPE_YOUNGS_MODULUS_RANGE as PIPE_YOUNGS_MODULUS,
+    SOIL_DENSITY_RANGE as SOIL_DENSITY,
+};
 
 /// One data row of the file.
 #[derive(Debug)]
@@ -111,17 +108,21 @@ pub(super) struct ParsedSegments {
     pub rows: Vec<SegmentRow>,
     pub errors: Vec<RowError>,
     pub fatal: bool,
+    /// Things to tell the user that reject nothing (ignored columns).
+    pub notes: Vec<String>,
 }
 
 /// Read and check `segments.csv`.
-pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
-    let read = Table::read(source, COLUMNS);
+pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedSegments {
+    let read = Table::read(source, COLUMNS, options);
     let mut errors = read.errors;
+    let notes = read.notes;
     let Some(table) = read.table else {
         return ParsedSegments {
             rows: Vec::new(),
             errors,
             fatal: read.fatal,
+            notes,
         };
     };
     let mut rows: Vec<SegmentRow> = table
@@ -177,6 +178,7 @@ pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
         rows,
         errors,
         fatal: false,
+        notes,
     }
 }
 
@@ -184,7 +186,7 @@ pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
 fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
     let segment_id = c.required_text("segment_id").map(str::to_string);
     let material = c.required_text("material").and_then(|t| {
-        t.parse::<Material>()
+        aliases::material(t)
             .map_err(|e| c.err("material", e.to_string()))
             .ok()
     });
@@ -196,7 +198,11 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         (Some(h), Some(d)) if h >= d / 2.0 => {
             c.err(
                 "wall_thickness_mm",
-                format!("must be less than half the outer diameter ({d} mm / 2), got {h} mm"),
+                format!(
+                    "must be less than half the outer diameter ({} mm / 2), got {} mm",
+                    short(d),
+                    short(h)
+                ),
             );
             None
         }
@@ -222,6 +228,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
     let length_m = c.positive("length_m", v, " m");
     let soil_type = c.owned_text("soil_type");
     let install_year = c.integer("install_year");
+    let soil_zone = c.owned_text("soil_zone");
 
     let geometry_wkt = c.text("geometry_wkt").and_then(|t| {
         LineString::parse_wkt(t)
@@ -270,6 +277,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         length_m,
         soil_type,
         install_year,
+        soil_zone,
         geometry_wkt,
         srid,
         inputs_hash: String::new(),
