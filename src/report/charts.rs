@@ -419,7 +419,7 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
             .map_err(e2s)?;
         }
         let series: [(&str, usize, Pick, f64); 2] =
-            [("c_P", 0, |g| &g.c_p, -0.05), ("c_S", 1, |g| &g.c_s, -0.3)];
+            [("c_P", 0, |g| &g.c_p, 0.02), ("c_S", 1, |g| &g.c_s, -0.3)];
         for (name, colour_i, get, base) in series {
             let colour = CATEGORY_COLOURS[colour_i];
             let mut bars = Vec::new();
@@ -428,8 +428,8 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
                     let pts = get(g);
                     let k = pts.len().max(1) as f64;
                     for (j, p) in pts.iter().enumerate() {
-                        // Spread the dots over a fifth of the band so their bars do not overlap.
-                        let y = y_of(i) + base - 0.2 * (j as f64 + 0.5) / k;
+                        // Spread the dots below the mean so their bars do not overlap.
+                        let y = y_of(i) + base - 0.18 * (j as f64 + 0.5) / k;
                         bars.push((
                             clip(p.value),
                             clip(p.value - p.std),
@@ -459,14 +459,14 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
                     } else {
                         g.c_s_mean
                     };
-                    Some((y_of(i) + base - 0.1, m?))
+                    Some((y_of(i) + base + 0.08, m?))
                 })
                 .collect();
             c.draw_series(means.iter().map(|&(y, m)| {
                 Rectangle::new(
                     [
-                        (clip(m.value - m.std), y - 0.06),
-                        (clip(m.value + m.std), y + 0.06),
+                        (clip(m.value - m.std), y - 0.04),
+                        (clip(m.value + m.std), y + 0.04),
                     ],
                     BLACK.filled(),
                 )
