@@ -1,37 +1,50 @@
 //! The network audit report (`pipewave audit`): one self-contained HTML page (inline CSS and
-//! SVG, no script, nothing fetched) on fit quality across the network.
+//! SVG, no script, nothing fetched), leading with what a water utility needs.
 //!
-//! Sections (each a `<section id=...>`): `summary` (counts, misfit statistics, runs),
-//! `status-flags` (counts by status and flag code), `map` (segments coloured by the leak-band
-//! wave speed), `misfit` (distribution), `speed-diameter` (wave speed against diameter by
-//! material), `modulus-soil` (fitted E against soil type), `worst-fits` (the worst fits, each with
-//! its measured points over the fitted curves), `failed` (segments without a fit).
+//! Sections (each a `<section id=...>`), in order: `trust` (how many predictions are
+//! trustworthy, status `ok`, and the flags that need action, each with its advice), `map`
+//! (segments coloured by the leak-band wave speed, and a second map of its relative error),
+//! `least-certain` (the segments whose leak-band speed is least certain), `soil-speeds` (the
+//! soil's c_P and c_S by soil type, with errors), `notes` (what the data leave undetermined,
+//! summarised), then fit quality: `summary` (misfit statistics, runs), `misfit`
+//! (distribution), `speed-diameter` (wave speed against diameter by material), `worst-fits`
+//! (the worst fits, each with its measured points over the fitted curves), `failed` (segments
+//! without a fit).
 //!
 //! Everything aggregates, so the page reads the same for 200 or 20,000 segments: see
-//! [`svg::MAP_TOOLTIP_LIMIT`], [`charts::SCATTER_LIMIT`], [`WORST_FITS`], [`FAILED_LISTED`].
+//! [`svg::MAP_TOOLTIP_LIMIT`], [`charts::SCATTER_LIMIT`], [`WORST_FITS`], [`FAILED_LISTED`],
+//! [`LEAST_CERTAIN_LISTED`], [`SOIL_TYPES_SHOWN`].
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::charts::{self, ChartError, SpeedPoint};
-use super::svg::{self, escape, MapLine};
+use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
+use super::svg::{self, escape, ColourScale, MapLine, MapStyle};
 use super::{quantile, sorted_finite};
-use crate::db::{self, Database, FitStatus, RunRow};
+use crate::db::{self, Database, FitRow, FitStatus, RunRow};
 use crate::export::gpkg::common_geometries;
 use crate::export::record::UNFITTED;
 use crate::export::{
     check_out_path, crs, load_records, write_file_atomically, ExportError, ExportSummary,
     SegmentExport,
 };
+use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};
+use crate::invert::FlagCode;
 use crate::units::{np_to_db, sig};
 
 /// The worst fits shown with their curves.
 pub const WORST_FITS: usize = 12;
 /// Failed segments listed by id (the rest are counted).
 pub const FAILED_LISTED: usize = 25;
-/// Soil types shown as their own box (the rest are pooled as "other").
+/// Soil types shown on their own (the rest are pooled as "other types").
 pub const SOIL_TYPES_SHOWN: usize = 15;
+/// Segments listed in the least-certain table.
+pub const LEAST_CERTAIN_LISTED: usize = 20;
+/// Width of each of the two maps, px.
+const MAP_WIDTH_PX: f64 = 1000.0;
+/// Width of the relative-error map, px (a second, smaller map).
+const ERROR_MAP_WIDTH_PX: f64 = 640.0;
 
 const CSS: &str = "body{font-family:sans-serif;margin:24px auto;max-width:1100px;color:#222;\
 line-height:1.4}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:4px;\
@@ -80,6 +93,15 @@ fn load_runs(db: &Database, records: &[SegmentExport]) -> Result<Vec<RunRow>, Ex
         }
     }
     Ok(runs)
+}
+
+/// "v ± σ" (or "v" without σ, "–" without a value), m/s-like precision.
+fn pm_opt(v: Option<(f64, Option<f64>)>) -> String {
+    match v {
+        Some((v, Some(e))) if v.is_finite() && e.is_finite() => format!("{v:.0} ± {}", sig(e, 2)),
+        Some((v, _)) if v.is_finite() => format!("{v:.0}"),
+        _ => "–".to_string(),
+    }
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -133,12 +155,14 @@ pub fn render(
                 .is_some_and(|f| f.status != FitStatus::Failed)
         })
         .collect();
-    summary(&mut h, records, &non_failed, runs);
-    status_flags(&mut h, records);
+    trust(&mut h, records);
     map(&mut h, records, warnings);
+    least_certain(&mut h, &non_failed);
+    soil_speeds(&mut h, &non_failed)?;
+    notes(&mut h, records);
+    summary(&mut h, records, &non_failed, runs);
     misfit(&mut h, records, &non_failed)?;
     speed_diameter(&mut h, &non_failed)?;
-    modulus_soil(&mut h, &non_failed)?;
     worst_fits(&mut h, records)?;
     failed(&mut h, records);
     if !warnings.is_empty() {
@@ -224,25 +248,74 @@ fn summary(
     h.push_str("</table></section>");
 }
 
-fn status_flags(h: &mut String, records: &[SegmentExport]) {
-    let mut status: BTreeMap<&str, usize> = ["ok", "flagged", "failed", UNFITTED]
-        .into_iter()
-        .map(|s| (s, 0))
-        .collect();
-    let mut flags: BTreeMap<&str, usize> = BTreeMap::new();
-    for r in records {
-        *status.entry(r.status()).or_default() += 1;
-        for f in r.flag_codes() {
-            *flags.entry(f).or_default() += 1;
+/// The codes of a comma-separated list (`fits.flags`, `fits.notes`).
+fn codes(list: &str) -> impl Iterator<Item = &str> {
+    list.split(',').map(str::trim).filter(|s| !s.is_empty())
+}
+
+/// What a flag or note code means and what to do ([`FlagCode::advice`]); codes an older
+/// pipewave stored are named as such.
+fn advice(code: &str) -> &'static str {
+    FlagCode::ALL.iter().find(|c| c.as_str() == code).map_or(
+        "a code of an older pipewave version: `pipewave run` refits these fits",
+        |c| c.advice(),
+    )
+}
+
+/// Count each code over the records, most frequent first (then by code).
+fn count_codes(records: &[SegmentExport], list: fn(&FitRow) -> &str) -> Vec<(&str, usize)> {
+    let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
+    for f in records.iter().filter_map(|r| r.fit.as_ref()) {
+        for c in codes(list(f)) {
+            *counts.entry(c).or_default() += 1;
         }
     }
-    let max = records.len();
-    h.push_str(
-        "<section id=\"status-flags\"><h2>Counts by status and flag</h2><table>\
-                <tr><th>status</th><th>segments</th><th></th></tr>",
+    let mut v: Vec<(&str, usize)> = counts.into_iter().collect();
+    v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
+    v
+}
+
+/// The leak-band speed of a fitted record, m/s, with its one-sigma error when stored.
+fn speed_with_std(r: &SegmentExport) -> Option<(f64, Option<f64>)> {
+    let speed = r.leak_band_speed.filter(|v| v.is_finite() && *v > 0.0)?;
+    let std = r
+        .fit
+        .as_ref()
+        .and_then(|f| f.leak_band_speed_std_m_per_s)
+        .filter(|s| s.is_finite() && *s >= 0.0);
+    Some((speed, std))
+}
+
+fn percent(part: usize, whole: usize) -> String {
+    if whole == 0 {
+        "–".to_string()
+    } else {
+        format!("{:.0} %", 100.0 * part as f64 / whole as f64)
+    }
+}
+
+fn trust(h: &mut String, records: &[SegmentExport]) {
+    let mut status: BTreeMap<&str, usize> = BTreeMap::new();
+    for r in records {
+        *status.entry(r.status()).or_default() += 1;
+    }
+    let n = |s: &str| status.get(s).copied().unwrap_or(0);
+    let _ = write!(
+        h,
+        "<section id=\"trust\"><h2>Trustworthy predictions</h2><p><b>{ok} of {all} segments \
+         ({pct}) have a trustworthy wave speed</b> (status ok): the model explains their \
+         measurements and their leak-band speed is known within {lim:.0} % (one sigma). \
+         {flagged} are flagged for action, {failed} failed, {unfitted} are not fitted.</p><table>\
+         <tr><th>status</th><th>segments</th><th></th></tr>",
+        ok = n("ok"),
+        all = records.len(),
+        pct = percent(n("ok"), records.len()),
+        lim = 100.0 * SPEED_RSTD_MAX,
+        flagged = n("flagged"),
+        failed = n("failed"),
+        unfitted = n(UNFITTED),
     );
     for s in ["ok", "flagged", "failed", UNFITTED] {
-        let n = status.get(s).copied().unwrap_or(0);
         let colour = match s {
             "ok" => "#228833",
             "flagged" => "#ccbb44",
@@ -251,65 +324,375 @@ fn status_flags(h: &mut String, records: &[SegmentExport]) {
         };
         let _ = write!(
             h,
-            "<tr><td>{s}</td><td class=\"n\">{n}</td><td>{}</td></tr>",
-            svg::bar(n, max, colour)
+            "<tr><td>{s}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            n(s),
+            svg::bar(n(s), records.len(), colour)
         );
     }
-    h.push_str("</table><table><tr><th>flag code</th><th>segments</th><th></th></tr>");
-    let mut by_count: Vec<(&str, usize)> = flags.into_iter().collect();
-    by_count.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
-    for (f, n) in &by_count {
+    h.push_str(
+        "</table><h3 id=\"flags\">Flags that need action</h3><table><tr><th>flag</th>\
+         <th>segments</th><th>what it means and what to do</th></tr>",
+    );
+    let flags = count_codes(records, |f| f.flags.as_str());
+    for (code, count) in &flags {
         let _ = write!(
             h,
-            "<tr><td>{}</td><td class=\"n\">{n}</td><td>{}</td></tr>",
-            escape(f),
-            svg::bar(*n, max, "#4477aa")
+            "<tr><td>{}</td><td class=\"n\">{count}</td><td>{}</td></tr>",
+            escape(code),
+            escape(advice(code))
         );
     }
-    if by_count.is_empty() {
+    if flags.is_empty() {
         h.push_str("<tr><td colspan=\"3\">no flags raised</td></tr>");
+    }
+    h.push_str(
+        "</table><p class=\"note\">A segment can carry several flags. Each fit's own reasons \
+         are in the exports' <code>flag_reasons</code> column.</p></section>",
+    );
+}
+
+/// Classes of the relative-error map, % (the last class starts at [`SPEED_RSTD_MAX`]).
+fn error_scale() -> ColourScale {
+    ColourScale {
+        lo: 100.0 * SPEED_RSTD_MAX / 8.0,
+        hi: 100.0 * SPEED_RSTD_MAX,
+    }
+}
+
+fn map(h: &mut String, records: &[SegmentExport], warnings: &mut Vec<String>) {
+    h.push_str("<section id=\"map\"><h2>Map: leak-band wave speed ± its error</h2>");
+    let (srid, lines) = common_geometries(records, warnings);
+    let drawn: Vec<(&SegmentExport, &crate::db::wkt::LineString)> = records
+        .iter()
+        .zip(&lines)
+        .filter_map(|(r, l)| l.as_ref().map(|line| (r, line)))
+        .collect();
+    let Some(srid) = srid.filter(|_| !drawn.is_empty()) else {
+        h.push_str("<p class=\"note\">No segment has a geometry.</p></section>");
+        return;
+    };
+    let speeds: Vec<Option<(f64, Option<f64>)>> =
+        drawn.iter().map(|(r, _)| speed_with_std(r)).collect();
+    let speed_lines: Vec<MapLine<'_>> = drawn
+        .iter()
+        .zip(&speeds)
+        .map(|((r, line), s)| MapLine {
+            id: r.id(),
+            line,
+            value: s.map(|s| s.0),
+            label: s.map(|(v, e)| match e {
+                Some(e) => format!("{v:.0} ± {} m/s ({})", sig(e, 2), r.status()),
+                None => format!("{v:.0} m/s, error unknown ({})", r.status()),
+            }),
+        })
+        .collect();
+    let error_lines: Vec<MapLine<'_>> = drawn
+        .iter()
+        .zip(&speeds)
+        .map(|((r, line), s)| {
+            let rel = s.and_then(|(v, e)| Some(100.0 * e? / v));
+            MapLine {
+                id: r.id(),
+                line,
+                value: rel,
+                label: rel.map(|p| format!("{} % of the speed", sig(p, 2))),
+            }
+        })
+        .collect();
+    let name = crs::lookup(srid).map_or("unknown system", |d| d.name);
+    let _ = write!(
+        h,
+        "<p class=\"note\">{} segments drawn in EPSG:{srid} ({}). First map: the speed to type \
+         into a leak correlator, colour classes spanning the 2nd–98th percentiles. Second map: its \
+         one-sigma error as a percentage of the speed; darker is less certain, the darkest class \
+         is above the {:.0} % a trustworthy prediction allows. Grey: no value (not fitted, \
+         failed, a curve that does not cover the band, or no error stored).{}</p>",
+        drawn.len(),
+        escape(name),
+        100.0 * SPEED_RSTD_MAX,
+        if drawn.len() <= svg::MAP_TOOLTIP_LIMIT {
+            " Hover a segment for its id, speed and error."
+        } else {
+            ""
+        }
+    );
+    let geographic = crs::is_geographic(srid);
+    h.push_str(&svg::map(
+        &speed_lines,
+        geographic,
+        &MapStyle {
+            unit: "m/s",
+            decimals: 0,
+            scale: None,
+            reversed: false,
+            width: MAP_WIDTH_PX,
+        },
+    ));
+    let _ = write!(
+        h,
+        "<h3>Relative error of the leak-band speed (%)</h3>{}</section>",
+        svg::map(
+            &error_lines,
+            geographic,
+            &MapStyle {
+                unit: "%",
+                decimals: 2,
+                scale: Some(error_scale()),
+                reversed: true,
+                width: ERROR_MAP_WIDTH_PX,
+            },
+        )
+    );
+}
+
+fn least_certain(h: &mut String, non_failed: &[&SegmentExport]) {
+    let mut rows: Vec<(&SegmentExport, f64, f64, f64)> = Vec::new();
+    let mut without_error = 0usize;
+    for r in non_failed {
+        match speed_with_std(r) {
+            Some((v, Some(e))) => rows.push((r, v, e, e / v)),
+            Some((_, None)) => without_error += 1,
+            None => {}
+        }
+    }
+    rows.sort_by(|a, b| b.3.total_cmp(&a.3).then(a.0.id().cmp(b.0.id())));
+    let above = rows.iter().filter(|r| r.3 > SPEED_RSTD_MAX).count();
+    let _ = write!(
+        h,
+        "<section id=\"least-certain\"><h2>The least certain wave speeds</h2><p>{} fitted \
+         segments have a leak-band speed with an error; {above} of them are uncertain by more \
+         than {:.0} % (one sigma). The {} with the largest relative error:</p>",
+        rows.len(),
+        100.0 * SPEED_RSTD_MAX,
+        rows.len().min(LEAST_CERTAIN_LISTED),
+    );
+    if without_error > 0 {
+        let _ = write!(
+            h,
+            "<p class=\"note\">{without_error} fitted segment(s) have a speed but no stored \
+             error (fits made by an older pipewave: <code>pipewave run</code> refits them).</p>"
+        );
+    }
+    h.push_str(
+        "<table><tr><th>segment</th><th>material</th><th>soil type</th>\
+         <th>leak-band speed (m/s)</th><th>relative error</th><th>status</th><th>flags</th></tr>",
+    );
+    for (r, v, e, rel) in rows.iter().take(LEAST_CERTAIN_LISTED) {
+        let flags = r.fit.as_ref().map_or("", |f| f.flags.as_str());
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"n\">{v:.0} ± {}</td>\
+             <td class=\"n rel\">{:.2} %</td><td>{}</td><td>{}</td></tr>",
+            escape(r.id()),
+            r.segment.material.code(),
+            escape(r.segment.soil_type.as_deref().unwrap_or("")),
+            sig(*e, 2),
+            100.0 * rel,
+            r.status(),
+            escape(if flags.is_empty() { "none" } else { flags }),
+        );
+    }
+    if rows.is_empty() {
+        h.push_str("<tr><td colspan=\"7\">no fitted segment with a speed error</td></tr>");
     }
     h.push_str("</table></section>");
 }
 
-fn map(h: &mut String, records: &[SegmentExport], warnings: &mut Vec<String>) {
-    h.push_str("<section id=\"map\"><h2>Map: leak-band wave speed</h2>");
-    let (srid, lines) = common_geometries(records, warnings);
-    let map_lines: Vec<MapLine<'_>> = records
-        .iter()
-        .zip(&lines)
-        .filter_map(|(r, l)| {
-            l.as_ref().map(|line| MapLine {
-                id: r.id(),
-                line,
-                value: r.leak_band_speed,
-            })
-        })
+/// A value ± σ when determined: finite, positive, relative σ ≤ [`SPEED_DETERMINED_RSTD`].
+fn determined(value: Option<f64>, std: Option<f64>) -> Option<WithStd> {
+    let (value, std) = (value?, std?);
+    (value.is_finite() && value > 0.0 && std.is_finite() && std > 0.0)
+        .then_some(WithStd { value, std })
+        .filter(|w| w.std / w.value <= SPEED_DETERMINED_RSTD)
+}
+
+/// The inverse-variance weighted mean of values ± σ, with its error (1/√Σw), and the sample
+/// standard deviation of the values (None below two values).
+pub fn weighted_mean(values: &[WithStd]) -> Option<(WithStd, Option<f64>)> {
+    if values.is_empty() {
+        return None;
+    }
+    let (sw, swx) = values.iter().fold((0.0, 0.0), |(sw, swx), p| {
+        let w = 1.0 / (p.std * p.std);
+        (sw + w, swx + w * p.value)
+    });
+    let mean = WithStd {
+        value: swx / sw,
+        std: 1.0 / sw.sqrt(),
+    };
+    let n = values.len() as f64;
+    let spread = (values.len() >= 2).then(|| {
+        let m = values.iter().map(|p| p.value).sum::<f64>() / n;
+        (values.iter().map(|p| (p.value - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    });
+    Some((mean, spread))
+}
+
+/// The fitted segments of one soil type and their determined soil speeds.
+#[derive(Default)]
+struct SoilTally {
+    fitted: usize,
+    c_p: Vec<WithStd>,
+    c_s: Vec<WithStd>,
+}
+
+fn soil_speeds(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), ChartError> {
+    h.push_str(
+        "<section id=\"soil-speeds\"><h2>The soil's wave speeds by soil type</h2><p>The data fix \
+         the soil's compressional speed c_P (metal and plastic pipes) and, for plastic pipes, \
+         also its shear speed c_S; geotechnical surveys report the same quantities (Vp, Vs). \
+         Each segment counts where its speed is determined (one sigma within ",
+    );
+    let _ = write!(
+        h,
+        "{:.0} % of the value); the mean of a soil type weights each segment by 1/σ², and the \
+         spread is the standard deviation of its segments' values: a spread much larger than \
+         the error says that soil type is not one material.</p>",
+        100.0 * SPEED_DETERMINED_RSTD
+    );
+    let mut by_type: BTreeMap<String, SoilTally> = BTreeMap::new();
+    for r in non_failed {
+        let Some(f) = r.fit.as_ref() else { continue };
+        let t = r
+            .segment
+            .soil_type
+            .as_deref()
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .unwrap_or("(not recorded)");
+        let g = by_type.entry(t.to_string()).or_default();
+        g.fitted += 1;
+        g.c_p.extend(determined(
+            f.soil_p_wave_speed_m_per_s,
+            f.soil_p_wave_speed_std_m_per_s,
+        ));
+        g.c_s.extend(determined(
+            f.soil_s_wave_speed_m_per_s,
+            f.soil_s_wave_speed_std_m_per_s,
+        ));
+    }
+    let mut groups: Vec<(String, SoilTally)> = by_type.into_iter().collect();
+    groups.sort_by(|a, b| b.1.fitted.cmp(&a.1.fitted).then(a.0.cmp(&b.0)));
+    if groups.len() > SOIL_TYPES_SHOWN {
+        let mut rest = SoilTally::default();
+        for (_, g) in groups.drain(SOIL_TYPES_SHOWN - 1..) {
+            rest.fitted += g.fitted;
+            rest.c_p.extend(g.c_p);
+            rest.c_s.extend(g.c_s);
+        }
+        groups.push(("(other types)".to_string(), rest));
+    }
+    let mut rows: Vec<(SoilSpeeds, usize, Option<f64>, Option<f64>)> = groups
+        .into_iter()
+        .map(
+            |(
+                name,
+                SoilTally {
+                    fitted: n,
+                    c_p,
+                    c_s,
+                },
+            )| {
+                let p = weighted_mean(&c_p);
+                let s = weighted_mean(&c_s);
+                (
+                    SoilSpeeds {
+                        name,
+                        c_p_mean: p.map(|m| m.0),
+                        c_s_mean: s.map(|m| m.0),
+                        c_p,
+                        c_s,
+                    },
+                    n,
+                    p.and_then(|m| m.1),
+                    s.and_then(|m| m.1),
+                )
+            },
+        )
         .collect();
-    match srid {
-        Some(srid) if !map_lines.is_empty() => {
-            let name = crs::lookup(srid).map_or("unknown system", |d| d.name);
+    // Softest soil first; types without a determined c_P last.
+    rows.sort_by(|a, b| {
+        let key = |g: &SoilSpeeds| g.c_p_mean.map_or(f64::INFINITY, |m| m.value);
+        key(&a.0)
+            .total_cmp(&key(&b.0))
+            .then(a.0.name.cmp(&b.0.name))
+    });
+    h.push_str(
+        "<table><tr><th>soil type</th><th>fitted segments</th><th>with c_P</th>\
+         <th>c_P (m/s): mean ± error</th><th>spread</th><th>with c_S</th>\
+         <th>c_S (m/s): mean ± error</th><th>spread</th></tr>",
+    );
+    let pm = |m: Option<WithStd>| {
+        m.map_or_else(
+            || "–".to_string(),
+            |m| format!("{:.0} ± {}", m.value, sig(m.std, 2)),
+        )
+    };
+    for (g, n, p_spread, s_spread) in &rows {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td class=\"n\">{n}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
+             <td class=\"n\">{}</td></tr>",
+            escape(&g.name),
+            g.c_p.len(),
+            pm(g.c_p_mean),
+            p_spread.map_or_else(|| "–".to_string(), |v| format!("{v:.0}")),
+            g.c_s.len(),
+            pm(g.c_s_mean),
+            s_spread.map_or_else(|| "–".to_string(), |v| format!("{v:.0}")),
+        );
+    }
+    if rows.is_empty() {
+        h.push_str("<tr><td colspan=\"8\">no fitted segment</td></tr></table>");
+    } else {
+        h.push_str("</table>");
+        let groups: Vec<SoilSpeeds> = rows.into_iter().map(|r| r.0).collect();
+        if groups
+            .iter()
+            .any(|g| !g.c_p.is_empty() || !g.c_s.is_empty())
+        {
             let _ = write!(
                 h,
-                "<p class=\"note\">{} segments drawn in EPSG:{srid} ({}); colour classes span the \
-                 2nd–98th percentiles, grey: no speed (not fitted, failed, or a curve that does \
-                 not cover the band).{}</p>",
-                map_lines.len(),
-                escape(name),
-                if map_lines.len() <= svg::MAP_TOOLTIP_LIMIT {
-                    " Hover a segment for its id and speed."
+                "<p class=\"note\">Dots: one segment each, ± one sigma (blue c_P, red c_S{}); \
+                 black bars: each type's weighted mean ± its error.</p>",
+                if groups
+                    .iter()
+                    .map(|g| g.c_p.len() + g.c_s.len())
+                    .sum::<usize>()
+                    > charts::SCATTER_LIMIT
+                {
+                    "; too many to draw, only the means are shown"
                 } else {
                     ""
                 }
             );
-            h.push_str(&svg::map(
-                &map_lines,
-                crs::is_geographic(srid),
-                "m/s",
-                1000.0,
-            ));
+            h.push_str(&charts::soil_speeds(&groups)?);
         }
-        _ => h.push_str("<p class=\"note\">No segment has a geometry.</p>"),
+    }
+    h.push_str("</section>");
+    Ok(())
+}
+
+fn notes(h: &mut String, records: &[SegmentExport]) {
+    let notes = count_codes(records, |f| f.notes.as_str());
+    h.push_str(
+        "<section id=\"notes\"><h2>Notes</h2><p class=\"note\">What the data leave undetermined. \
+         These are facts about the soil and the measurements, not defects of the fit.</p>",
+    );
+    if notes.is_empty() {
+        h.push_str("<p class=\"note\">No notes.</p>");
+    } else {
+        h.push_str("<table class=\"note\"><tr><th>note</th><th>segments</th><th>meaning</th></tr>");
+        for (code, count) in &notes {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td class=\"n\">{count}</td><td>{}</td></tr>",
+                escape(code),
+                escape(advice(code))
+            );
+        }
+        h.push_str("</table>");
     }
     h.push_str("</section>");
 }
@@ -387,60 +770,6 @@ fn speed_diameter(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), C
     Ok(())
 }
 
-fn modulus_soil(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), ChartError> {
-    h.push_str(
-        "<section id=\"modulus-soil\"><h2>Fitted soil Young's modulus E against soil type</h2>",
-    );
-    let mut groups: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    for r in non_failed {
-        if let Some(e) = r.fit.as_ref().and_then(|f| f.soil_youngs_modulus_pa) {
-            let t = r
-                .segment
-                .soil_type
-                .as_deref()
-                .map(str::trim)
-                .filter(|s| !s.is_empty());
-            groups
-                .entry(t.unwrap_or("(not recorded)").to_string())
-                .or_default()
-                .push(e);
-        }
-    }
-    let mut groups: Vec<(String, Vec<f64>)> = groups.into_iter().collect();
-    groups.sort_by(|a, b| b.1.len().cmp(&a.1.len()).then(a.0.cmp(&b.0)));
-    if groups.len() > SOIL_TYPES_SHOWN {
-        let rest: Vec<f64> = groups
-            .drain(SOIL_TYPES_SHOWN - 1..)
-            .flat_map(|(_, v)| v)
-            .collect();
-        groups.push(("(other types)".to_string(), rest));
-    }
-    for g in &mut groups {
-        g.1.sort_by(f64::total_cmp);
-    }
-    groups.sort_by(|a, b| {
-        quantile(&a.1, 0.5)
-            .unwrap_or(0.0)
-            .total_cmp(&quantile(&b.1, 0.5).unwrap_or(0.0))
-    });
-    if groups.is_empty() {
-        h.push_str("<p class=\"note\">No fitted modulus.</p>");
-    } else {
-        h.push_str(
-            "<p class=\"note\">Box: quartiles and median; whiskers: 1.5 × interquartile range; \
-             number of segments in brackets; logarithmic axis.</p>",
-        );
-        h.push_str(&charts::log_boxplots(
-            "modulus by soil type",
-            &groups,
-            "soil Young's modulus E (MPa)",
-            |l| sig(10f64.powf(l) / 1e6, 2),
-        )?);
-    }
-    h.push_str("</section>");
-    Ok(())
-}
-
 fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartError> {
     let (name, key) = quality_key(records);
     let mut cands: Vec<(&SegmentExport, f64)> = records
@@ -497,7 +826,7 @@ fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartErro
             write!(
             h,
             "<figure id=\"worst-{}\"><figcaption><b>{}</b> — {} {}, {} mm; {name} {}; status {}; \
-             flags {}; E {} Pa, ν {}, ξ {}</figcaption>",
+             flags {}; leak-band speed {} m/s; c_P {} m/s, c_S {} m/s; notes {}</figcaption>",
             escape(r.id()),
             escape(r.id()),
             r.segment.material.code(),
@@ -506,9 +835,10 @@ fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartErro
             sig(v, 3),
             fit.status.as_str(),
             escape(if fit.flags.is_empty() { "none" } else { &fit.flags }),
-            opt(fit.soil_youngs_modulus_pa, 3),
-            opt(fit.soil_poisson, 3),
-            opt(fit.contact, 3),
+            pm_opt(speed_with_std(r)),
+            pm_opt(fit.soil_p_wave_speed_m_per_s.map(|v| (v, fit.soil_p_wave_speed_std_m_per_s))),
+            pm_opt(fit.soil_s_wave_speed_m_per_s.map(|v| (v, fit.soil_s_wave_speed_std_m_per_s))),
+            escape(if fit.notes.is_empty() { "none" } else { &fit.notes }),
         );
         h.push_str(&charts::curve_with_points(
             "worst fit: speed",

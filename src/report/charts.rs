@@ -336,6 +336,160 @@ pub fn log_boxplots(
     })
 }
 
+/// A speed with its one-sigma error, m/s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WithStd {
+    /// The value.
+    pub value: f64,
+    /// Its one-sigma error.
+    pub std: f64,
+}
+
+/// One soil type of the soil-speed chart.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SoilSpeeds {
+    /// Soil type, as in the inventory (plotters escapes it in the SVG).
+    pub name: String,
+    /// Each segment's c_P ± σ.
+    pub c_p: Vec<WithStd>,
+    /// Each segment's c_S ± σ (only where determined).
+    pub c_s: Vec<WithStd>,
+    /// The inverse-variance weighted mean of `c_p` with its error.
+    pub c_p_mean: Option<WithStd>,
+    /// The same for `c_s`.
+    pub c_s_mean: Option<WithStd>,
+}
+
+/// Which speeds of a soil type a series draws.
+type Pick = fn(&SoilSpeeds) -> &[WithStd];
+
+/// The soils' compressional (blue) and shear (red) speeds, one band per soil type: each
+/// segment's value ± σ as a dot with an error bar (up to [`SCATTER_LIMIT`] segments in all),
+/// and each type's weighted mean ± its error as a black bar.
+pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
+    let all: Vec<f64> = groups
+        .iter()
+        .flat_map(|g| g.c_p.iter().chain(&g.c_s))
+        .map(|p| p.value)
+        .filter(|v| v.is_finite())
+        .collect();
+    let sorted = super::sorted_finite(all.iter().copied());
+    // The axis spans the values (1st–99th percentiles), not the error bars, which are clipped.
+    let lo = quantile(&sorted, 0.01).unwrap_or(0.0);
+    let hi = quantile(&sorted, 0.99).unwrap_or(1.0);
+    let (x0, x1) = padded(lo.min(hi), hi, 0.08);
+    let x0 = x0.max(0.0);
+    let clip = |v: f64| v.clamp(x0, x1);
+    let n = groups.len().max(1);
+    let dots = all.len() <= SCATTER_LIMIT;
+    let height = (70 + 60 * n).clamp(180, 1400) as u32;
+    render("soil speeds by soil type", (720, height), |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(10)
+            .build_cartesian_2d(x0..x1, -0.5f64..(n as f64 - 0.5))
+            .map_err(e2s)?;
+        c.configure_mesh()
+            .max_light_lines(0)
+            .disable_y_mesh()
+            .y_labels(0)
+            .x_desc("soil wave speed (m/s)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .label_style((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        // Band separators and names; band i holds group i, top to bottom.
+        let y_of = |i: usize| (n - 1 - i) as f64;
+        for i in 0..n {
+            let y = y_of(i) + 0.5;
+            c.draw_series(std::iter::once(PathElement::new(
+                vec![(x0, y), (x1, y)],
+                BLACK.mix(0.15),
+            )))
+            .map_err(e2s)?;
+        }
+        for (i, g) in groups.iter().enumerate() {
+            let label = format!("{} (c_P: {}, c_S: {})", g.name, g.c_p.len(), g.c_s.len());
+            c.draw_series(std::iter::once(Text::new(
+                label,
+                (x0 + 0.01 * (x1 - x0), y_of(i) + 0.42),
+                (FONT, 12),
+            )))
+            .map_err(e2s)?;
+        }
+        let series: [(&str, usize, Pick, f64); 2] =
+            [("c_P", 0, |g| &g.c_p, 0.02), ("c_S", 1, |g| &g.c_s, -0.3)];
+        for (name, colour_i, get, base) in series {
+            let colour = CATEGORY_COLOURS[colour_i];
+            let mut bars = Vec::new();
+            if dots {
+                for (i, g) in groups.iter().enumerate() {
+                    let pts = get(g);
+                    let k = pts.len().max(1) as f64;
+                    for (j, p) in pts.iter().enumerate() {
+                        // Spread the dots below the mean so their bars do not overlap.
+                        let y = y_of(i) + base - 0.18 * (j as f64 + 0.5) / k;
+                        bars.push((
+                            clip(p.value),
+                            clip(p.value - p.std),
+                            clip(p.value + p.std),
+                            y,
+                        ));
+                    }
+                }
+            }
+            c.draw_series(bars.iter().map(|&(_, a, b, y)| {
+                PathElement::new(vec![(a, y), (b, y)], colour.mix(0.6).stroke_width(1))
+            }))
+            .map_err(e2s)?;
+            c.draw_series(
+                bars.iter()
+                    .map(|&(v, _, _, y)| Circle::new((v, y), 2, colour.mix(0.8).filled())),
+            )
+            .map_err(e2s)?
+            .label(format!("{name} of a segment ± σ"))
+            .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
+            let means: Vec<(f64, WithStd)> = groups
+                .iter()
+                .enumerate()
+                .filter_map(|(i, g)| {
+                    let m = if colour_i == 0 {
+                        g.c_p_mean
+                    } else {
+                        g.c_s_mean
+                    };
+                    Some((y_of(i) + base + 0.08, m?))
+                })
+                .collect();
+            c.draw_series(means.iter().map(|&(y, m)| {
+                Rectangle::new(
+                    [
+                        (clip(m.value - m.std), y - 0.04),
+                        (clip(m.value + m.std), y + 0.04),
+                    ],
+                    BLACK.filled(),
+                )
+            }))
+            .map_err(e2s)?;
+            c.draw_series(
+                means
+                    .iter()
+                    .map(|&(y, m)| Circle::new((clip(m.value), y), 4, colour.filled())),
+            )
+            .map_err(e2s)?;
+        }
+        c.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.9))
+            .border_style(BLACK.mix(0.4))
+            .label_font((FONT, 12))
+            .draw()
+            .map_err(e2s)?;
+        Ok(())
+    })
+}
+
 /// A fitted curve (line) with the measured points (dots) over it.
 pub fn curve_with_points(
     chart: &'static str,
@@ -417,6 +571,35 @@ mod tests {
     }
 
     #[test]
+    fn soil_speeds_draw_every_segment_and_name_every_type() {
+        let w = |value, std| WithStd { value, std };
+        let groups = vec![
+            SoilSpeeds {
+                name: "clay & <silt>".into(),
+                c_p: vec![w(250.0, 10.0), w(270.0, 12.0)],
+                c_s: vec![w(120.0, 5.0)],
+                c_p_mean: Some(w(259.0, 7.7)),
+                c_s_mean: Some(w(120.0, 5.0)),
+            },
+            SoilSpeeds {
+                name: "sand".into(),
+                c_p: vec![w(400.0, 20.0)],
+                c_s: Vec::new(),
+                c_p_mean: Some(w(400.0, 20.0)),
+                c_s_mean: None,
+            },
+        ];
+        let svg = soil_speeds(&groups).unwrap();
+        assert!(
+            svg.contains("clay &amp; &lt;silt&gt; (c_P: 2, c_S: 1)"),
+            "{svg}"
+        );
+        assert!(svg.contains("sand (c_P: 1, c_S: 0)"));
+        // One dot per segment plus one per mean, plus the legend's two.
+        assert_eq!(svg.matches("<circle").count(), 4 + 3 + 2);
+    }
+
+    #[test]
     fn charts_survive_degenerate_data() {
         assert!(log_histogram("h", &[], "x", &[]).is_ok());
         assert!(log_histogram("h", &[1.0, 1.0], "x", &[("median", 1.0)]).is_ok());
@@ -425,6 +608,19 @@ mod tests {
         assert!(log_boxplots("b", &[("a".into(), vec![5e7])], "E", |v| v.to_string()).is_ok());
         assert!(log_boxplots("b", &[], "E", |v| v.to_string()).is_ok());
         assert!(curve_with_points("c", "t", &[], &[], "m/s").is_ok());
+        assert!(soil_speeds(&[]).is_ok());
+        let one = WithStd {
+            value: 300.0,
+            std: 1e9,
+        };
+        let g = SoilSpeeds {
+            name: "clay".into(),
+            c_p: vec![one],
+            c_s: Vec::new(),
+            c_p_mean: Some(one),
+            c_s_mean: None,
+        };
+        assert!(soil_speeds(&[g]).is_ok());
         assert!(curve_with_points("c", "t", &[(100.0, 1.0)], &[(100.0, 1.0)], "m/s").is_ok());
     }
 }

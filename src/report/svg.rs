@@ -96,11 +96,38 @@ pub struct MapLine<'a> {
     pub line: &'a LineString,
     /// The value coloured (None: grey).
     pub value: Option<f64>,
+    /// The tooltip's text after the id (None: the value with [`MapStyle::unit`]).
+    pub label: Option<String>,
+}
+
+/// How a map colours its values.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapStyle<'a> {
+    /// Unit of the values (tooltips).
+    pub unit: &'a str,
+    /// Decimals of the legend's class bounds and the default tooltip.
+    pub decimals: usize,
+    /// Fixed colour classes (None: the 2nd–98th percentiles of the values,
+    /// [`ColourScale::from_sorted`]).
+    pub scale: Option<ColourScale>,
+    /// Reverse the palette: high values dark (used where high values are the ones to see).
+    pub reversed: bool,
+    /// Width of the SVG, px.
+    pub width: f64,
 }
 
 /// The network map: every segment as a polyline coloured by `value`, with a legend.
 /// `geographic`: the coordinates are degrees (x scaled by cos(latitude) to keep shapes).
-pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> String {
+pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> String {
+    let width = style.width;
+    let dec = style.decimals;
+    let palette = |class: usize| {
+        if style.reversed {
+            VIRIDIS_9[VIRIDIS_9.len() - 1 - class]
+        } else {
+            VIRIDIS_9[class]
+        }
+    };
     let mut bbox = [
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -118,7 +145,7 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> S
         }
     }
     let values = super::sorted_finite(lines.iter().filter_map(|l| l.value));
-    let scale = ColourScale::from_sorted(&values);
+    let scale = style.scale.or_else(|| ColourScale::from_sorted(&values));
     let legend_h = 40.0;
     let pad = 10.0;
     let kx = if geographic {
@@ -156,7 +183,7 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> S
         }
     };
     let colour = |v: Option<f64>| match (v, scale) {
-        (Some(v), Some(sc)) => VIRIDIS_9[sc.class(v)],
+        (Some(v), Some(sc)) => palette(sc.class(v)),
         _ => NO_VALUE_COLOUR,
     };
     let _ = write!(
@@ -167,9 +194,11 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> S
         for l in lines {
             let mut d = String::new();
             path_d(l.line, &mut d);
-            let v = l
-                .value
-                .map_or("no value".to_string(), |v| format!("{v:.0} {unit}"));
+            let v = match (&l.label, l.value) {
+                (Some(t), _) => t.clone(),
+                (None, Some(v)) => format!("{v:.dec$} {}", style.unit),
+                (None, None) => "no value".to_string(),
+            };
             let _ = write!(
                 svg,
                 "<path stroke=\"{}\" d=\"{d}\"><title>{}: {}</title></path>",
@@ -181,7 +210,7 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> S
     } else {
         // Grey first, so coloured segments are drawn over it.
         let mut by_colour: Vec<(&str, String)> = std::iter::once(NO_VALUE_COLOUR)
-            .chain(VIRIDIS_9)
+            .chain((0..VIRIDIS_9.len()).map(palette))
             .map(|c| (c, String::new()))
             .collect();
         for l in lines {
@@ -200,12 +229,13 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, unit: &str, width: f64) -> S
     let _ = write!(svg, "<g font-family=\"sans-serif\" font-size=\"11\">");
     if let Some(sc) = scale {
         let box_w = (width - 2.0 * pad) / (VIRIDIS_9.len() + 1) as f64;
-        for (i, c) in VIRIDIS_9.iter().enumerate() {
+        for i in 0..VIRIDIS_9.len() {
+            let c = palette(i);
             let x = pad + i as f64 * box_w;
             let label = match sc.bounds(i) {
-                (None, Some(h)) => format!("< {h:.0}"),
-                (Some(l), None) => format!("≥ {l:.0}"),
-                (Some(l), Some(h)) => format!("{l:.0}–{h:.0}"),
+                (None, Some(h)) => format!("< {h:.dec$}"),
+                (Some(l), None) => format!("≥ {l:.dec$}"),
+                (Some(l), Some(h)) => format!("{l:.dec$}–{h:.dec$}"),
                 (None, None) => String::new(),
             };
             let _ = write!(
@@ -268,6 +298,45 @@ mod tests {
             .collect()
     }
 
+    fn style(width: f64) -> MapStyle<'static> {
+        MapStyle {
+            unit: "m/s",
+            decimals: 0,
+            scale: None,
+            reversed: false,
+            width,
+        }
+    }
+
+    #[test]
+    fn fixed_reversed_scales_put_high_values_dark() {
+        let ls = lines(2);
+        let ml: Vec<MapLine<'_>> = ls
+            .iter()
+            .zip([0.1, 3.0])
+            .map(|(l, v)| MapLine {
+                id: "x",
+                line: l,
+                value: Some(v),
+                label: Some(format!("{v} %")),
+            })
+            .collect();
+        let st = MapStyle {
+            unit: "%",
+            decimals: 2,
+            scale: Some(ColourScale { lo: 0.25, hi: 2.0 }),
+            reversed: true,
+            width: 400.0,
+        };
+        let svg = map(&ml, false, &st);
+        assert!(svg.contains(&format!("<path stroke=\"{}\"", VIRIDIS_9[8])));
+        assert!(svg.contains(&format!("<path stroke=\"{}\"", VIRIDIS_9[0])));
+        let yellow = svg.find(&format!("stroke=\"{}\"", VIRIDIS_9[8])).unwrap();
+        assert!(svg[yellow..].starts_with(&format!("stroke=\"{}\" d=", VIRIDIS_9[8])));
+        assert!(svg[yellow..].contains("<title>x: 0.1 %</title>"));
+        assert!(svg.contains(">≥ 2.00<") && svg.contains(">&lt; 0.25<"));
+    }
+
     fn count(svg: &str, tag: &str) -> usize {
         svg.matches(&format!("<{tag} ")).count() + svg.matches(&format!("<{tag}>")).count()
     }
@@ -284,9 +353,10 @@ mod tests {
                 id,
                 line: l,
                 value: (i % 7 != 0).then_some(300.0 + i as f64),
+                label: None,
             })
             .collect();
-        let svg = map(&ml, false, "m/s", 800.0);
+        let svg = map(&ml, false, &style(800.0));
         assert_eq!(count(&svg, "path"), 50);
         assert_eq!(count(&svg, "title"), 50);
         assert!(svg.contains("<title>S&lt;7&gt;: no value</title>"));
@@ -303,9 +373,10 @@ mod tests {
                 id: "x",
                 line: l,
                 value: (i % 11 != 0).then_some((i % 1000) as f64),
+                label: None,
             })
             .collect();
-        let svg = map(&ml, false, "m/s", 1000.0);
+        let svg = map(&ml, false, &style(1000.0));
         // Nine colour classes and grey, no per-segment element.
         assert_eq!(count(&svg, "path"), 10);
         assert_eq!(count(&svg, "title"), 0);

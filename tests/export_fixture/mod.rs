@@ -78,6 +78,39 @@ pub fn speed_law(i: usize, base: f64) -> (f64, f64) {
     (c0, 0.02 + 0.01 * (i % 3) as f64)
 }
 
+/// The compressional speed of soil type `soil`, m/s (made up, per type), for segment `i`.
+pub fn soil_p_speed(i: usize, soil: &str) -> f64 {
+    let base = match soil {
+        "clay" => 220.0,
+        "sandy clay" => 260.0,
+        "silt" => 240.0,
+        "sand" => 320.0,
+        "gravel" => 400.0,
+        _ => 280.0,
+    };
+    base * (0.95 + 0.1 * ((i * 13) % 10) as f64 / 10.0)
+}
+
+/// The relative one-sigma error of segment `i`'s c_P: determined (2-6 %) except every 8th.
+pub fn soil_p_rel_std(i: usize) -> f64 {
+    if i % 8 == 0 {
+        0.25
+    } else {
+        0.02 + 0.01 * (i % 5) as f64
+    }
+}
+
+/// The relative one-sigma error of segment `i`'s leak-band speed (None: not stored, as an
+/// older fit): 0.2-2.7 %.
+pub fn leak_band_rel_std(i: usize) -> Option<f64> {
+    (i % 17 != 4).then(|| 0.002 + 0.0025 * ((i * 7) % 11) as f64)
+}
+
+/// Plastic materials of the fixture (their fits determine c_S as well).
+pub fn is_plastic(material: &str) -> bool {
+    matches!(material, "PVC" | "MDPE")
+}
+
 /// Create (or extend) the database at `path` with `n` segments, their measurements, and one
 /// calibrate run with fits for all but the unfitted ones.
 pub fn build(path: &Path, n: usize) -> Database {
@@ -115,6 +148,7 @@ pub fn build(path: &Path, n: usize) -> Database {
     // Spread the network over a square whose side grows with sqrt(n): ~150 m per segment.
     let side = 150.0 * (n as f64).sqrt().max(4.0);
     let mut specs = Vec::with_capacity(n);
+    let mut soils = Vec::with_capacity(n);
     for i in 0..n {
         let (material, diameters, wall, base) = *rng.pick(&MATERIALS);
         let d = *rng.pick(diameters);
@@ -166,6 +200,7 @@ pub fn build(path: &Path, n: usize) -> Database {
             .unwrap();
         }
         specs.push((material, base, d));
+        soils.push(soil);
     }
     let report = db::import(
         database.conn_mut(),
@@ -227,6 +262,26 @@ pub fn build(path: &Path, n: usize) -> Database {
             fit.misfit = Some(1e-4 * (1.0 + ((i * 7) % 97) as f64).powi(2));
             fit.chi2_per_dof = Some(0.5 + ((i * 13) % 89) as f64 / 10.0);
             fit.n_measurements = Some(5);
+            let c_p = soil_p_speed(i, soils[i]);
+            fit.soil_p_wave_speed_m_per_s = Some(c_p);
+            fit.soil_p_wave_speed_std_m_per_s = Some(soil_p_rel_std(i) * c_p);
+            fit.soil_s_wave_speed_m_per_s = Some(0.5 * c_p);
+            let plastic = is_plastic(specs[i].0);
+            fit.soil_s_wave_speed_std_m_per_s = Some(if plastic { 0.05 } else { 0.5 } * 0.5 * c_p);
+            let (lb0, lb_slope) = speed_law(i, *base);
+            let lb = lb0 + lb_slope * 450.0;
+            fit.leak_band_speed_m_per_s = Some(lb);
+            fit.leak_band_speed_std_m_per_s = leak_band_rel_std(i).map(|r| r * lb);
+            (fit.notes, fit.note_reasons) = if !plastic {
+                (
+                    "soil_via_cp,contact_undetermined".into(),
+                    format!("soil_via_cp: E_m and nu_m known only through c_P = {c_p:.0} m/s\ncontact_undetermined: xi not determined"),
+                )
+            } else if i % 5 == 0 {
+                ("at_bound".into(), "at_bound: nu_m reaches 0.49".into())
+            } else {
+                (String::new(), String::new())
+            };
             if status == FitStatus::Flagged {
                 fit.flags = if i % 4 == 1 {
                     "high_misfit,at_bound"

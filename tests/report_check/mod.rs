@@ -7,17 +7,62 @@ use std::collections::BTreeMap;
 use quick_xml::events::Event;
 use quick_xml::Reader;
 
-/// The ids of the audit report's sections.
-pub const SECTIONS: [&str; 8] = [
-    "summary",
-    "status-flags",
+/// The ids of the audit report's sections, in order.
+pub const SECTIONS: [&str; 10] = [
+    "trust",
     "map",
+    "least-certain",
+    "soil-speeds",
+    "notes",
+    "summary",
     "misfit",
     "speed-diameter",
-    "modulus-soil",
     "worst-fits",
     "failed",
 ];
+
+/// The HTML of the section with id `id` (panics when missing).
+pub fn section<'a>(html: &'a str, id: &str) -> &'a str {
+    let open = format!("<section id=\"{id}\">");
+    let start = html
+        .find(&open)
+        .unwrap_or_else(|| panic!("section {id} missing"));
+    let len = html[start..].find("</section>").expect("unclosed section");
+    &html[start..start + len]
+}
+
+/// The text of each cell of each table row after the header (tags stripped, entities kept).
+pub fn table_rows(fragment: &str) -> Vec<Vec<String>> {
+    fragment
+        .split("<tr>")
+        .skip(1)
+        .filter(|r| r.contains("<td"))
+        .map(|r| {
+            r.split("<td")
+                .skip(1)
+                .map(|c| {
+                    let c = &c[c.find('>').map_or(0, |i| i + 1)..];
+                    let c = &c[..c.find("</td>").unwrap_or(c.len())];
+                    strip_tags(c)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn strip_tags(s: &str) -> String {
+    let mut out = String::new();
+    let mut in_tag = false;
+    for ch in s.chars() {
+        match ch {
+            '<' => in_tag = true,
+            '>' => in_tag = false,
+            c if !in_tag => out.push(c),
+            _ => {}
+        }
+    }
+    out
+}
 
 /// Every `<svg ...>...</svg>` of the page (SVG elements do not nest in our output except
 /// inside one another, which the scan handles by depth).
