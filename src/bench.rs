@@ -340,3 +340,153 @@ pub fn print_fit_figures(figs: &[FitFigure]) {
         );
     }
 }
+
+/// Which materials a benchmark network holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MaterialMix {
+    /// The synthetic network's own mix ([`crate::synth::MATERIAL_MIX`]: 45 % iron, 40 % plastic).
+    #[default]
+    Default,
+    /// Four plastic segments (PVC, MDPE, HDPE) for every other one.
+    PlasticHeavy,
+}
+
+impl std::str::FromStr for MaterialMix {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => Ok(MaterialMix::Default),
+            "plastic-heavy" => Ok(MaterialMix::PlasticHeavy),
+            _ => Err(format!(
+                "unknown material mix `{s}` (expected default, plastic-heavy)"
+            )),
+        }
+    }
+}
+
+/// Plastic share of a plastic-heavy benchmark network.
+pub const PLASTIC_HEAVY_SHARE: f64 = 0.8;
+
+/// One segment of a benchmark network: its id, what the fit is given, and its fit seed.
+#[derive(Debug, Clone)]
+pub struct BenchSegment {
+    /// Asset id.
+    pub id: String,
+    /// Inventory material.
+    pub material: crate::physics::Material,
+    /// The fit's inputs.
+    pub data: crate::invert::SegmentData,
+    /// The fit's seed (as `calibrate` derives it from the run seed and the id).
+    pub seed: u64,
+}
+
+/// A realistic synthetic network for timing: `segments` segments from `synth` (all materials,
+/// 4–8 frequencies spread over each pipe's measurable band, 1 %/5 % noise with stated
+/// standard deviations, no defects), seeded by `seed`. `PlasticHeavy` keeps every plastic
+/// segment and enough of the others to make them [`PLASTIC_HEAVY_SHARE`] of the network.
+pub fn bench_network(segments: usize, seed: u64, mix: MaterialMix) -> Vec<BenchSegment> {
+    use crate::synth::{generate, SynthOptions};
+    let generated = match mix {
+        MaterialMix::Default => generate(&SynthOptions {
+            segments,
+            seed,
+            defect_fraction: 0.0,
+            ..SynthOptions::default()
+        }),
+        MaterialMix::PlasticHeavy => {
+            let all = generate(&SynthOptions {
+                segments: 3 * segments,
+                seed,
+                defect_fraction: 0.0,
+                ..SynthOptions::default()
+            });
+            let n_plastic = (PLASTIC_HEAVY_SHARE * segments as f64).round() as usize;
+            let plastic = all.iter().filter(|s| s.material.is_plastic()).take(n_plastic);
+            let other = all
+                .iter()
+                .filter(|s| !s.material.is_plastic())
+                .take(segments - n_plastic.min(segments));
+            plastic.chain(other).cloned().collect()
+        }
+    };
+    generated
+        .into_iter()
+        .map(|s| BenchSegment {
+            seed: crate::batch::segment_seed(seed, &s.id),
+            material: s.material,
+            data: s.segment_data(),
+            id: s.id,
+        })
+        .collect()
+}
+
+/// What one timed fit of a network segment gave.
+#[derive(Debug, Clone)]
+pub struct TimedFit {
+    /// Wall time of the fit and its stored curve, ms.
+    pub ms: f64,
+    /// Forward evaluations of the fit.
+    pub evaluations: usize,
+    /// The final misfit (NaN when the fit failed).
+    pub misfit: f64,
+    /// The fit failed.
+    pub failed: bool,
+}
+
+/// Fit one segment and compute its stored curve (what a `calibrate` worker does), timed.
+pub fn timed_fit(seg: &BenchSegment, settings: &crate::invert::FitSettings) -> TimedFit {
+    let t = Instant::now();
+    let r = crate::invert::fit_segment(&seg.data, settings, seg.seed);
+    let curve = r
+        .system
+        .as_ref()
+        .map(|s| {
+            crate::physics::curves::curve(s, &crate::physics::curves::STANDARD_GRID_HZ).len()
+        })
+        .unwrap_or(0);
+    black_box(curve);
+    TimedFit {
+        ms: t.elapsed().as_secs_f64() * 1e3,
+        evaluations: r.evaluations,
+        misfit: r.misfit,
+        failed: r.status == crate::invert::FitStatus::Failed,
+    }
+}
+
+/// Median, 90th, 99th percentile and maximum of a sample (type-7 quantiles), with its mean.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Distribution {
+    /// Median.
+    pub median: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Maximum.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+}
+
+impl Distribution {
+    /// The distribution of `v` (NaN everywhere when empty).
+    pub fn of(v: &[f64]) -> Self {
+        let mut s: Vec<f64> = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        let q = |p: f64| -> f64 {
+            if s.is_empty() {
+                return f64::NAN;
+            }
+            let h = p * (s.len() - 1) as f64;
+            let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+            s[lo] + (h - lo as f64) * (s[hi] - s[lo])
+        };
+        Distribution {
+            median: q(0.5),
+            p90: q(0.9),
+            p99: q(0.99),
+            max: s.last().copied().unwrap_or(f64::NAN),
+            mean: s.iter().sum::<f64>() / s.len().max(1) as f64,
+        }
+    }
+}
