@@ -65,6 +65,9 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
         return Err(SpecialError::BadArgument(z));
     }
+    if amos_only() {
+        return hankel_ratio_amos(z);
+    }
     let w = Complex64::new(-z.im, z.re);
     if in_modified_bessel_sector(w) {
         if let Some(r) = k1_over_k0(w) {
@@ -75,6 +78,29 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
         }
     }
     hankel_ratio_amos(z)
+}
+
+thread_local! {
+    static AMOS_ONLY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run `f` with every special function of this thread computed by Amos, as pipewave 0.1 did
+/// (for `pipewave bench`, which times the previous algorithm beside the current one in the
+/// same run). Other threads are not affected.
+pub fn with_amos_only<T>(f: impl FnOnce() -> T) -> T {
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            AMOS_ONLY.with(|c| c.set(self.0));
+        }
+    }
+    let _restore = Restore(AMOS_ONLY.with(|c| c.replace(true)));
+    f()
+}
+
+#[inline]
+fn amos_only() -> bool {
+    AMOS_ONLY.with(|c| c.get())
 }
 
 /// Whether w = iz lies where the principal K_ν(w) continues the principal H_ν⁽²⁾(z):
@@ -100,7 +126,7 @@ pub const K_CF_MAX_TERMS: usize = 400;
 /// K₁/K₀ = (w + ½ − h)/w with h = ¼·CF (Numerical Recipes §6.7, `bessik`); the
 /// normalisation sum of that method is not needed for a ratio.
 pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
-    if w.norm() < K_SERIES_MAX_ABS {
+    if w.norm_sqr() < K_SERIES_MAX_ABS * K_SERIES_MAX_ABS {
         return Some(k1_over_k0_series(w));
     }
     let one = Complex64::new(1.0, 0.0);
@@ -115,7 +141,7 @@ pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
         d = one / (b + a * d);
         delh *= b * d - 1.0;
         h += delh;
-        if delh.norm() <= K_RATIO_EPS * h.norm() {
+        if delh.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * h.norm_sqr() {
             let h = 0.25 * h;
             return Some((w + 0.5 - h) / w);
         }
@@ -145,7 +171,9 @@ fn k1_over_k0_series(w: Complex64) -> Complex64 {
         s0 += t0 * psi_k;
         i1 += t1;
         s1 += t1 * (2.0 * psi_k + 1.0 / (kf + 1.0));
-        if t0.norm() <= K_RATIO_EPS * i0.norm() && t1.norm() <= K_RATIO_EPS * i1.norm() {
+        if t0.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i0.norm_sqr()
+            && t1.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i1.norm_sqr()
+        {
             break;
         }
     }
@@ -228,7 +256,7 @@ pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
     if w.norm() < PSI_SERIES_Z2 {
         return Ok((1.0 - w / 8.0 - w * w / 192.0, -1.0 / 8.0 - w / 96.0));
     }
-    if w.norm() <= PSI_CF_MAX_ABS {
+    if w.norm() <= PSI_CF_MAX_ABS && !amos_only() {
         let (psi, one_minus_psi_over_w) = psi_cf(w);
         if psi.is_finite() && one_minus_psi_over_w.is_finite() {
             return Ok((psi, psi * one_minus_psi_over_w - 0.25));
