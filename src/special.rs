@@ -447,7 +447,10 @@ mod tests {
             }
         }
         assert!(fast > 4000, "{fast} points on the fast path");
-        assert!(worst < 1e-13, "worst relative difference from Amos {worst:e}");
+        assert!(
+            worst < 1e-13,
+            "worst relative difference from Amos {worst:e}"
+        );
     }
 
     /// ψ and dψ/dw by the continued fraction against the scaled Amos pair J₀, J₁.
@@ -474,6 +477,24 @@ mod tests {
         }
         assert!(worst < 1e-13, "worst relative difference in psi {worst:e}");
         assert!(worst_d < 1e-9, "worst difference in dpsi/dw {worst_d:e}");
+    }
+
+    /// The v0.1 switch computes by Amos on this thread only, and is undone afterwards.
+    #[test]
+    fn amos_only_switch_is_scoped() {
+        let z = c(1.1, -0.01);
+        let amos = hankel_ratio_amos(z).unwrap();
+        let fast = hankel_ratio(z).unwrap();
+        assert_ne!(fast, amos, "the fast path is a different computation");
+        assert!(rel(fast, amos) < 1e-14);
+        assert_eq!(with_amos_only(|| hankel_ratio(z).unwrap()), amos);
+        let w = c(-0.3, 0.01);
+        let zz = principal_sqrt(w);
+        let want = zz * bessel_j_ratio(zz).unwrap() * 0.5;
+        assert_eq!(with_amos_only(|| psi(w).unwrap()), want);
+        let other = std::thread::spawn(move || with_amos_only(|| hankel_ratio(z).unwrap()));
+        assert_eq!(other.join().unwrap(), amos);
+        assert_eq!(hankel_ratio(z).unwrap(), fast);
     }
 
     #[test]
