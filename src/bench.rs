@@ -738,7 +738,7 @@ pub fn print_verify(rows: &[VerifyRow]) -> bool {
         .max_by(|a, b| a.excess().total_cmp(&b.excess()));
     let over = rows
         .iter()
-        .filter(|r| !(r.excess() <= VERIFY_DCHI2_MAX))
+        .filter(|r| r.excess().is_nan() || r.excess() > VERIFY_DCHI2_MAX)
         .count();
     println!(
         "verify: {} segments, default fit against {}x the budget with {} restarts",
