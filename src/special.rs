@@ -114,6 +114,12 @@ fn in_modified_bessel_sector(w: Complex64) -> bool {
 /// Below this |w| the ratio K₁/K₀ comes from the power series (DLMF 10.31.1), above it from
 /// Steed's continued fraction (Temme 1975; Thompson & Barnett 1987, J. Comput. Phys. 64, 490).
 pub const K_SERIES_MAX_ABS: f64 = 2.0;
+/// Near the imaginary axis (Re w < [`K_SERIES_MAX_RE`]) the series is used up to this |w|:
+/// there I₀ and K₀ are of the same size (no e^{2 Re w} cancellation), the largest term is
+/// below 20× the sum at |w| = 6, and the continued fraction is slowest (40–100 terms).
+pub const K_SERIES_MAX_ABS_NEAR_IMAGINARY: f64 = 6.0;
+/// See [`K_SERIES_MAX_ABS_NEAR_IMAGINARY`].
+pub const K_SERIES_MAX_RE: f64 = 1.0;
 /// Relative size of the last term at which the series and the continued fraction stop.
 pub const K_RATIO_EPS: f64 = 1e-17;
 /// Terms of the continued fraction beyond which it is declared not converged (then Amos).
@@ -126,7 +132,11 @@ pub const K_CF_MAX_TERMS: usize = 400;
 /// K₁/K₀ = (w + ½ − h)/w with h = ¼·CF (Numerical Recipes §6.7, `bessik`); the
 /// normalisation sum of that method is not needed for a ratio.
 pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
-    if w.norm_sqr() < K_SERIES_MAX_ABS * K_SERIES_MAX_ABS {
+    let r2 = w.norm_sqr();
+    if r2 < K_SERIES_MAX_ABS * K_SERIES_MAX_ABS
+        || (r2 < K_SERIES_MAX_ABS_NEAR_IMAGINARY * K_SERIES_MAX_ABS_NEAR_IMAGINARY
+            && w.re < K_SERIES_MAX_RE)
+    {
         return Some(k1_over_k0_series(w));
     }
     let one = Complex64::new(1.0, 0.0);
