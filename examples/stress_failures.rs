@@ -37,6 +37,9 @@ fn main() {
         });
         net.extend(segs.into_iter().map(|s| (*e, s)));
     }
+    if let Ok(only) = std::env::var("ONLY") {
+        net.retain(|(e, s)| format!("{}-{}", e.name(), s.id) == only);
+    }
     let t = std::time::Instant::now();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs)

@@ -26,7 +26,15 @@ fn run() {
         // E,nu,xi at the nominal wall (a fit's optimum)
         let p: Vec<f64> = v.split(',').map(|x| x.parse().unwrap()).collect();
         let soil = Soil::new(p[0], p[1], 1930.0, 0.0).unwrap();
-        System::new(Fluid::water(), pipe, soil, p[2], Model::Full, ContactMode::Reciprocal).unwrap()
+        System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            p[2],
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap()
     } else {
         Effect::WallThinning.apply(&sys, 0.62).unwrap()
     };
@@ -67,7 +75,16 @@ fn run() {
     if std::env::var_os("PROBE").is_some() {
         let kv = pipewave::physics::dispersion::in_vacuo_root(&sys, 260.0 * std::f64::consts::TAU);
         let kp = 260.0 * std::f64::consts::TAU / cp;
-        probe(&sys, 260.0, &[kv, num_complex::Complex64::new(4.635, -0.308), num_complex::Complex64::new(kp * 1.05, -0.45), num_complex::Complex64::new(kp * 1.1, 0.0)]);
+        probe(
+            &sys,
+            260.0,
+            &[
+                kv,
+                num_complex::Complex64::new(4.635, -0.308),
+                num_complex::Complex64::new(kp * 1.05, -0.45),
+                num_complex::Complex64::new(kp * 1.1, 0.0),
+            ],
+        );
         return;
     }
     if std::env::var_os("FIT").is_some() {
@@ -109,7 +126,14 @@ pub fn fit_it(sys: &System, pipe: Pipe) {
             failed += 1;
             println!("seed {s}: {:?}", r.message);
         } else {
-            println!("seed {s}: E {:.3e} nu {:.3} xi {:.3} chi2 {:.2} flags {}", r.soil_modulus().unwrap(), r.soil_poisson().unwrap(), r.contact().unwrap(), r.misfit, r.flag_codes());
+            println!(
+                "seed {s}: E {:.3e} nu {:.3} xi {:.3} chi2 {:.2} flags {}",
+                r.soil_modulus().unwrap(),
+                r.soil_poisson().unwrap(),
+                r.contact().unwrap(),
+                r.misfit,
+                r.flag_codes()
+            );
         }
     }
     println!("{failed}/20 failed");
@@ -121,7 +145,10 @@ pub fn probe(sys: &System, f: f64, guesses: &[num_complex::Complex64]) {
     let w = f * std::f64::consts::TAU;
     for &g in guesses {
         for t in [Tolerance::REFERENCE, Tolerance::FAST] {
-            println!("  probe {f} Hz from {g:.4}: {:?}", solve_from_guess_tol(sys, w, g, t).map(|r| (r.k1, r.phase_speed(), r.residual)));
+            println!(
+                "  probe {f} Hz from {g:.4}: {:?}",
+                solve_from_guess_tol(sys, w, g, t).map(|r| (r.k1, r.phase_speed(), r.residual))
+            );
         }
     }
 }

@@ -682,3 +682,90 @@ fn step_to(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil};
+
+    /// Issue 11: a thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
+    /// the optimum of a fit that failed. Its s = 1 wave is faster than the soil's compressional
+    /// wave (363.5 m/s) at 136 Hz and slower from about 259 Hz: the tracked root meets the
+    /// branch point there. The reference continuation restarts past it and finds the root of
+    /// the proper sheet that the direct solve (no ramp) finds; before, it ended in a
+    /// branch jump and the fit failed.
+    #[test]
+    fn reference_continuation_restarts_past_grazing() {
+        let pipe = Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.090, 0.0054).unwrap();
+        let soil = Soil::new(4.975_393_44e6, 0.496_719_830_7, 1930.0, 0.0).unwrap();
+        let sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            0.734_144_601_3,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap();
+        let (cp, _) = sys.soil.wave_speeds();
+        assert!((cp - 363.5).abs() < 0.1, "{cp}");
+        let w: Vec<f64> = [136.0, 260.0, 390.0, 520.0, 717.0]
+            .iter()
+            .map(|f| f * std::f64::consts::TAU)
+            .collect();
+        let reference = solve_curve(&sys, &w, Continuation::default());
+        let direct = solve_curve(
+            &sys,
+            &w,
+            Continuation {
+                ramp_points: 0,
+                tolerance: Tolerance::REFERENCE,
+            },
+        );
+        for (r, d) in reference.iter().zip(&direct) {
+            let (r, d) = (r.as_ref().unwrap(), d.as_ref().unwrap());
+            assert!(
+                (r.k1 - d.k1).norm() < 1e-10 * d.k1.norm(),
+                "{} vs {}",
+                r.k1,
+                d.k1
+            );
+        }
+        let r = reference[0].as_ref().unwrap();
+        assert!(r.phase_speed() > cp);
+        let r = reference[1].as_ref().unwrap();
+        assert!(r.phase_speed() < cp * (1.0 - GRAZING_RTOL));
+        assert!((r.k1 - Complex64::new(4.635_094_676, -0.308_124_806)).norm() < 1e-8);
+    }
+
+    /// Without a soil wave speed nearby a failure is not turned into a restart: the grazing
+    /// test names the wave only within its band.
+    #[test]
+    fn grazing_wave_is_named_only_inside_its_band() {
+        let pipe = Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.090, 0.0054).unwrap();
+        let soil = Soil::new(1.8e7, 0.32, 1930.0, 0.0).unwrap();
+        let sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            0.3,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap();
+        let (cp, cs) = sys.soil.wave_speeds();
+        let at = |c: f64| PathPoint {
+            omega: 1000.0,
+            k1: Complex64::new(1000.0 / c, -0.1),
+        };
+        assert_eq!(
+            grazing_wave(&sys, at(cp * 1.03)).map(|g| g.0),
+            Some("compressional")
+        );
+        assert_eq!(
+            grazing_wave(&sys, at(cs * 0.97)).map(|g| g.0),
+            Some("shear")
+        );
+        assert_eq!(grazing_wave(&sys, at(cp * 1.2)), None);
+    }
+}
