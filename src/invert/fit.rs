@@ -348,13 +348,7 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
             (r, problem.path == SolvePath::Safe || agree)
         }
         (None, Some(f)) if problem.path == SolvePath::Fast => (f, false),
-        _ => {
-            if std::env::var_os("DEBUG_FAIL").is_some() {
-                let r = crate::physics::solver::solve_curve(&sys, &problem.data.measurements.iter().map(|m| m.omega).collect::<Vec<_>>(), crate::physics::solver::Continuation::default());
-                eprintln!("FAIL x = {:?} path {:?} cp/cs {:?} ref {:?}", x, problem.path, sys.soil.wave_speeds(), r.iter().map(|r| r.as_ref().map(|r| (r.k1, r.phase_speed())).map_err(|e| e.to_string())).collect::<Vec<_>>());
-            }
-            return Err("forward solve failed at the optimum".to_string());
-        }
+        _ => return Err("forward solve failed at the optimum".to_string()),
     };
 
     // Uncertainty from the Jacobian of the weighted residuals at the optimum.
