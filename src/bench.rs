@@ -12,7 +12,7 @@ use crate::physics::solver::{
     solve_curve, solve_direct, solve_from_guess_tol, Continuation, Tolerance,
 };
 use crate::physics::{ContactMode, Evaluator, Fluid, Model, Pipe, Soil, System};
-use crate::special::{hankel_ratio, psi};
+use crate::special::{hankel_ratio, hankel_ratio_amos, psi};
 
 /// One measured figure.
 #[derive(Debug, Clone)]
@@ -65,17 +65,38 @@ pub fn forward_figures(scale: usize) -> Vec<Figure> {
     let reps = 2000 * scale;
     let mut out = Vec::new();
     let z = Complex64::new(1.1, -0.01);
+    for (label, zz, note) in [
+        ("radiating", z, "z = 1.1 - 0.01i"),
+        ("evanescent", Complex64::new(0.02, -3.0), "z = 0.02 - 3i"),
+    ] {
+        out.push(Figure {
+            name: format!("Hankel ratio P(z), {label} (K0/K1 series or continued fraction)"),
+            micros: time_per_call(7, reps, |i| {
+                black_box(hankel_ratio(black_box(zz + 1e-9 * i as f64)).ok());
+            }),
+            note: note.into(),
+        });
+        out.push(Figure {
+            name: format!("Hankel ratio P(z), {label} (Amos, scaled pair; v0.1)"),
+            micros: time_per_call(7, reps, |i| {
+                black_box(hankel_ratio_amos(black_box(zz + 1e-9 * i as f64)).ok());
+            }),
+            note: note.into(),
+        });
+    }
     out.push(Figure {
-        name: "Hankel ratio P(z) (Amos, scaled pair)".into(),
-        micros: time_per_call(7, reps, |i| {
-            black_box(hankel_ratio(black_box(z + 1e-9 * i as f64)).ok());
-        }),
-        note: "z = 1.1 - 0.01i".into(),
-    });
-    out.push(Figure {
-        name: "fluid loading psi(z^2) (Bessel J pair)".into(),
+        name: "fluid loading psi(z^2) (continued fraction)".into(),
         micros: time_per_call(7, reps, |i| {
             black_box(psi(black_box(Complex64::new(-0.3 - 1e-9 * i as f64, 0.01))).ok());
+        }),
+        note: "full model only".into(),
+    });
+    out.push(Figure {
+        name: "fluid loading psi(z^2) (Amos J pair; v0.1)".into(),
+        micros: time_per_call(7, reps, |i| {
+            crate::special::with_amos_only(|| {
+                black_box(psi(black_box(Complex64::new(-0.3 - 1e-9 * i as f64, 0.01))).ok());
+            })
         }),
         note: "full model only".into(),
     });
@@ -338,5 +359,434 @@ pub fn print_fit_figures(figs: &[FitFigure]) {
             "  {:>8.1} ms/fit  {:>7.0} evaluations/fit  global optimum {:>3}/{:<3}{stat}  {}",
             f.ms_per_fit, f.evaluations, f.global, f.runs, f.name
         );
+    }
+}
+
+/// Which materials a benchmark network holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MaterialMix {
+    /// The synthetic network's own mix ([`crate::synth::MATERIAL_MIX`]: 45 % iron, 40 % plastic).
+    #[default]
+    Default,
+    /// Four plastic segments (PVC, MDPE, HDPE) for every other one.
+    PlasticHeavy,
+}
+
+impl std::str::FromStr for MaterialMix {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "default" => Ok(MaterialMix::Default),
+            "plastic-heavy" => Ok(MaterialMix::PlasticHeavy),
+            _ => Err(format!(
+                "unknown material mix `{s}` (expected default, plastic-heavy)"
+            )),
+        }
+    }
+}
+
+/// Plastic share of a plastic-heavy benchmark network.
+pub const PLASTIC_HEAVY_SHARE: f64 = 0.8;
+
+/// One segment of a benchmark network: its id, what the fit is given, and its fit seed.
+#[derive(Debug, Clone)]
+pub struct BenchSegment {
+    /// Asset id.
+    pub id: String,
+    /// Inventory material.
+    pub material: crate::physics::Material,
+    /// The fit's inputs.
+    pub data: crate::invert::SegmentData,
+    /// The fit's seed (as `calibrate` derives it from the run seed and the id).
+    pub seed: u64,
+}
+
+/// A realistic synthetic network for timing: `segments` segments from `synth` (all materials,
+/// 4–8 frequencies spread over each pipe's measurable band, 1 %/5 % noise with stated
+/// standard deviations, no defects), seeded by `seed`. `PlasticHeavy` keeps every plastic
+/// segment and enough of the others to make them [`PLASTIC_HEAVY_SHARE`] of the network.
+pub fn bench_network(segments: usize, seed: u64, mix: MaterialMix) -> Vec<BenchSegment> {
+    use crate::synth::{generate, SynthOptions};
+    let generated = match mix {
+        MaterialMix::Default => generate(&SynthOptions {
+            segments,
+            seed,
+            defect_fraction: 0.0,
+            ..SynthOptions::default()
+        }),
+        MaterialMix::PlasticHeavy => {
+            let all = generate(&SynthOptions {
+                segments: 3 * segments,
+                seed,
+                defect_fraction: 0.0,
+                ..SynthOptions::default()
+            });
+            let n_plastic = (PLASTIC_HEAVY_SHARE * segments as f64).round() as usize;
+            let plastic = all
+                .iter()
+                .filter(|s| s.material.is_plastic())
+                .take(n_plastic);
+            let other = all
+                .iter()
+                .filter(|s| !s.material.is_plastic())
+                .take(segments - n_plastic.min(segments));
+            plastic.chain(other).cloned().collect()
+        }
+    };
+    generated
+        .into_iter()
+        .map(|s| BenchSegment {
+            seed: crate::batch::segment_seed(seed, &s.id),
+            material: s.material,
+            data: s.segment_data(),
+            id: s.id,
+        })
+        .collect()
+}
+
+/// What one timed fit of a network segment gave.
+#[derive(Debug, Clone)]
+pub struct TimedFit {
+    /// Wall time of the fit and its stored curve, ms.
+    pub ms: f64,
+    /// CPU time of the fit and its stored curve on this thread, ms.
+    pub cpu_ms: f64,
+    /// Forward evaluations of the fit.
+    pub evaluations: usize,
+    /// The final misfit (NaN when the fit failed).
+    pub misfit: f64,
+    /// The fit failed.
+    pub failed: bool,
+}
+
+/// Fit one segment and compute its stored curve (what a `calibrate` worker does), timed.
+pub fn timed_fit(seg: &BenchSegment, settings: &crate::invert::FitSettings) -> TimedFit {
+    let t = Instant::now();
+    let cpu = thread_cpu_ms();
+    let r = crate::invert::fit_segment(&seg.data, settings, seg.seed);
+    let curve = r
+        .system
+        .as_ref()
+        .map(|s| crate::physics::curves::curve(s, &crate::physics::curves::STANDARD_GRID_HZ).len())
+        .unwrap_or(0);
+    black_box(curve);
+    TimedFit {
+        cpu_ms: thread_cpu_ms() - cpu,
+        ms: t.elapsed().as_secs_f64() * 1e3,
+        evaluations: r.evaluations,
+        misfit: r.misfit,
+        failed: r.status == crate::invert::FitStatus::Failed,
+    }
+}
+
+/// Median, 90th, 99th percentile and maximum of a sample (type-7 quantiles), with its mean.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Distribution {
+    /// Median.
+    pub median: f64,
+    /// 90th percentile.
+    pub p90: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Maximum.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+}
+
+impl Distribution {
+    /// The distribution of `v` (NaN everywhere when empty).
+    pub fn of(v: &[f64]) -> Self {
+        let mut s: Vec<f64> = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        let q = |p: f64| -> f64 {
+            if s.is_empty() {
+                return f64::NAN;
+            }
+            let h = p * (s.len() - 1) as f64;
+            let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+            s[lo] + (h - lo as f64) * (s[hi] - s[lo])
+        };
+        Distribution {
+            median: q(0.5),
+            p90: q(0.9),
+            p99: q(0.99),
+            max: s.last().copied().unwrap_or(f64::NAN),
+            mean: s.iter().sum::<f64>() / s.len().max(1) as f64,
+        }
+    }
+}
+
+/// CPU time of the calling thread, ms (`CLOCK_THREAD_CPUTIME_ID`): unlike wall time, not
+/// inflated when other processes share the cores.
+pub fn thread_cpu_ms() -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant libc knows.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
+}
+
+/// The inversion as pipewave 0.1 ran it, kept selectable so `bench` can time it beside the
+/// current one in the same run: every Hankel and Bessel ratio by Amos
+/// ([`crate::special::with_amos_only`]), 2 restarts of 170 evaluations per parameter.
+pub const V0_1_RESTARTS: usize = 2;
+/// Evaluations per parameter of one DE run in pipewave 0.1.
+pub const V0_1_EVALUATIONS_PER_DIMENSION: usize = 170;
+
+/// Which inversion algorithm to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Algorithm {
+    /// The current defaults.
+    Current,
+    /// pipewave 0.1 (see [`V0_1_RESTARTS`]).
+    V0_1,
+}
+
+impl Algorithm {
+    /// The fit settings of the algorithm (default method).
+    pub fn settings(self) -> crate::invert::FitSettings {
+        match self {
+            Algorithm::Current => crate::invert::FitSettings::default(),
+            Algorithm::V0_1 => crate::invert::FitSettings {
+                restarts: V0_1_RESTARTS,
+                evaluations_per_dimension: V0_1_EVALUATIONS_PER_DIMENSION,
+                ..crate::invert::FitSettings::default()
+            },
+        }
+    }
+
+    /// Fit one segment (and its stored curve) with this algorithm, timed.
+    pub fn timed_fit(self, seg: &BenchSegment) -> TimedFit {
+        let settings = self.settings();
+        match self {
+            Algorithm::Current => timed_fit(seg, &settings),
+            Algorithm::V0_1 => crate::special::with_amos_only(|| timed_fit(seg, &settings)),
+        }
+    }
+}
+
+/// Per-fit figures of one algorithm on a network.
+#[derive(Debug, Clone)]
+pub struct NetworkRun {
+    /// The algorithm.
+    pub algorithm: Algorithm,
+    /// One entry per segment, in network order.
+    pub fits: Vec<TimedFit>,
+}
+
+impl NetworkRun {
+    /// Distribution of the per-fit CPU time, ms.
+    pub fn cpu(&self) -> Distribution {
+        Distribution::of(&self.fits.iter().map(|f| f.cpu_ms).collect::<Vec<_>>())
+    }
+    /// Distribution of the per-fit wall time, ms.
+    pub fn wall(&self) -> Distribution {
+        Distribution::of(&self.fits.iter().map(|f| f.ms).collect::<Vec<_>>())
+    }
+    /// Mean evaluations per fit.
+    pub fn mean_evaluations(&self) -> f64 {
+        self.fits.iter().map(|f| f.evaluations).sum::<usize>() as f64
+            / self.fits.len().max(1) as f64
+    }
+    /// Failed fits.
+    pub fn failed(&self) -> usize {
+        self.fits.iter().filter(|f| f.failed).count()
+    }
+}
+
+/// Time the current algorithm and pipewave 0.1 on every segment of `net`, one core, back to
+/// back on each segment (the order alternating between segments, so slow phases of a shared
+/// machine hit both alike).
+pub fn network_figures(net: &[BenchSegment]) -> (NetworkRun, NetworkRun) {
+    let mut cur = Vec::with_capacity(net.len());
+    let mut old = Vec::with_capacity(net.len());
+    for (i, seg) in net.iter().enumerate() {
+        if i % 2 == 0 {
+            cur.push(Algorithm::Current.timed_fit(seg));
+            old.push(Algorithm::V0_1.timed_fit(seg));
+        } else {
+            old.push(Algorithm::V0_1.timed_fit(seg));
+            cur.push(Algorithm::Current.timed_fit(seg));
+        }
+    }
+    (
+        NetworkRun {
+            algorithm: Algorithm::Current,
+            fits: cur,
+        },
+        NetworkRun {
+            algorithm: Algorithm::V0_1,
+            fits: old,
+        },
+    )
+}
+
+/// Print the network figures and the ratio of the previous algorithm to the current one.
+pub fn print_network_figures(label: &str, cur: &NetworkRun, old: &NetworkRun) {
+    println!(
+        "fits on a realistic synthetic network ({label}, {} segments, fit + stored curve, one core):",
+        cur.fits.len()
+    );
+    for (name, r) in [("current", cur), ("v0.1   ", old)] {
+        let (c, w) = (r.cpu(), r.wall());
+        println!(
+            "  {name}  CPU ms/fit: median {:>6.1}  p90 {:>6.1}  p99 {:>6.1}  max {:>7.1}  mean {:>6.1} \
+             | wall median {:>6.1} max {:>7.1} | {:>5.0} evaluations/fit, {} failed",
+            c.median, c.p90, c.p99, c.max, c.mean, w.median, w.max, r.mean_evaluations(), r.failed()
+        );
+    }
+    let (c, o) = (cur.cpu(), old.cpu());
+    println!(
+        "  v0.1 / current (same run): median {:.2}x  p90 {:.2}x  p99 {:.2}x  max {:.2}x  total {:.2}x",
+        o.median / c.median,
+        o.p90 / c.p90,
+        o.p99 / c.p99,
+        o.max / c.max,
+        o.mean / c.mean
+    );
+    let worse = cur
+        .fits
+        .iter()
+        .zip(&old.fits)
+        .map(|(a, b)| a.misfit - b.misfit)
+        .filter(|d| d.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    println!("  largest misfit increase of current over v0.1 on one segment: {worse:.3e}");
+}
+
+/// Budget multiple and restarts of the exhaustive search of `bench --verify`.
+pub const VERIFY_BUDGET_FACTOR: usize = 20;
+/// Restarts of the exhaustive search of `bench --verify`.
+pub const VERIFY_RESTARTS: usize = 6;
+/// `bench --verify` passes when no segment's χ² is more than this above the exhaustive one.
+pub const VERIFY_DCHI2_MAX: f64 = 0.1;
+
+/// One segment of `bench --verify`.
+#[derive(Debug, Clone)]
+pub struct VerifyRow {
+    /// Asset id.
+    pub id: String,
+    /// Inventory material.
+    pub material: crate::physics::Material,
+    /// χ² of the default fit.
+    pub chi2: f64,
+    /// χ² of the exhaustive search ([`VERIFY_BUDGET_FACTOR`]× the budget,
+    /// [`VERIFY_RESTARTS`] restarts, another seed).
+    pub chi2_exhaustive: f64,
+}
+
+impl VerifyRow {
+    /// χ² of the default fit above the exhaustive one (NaN when either failed).
+    pub fn excess(&self) -> f64 {
+        self.chi2 - self.chi2_exhaustive.min(self.chi2)
+    }
+}
+
+/// Fit every segment of `net` with the default settings and with an exhaustive search, on
+/// `jobs` threads (the figures do not depend on the thread count).
+pub fn verify(net: &[BenchSegment], jobs: usize) -> Vec<VerifyRow> {
+    use rayon::prelude::*;
+    let exhaustive = crate::invert::FitSettings {
+        restarts: VERIFY_RESTARTS,
+        evaluations_per_dimension: VERIFY_BUDGET_FACTOR
+            * crate::invert::FitSettings::default().evaluations_per_dimension,
+        ..crate::invert::FitSettings::default()
+    };
+    let work = || {
+        net.par_iter()
+            .map(|seg| {
+                let cur = crate::invert::fit_segment(
+                    &seg.data,
+                    &crate::invert::FitSettings::default(),
+                    seg.seed,
+                );
+                let ex = crate::invert::fit_segment(
+                    &seg.data,
+                    &exhaustive,
+                    crate::seed::splitmix64(seg.seed ^ 0x5eed),
+                );
+                VerifyRow {
+                    id: seg.id.clone(),
+                    material: seg.material,
+                    chi2: cur.misfit,
+                    chi2_exhaustive: ex.misfit,
+                }
+            })
+            .collect()
+    };
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+    {
+        Ok(pool) => pool.install(work),
+        Err(_) => work(),
+    }
+}
+
+/// Print the worst case of `bench --verify`; true when every segment passes.
+pub fn print_verify(rows: &[VerifyRow]) -> bool {
+    let failed = rows.iter().filter(|r| !r.chi2.is_finite()).count();
+    let worst = rows
+        .iter()
+        .filter(|r| r.chi2.is_finite())
+        .max_by(|a, b| a.excess().total_cmp(&b.excess()));
+    let over = rows
+        .iter()
+        .filter(|r| r.excess().is_nan() || r.excess() > VERIFY_DCHI2_MAX)
+        .count();
+    println!(
+        "verify: {} segments, default fit against {}x the budget with {} restarts",
+        rows.len(),
+        VERIFY_BUDGET_FACTOR,
+        VERIFY_RESTARTS
+    );
+    if let Some(w) = worst {
+        println!(
+            "  worst: {} ({:?}) chi2 {:.4} vs exhaustive {:.4}: {:+.4}",
+            w.id,
+            w.material,
+            w.chi2,
+            w.chi2_exhaustive,
+            w.excess()
+        );
+    }
+    println!(
+        "  {} segment(s) more than {} above the exhaustive chi2 (failed fits count), {} failed",
+        over, VERIFY_DCHI2_MAX, failed
+    );
+    over == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_are_type_7() {
+        let v: Vec<f64> = (1..=11).rev().map(f64::from).collect();
+        let d = Distribution::of(&v);
+        assert_eq!(d.median, 6.0);
+        assert!((d.p90 - 10.0).abs() < 1e-12);
+        assert!((d.p99 - 10.9).abs() < 1e-12);
+        assert_eq!(d.max, 11.0);
+        assert_eq!(d.mean, 6.0);
+        assert!(Distribution::of(&[]).median.is_nan());
+    }
+
+    #[test]
+    fn plastic_heavy_network_is_mostly_plastic() {
+        let net = bench_network(20, 3, MaterialMix::PlasticHeavy);
+        assert_eq!(net.len(), 20);
+        let plastic = net.iter().filter(|s| s.material.is_plastic()).count();
+        assert_eq!(plastic, 16);
+        let default = bench_network(20, 3, MaterialMix::Default);
+        assert!(default.iter().filter(|s| s.material.is_plastic()).count() < 16);
+        assert!(default.iter().all(|s| s.data.measurements.len() >= 4));
     }
 }

@@ -57,8 +57,144 @@ pub fn principal_sqrt(w: Complex64) -> Complex64 {
 
 /// P(z) = H₀(z)/H₀′(z) = −H₀⁽²⁾(z)/H₁⁽²⁾(z), eq. P16 (second kind, principal branch).
 ///
-/// Computed from one call for the scaled pair H₀⁽²⁾, H₁⁽²⁾·e^{iz}; the scale cancels.
+/// In the sector the model uses (−π < arg z ≤ π/4 and a little beyond, see
+/// [`in_modified_bessel_sector`]) P comes from the modified Bessel functions of w = iz:
+/// H_ν⁽²⁾(z) = (2i/π)·e^{iνπ/2}·K_ν(iz) (DLMF 10.27.8), so P(z) = i·K₀(w)/K₁(w), computed by
+/// [`k1_over_k0`] without any Amos call. Elsewhere, and if that fails, [`hankel_ratio_amos`].
 pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
+    if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
+        return Err(SpecialError::BadArgument(z));
+    }
+    if amos_only() {
+        return hankel_ratio_amos(z);
+    }
+    let w = Complex64::new(-z.im, z.re);
+    if in_modified_bessel_sector(w) {
+        if let Some(r) = k1_over_k0(w) {
+            let p = Complex64::new(0.0, 1.0) / r;
+            if p.re.is_finite() && p.im.is_finite() {
+                return Ok(p);
+            }
+        }
+    }
+    hankel_ratio_amos(z)
+}
+
+thread_local! {
+    static AMOS_ONLY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Run `f` with every special function of this thread computed by Amos, as pipewave 0.1 did
+/// (for `pipewave bench`, which times the previous algorithm beside the current one in the
+/// same run). Other threads are not affected.
+pub fn with_amos_only<T>(f: impl FnOnce() -> T) -> T {
+    struct Restore(bool);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            AMOS_ONLY.with(|c| c.set(self.0));
+        }
+    }
+    let _restore = Restore(AMOS_ONLY.with(|c| c.replace(true)));
+    f()
+}
+
+#[inline]
+fn amos_only() -> bool {
+    AMOS_ONLY.with(|c| c.get())
+}
+
+/// Whether w = iz lies where the principal K_ν(w) continues the principal H_ν⁽²⁾(z):
+/// −π/2 < arg w ≤ 3π/4 (i.e. −π < arg z ≤ π/4, the sector of q·a under the branch rule of
+/// eq. P3). The principal branches part where z crosses the positive imaginary axis.
+#[inline]
+fn in_modified_bessel_sector(w: Complex64) -> bool {
+    w.re > 0.0 || (w.im > 0.0 && w.im >= -w.re)
+}
+
+/// Below this |w| the ratio K₁/K₀ comes from the power series (DLMF 10.31.1), above it from
+/// Steed's continued fraction (Temme 1975; Thompson & Barnett 1987, J. Comput. Phys. 64, 490).
+pub const K_SERIES_MAX_ABS: f64 = 2.0;
+/// Near the imaginary axis (Re w < [`K_SERIES_MAX_RE`]) the series is used up to this |w|:
+/// there I₀ and K₀ are of the same size (no e^{2 Re w} cancellation), the largest term is
+/// below 20× the sum at |w| = 6, and the continued fraction is slowest (40–100 terms).
+pub const K_SERIES_MAX_ABS_NEAR_IMAGINARY: f64 = 6.0;
+/// See [`K_SERIES_MAX_ABS_NEAR_IMAGINARY`].
+pub const K_SERIES_MAX_RE: f64 = 1.0;
+/// Relative size of the last term at which the series and the continued fraction stop.
+pub const K_RATIO_EPS: f64 = 1e-17;
+/// Terms of the continued fraction beyond which it is declared not converged (then Amos).
+pub const K_CF_MAX_TERMS: usize = 400;
+
+/// K₁(w)/K₀(w) for −π/2 < arg w ≤ 3π/4, `None` if the continued fraction did not converge.
+///
+/// |w| < [`K_SERIES_MAX_ABS`]: the ascending series of K₀ and K₁ (DLMF 10.31.1 with n = 0, 1).
+/// Otherwise Steed's algorithm for the continued fraction of Temme's method with order μ = 0,
+/// K₁/K₀ = (w + ½ − h)/w with h = ¼·CF (Numerical Recipes §6.7, `bessik`); the
+/// normalisation sum of that method is not needed for a ratio.
+pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
+    let r2 = w.norm_sqr();
+    if r2 < K_SERIES_MAX_ABS * K_SERIES_MAX_ABS
+        || (r2 < K_SERIES_MAX_ABS_NEAR_IMAGINARY * K_SERIES_MAX_ABS_NEAR_IMAGINARY
+            && w.re < K_SERIES_MAX_RE)
+    {
+        return Some(k1_over_k0_series(w));
+    }
+    let one = Complex64::new(1.0, 0.0);
+    let mut b = 2.0 * (one + w);
+    let mut d = one / b;
+    let mut delh = d;
+    let mut h = d;
+    let mut a = -0.25;
+    for i in 2..=K_CF_MAX_TERMS {
+        a -= 2.0 * (i - 1) as f64;
+        b += 2.0;
+        d = one / (b + a * d);
+        delh *= b * d - 1.0;
+        h += delh;
+        if delh.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * h.norm_sqr() {
+            let h = 0.25 * h;
+            return Some((w + 0.5 - h) / w);
+        }
+    }
+    None
+}
+
+/// K₁(w)/K₀(w) by the ascending series, DLMF 10.31.1 (principal logarithm):
+/// K₀ = −ln(w/2)·I₀ + Σ ψ(k+1) y^k/(k!)², K₁ = 1/w + ln(w/2)·I₁ − (w/4) Σ (ψ(k+1) + ψ(k+2))
+/// y^k/(k!(k+1)!), with y = w²/4 and ψ the digamma function (ψ(1) = −γ).
+fn k1_over_k0_series(w: Complex64) -> Complex64 {
+    /// Euler–Mascheroni constant γ.
+    const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
+    let y = w * w * 0.25;
+    let lg = (w * 0.5).ln();
+    // t0 = y^k/(k!)², t1 = y^k/(k!(k+1)!); psi_k = ψ(k+1).
+    let (mut t0, mut t1) = (Complex64::new(1.0, 0.0), Complex64::new(1.0, 0.0));
+    let mut psi_k = -EULER_GAMMA;
+    let (mut i0, mut s0) = (t0, t0 * psi_k);
+    let (mut i1, mut s1) = (t1, t1 * (2.0 * psi_k + 1.0));
+    for k in 1..60 {
+        let kf = k as f64;
+        t0 *= y / (kf * kf);
+        t1 *= y / (kf * (kf + 1.0));
+        psi_k += 1.0 / kf;
+        i0 += t0;
+        s0 += t0 * psi_k;
+        i1 += t1;
+        s1 += t1 * (2.0 * psi_k + 1.0 / (kf + 1.0));
+        if t0.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i0.norm_sqr()
+            && t1.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i1.norm_sqr()
+        {
+            break;
+        }
+    }
+    let k0 = -lg * i0 + s0;
+    let k1 = 1.0 / w + lg * (w * 0.5) * i1 - w * 0.25 * s1;
+    k1 / k0
+}
+
+/// P(z) of eq. P16 from one Amos call for the scaled pair H₀⁽²⁾, H₁⁽²⁾·e^{iz} (the scale
+/// cancels): valid for every z ≠ 0, the reference for [`hankel_ratio`].
+pub fn hankel_ratio_amos(z: Complex64) -> Result<Complex64, SpecialError> {
     if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
         return Err(SpecialError::BadArgument(z));
     }
@@ -93,24 +229,48 @@ pub fn bessel_j_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     }
 }
 
-/// Fluid-loading factor ψ(z) = z J₀(z) / (2 J₁(z)) as a function of z², eq. P24.
+/// Fluid-loading factor ψ(z) = z J₀(z) / (2 J₁(z)) as a function of w = z², eq. P24.
 ///
-/// ψ is even in z, so z is the principal √(z²). For |z²| < [`PSI_SERIES_Z2`] the series
-/// 1 − z²/8 − z⁴/192 is used; ψ(0) = 1.
+/// ψ is even in z, so it is a function of w alone. For |w| < [`PSI_SERIES_Z2`] the series
+/// 1 − w/8 − w²/192 is used; ψ(0) = 1. Otherwise the continued fraction of [`psi_cf`].
 pub fn psi(z2: Complex64) -> Result<Complex64, SpecialError> {
-    if z2.norm() < PSI_SERIES_Z2 {
-        return Ok(1.0 - z2 / 8.0 - z2 * z2 / 192.0);
+    psi_d(z2).map(|(p, _)| p)
+}
+
+/// Largest |w| for the continued fraction of ψ; beyond it (far outside the model's validity,
+/// eq. P7) the scaled Amos pair J₀, J₁ is used.
+pub const PSI_CF_MAX_ABS: f64 = 1e4;
+
+/// ψ(w) of eq. P24 and 1/(2C₂) by Gauss' continued fraction of J₁/J₀ (DLMF 10.10.1 with
+/// ν = 0): J₁(z)/J₀(z) = z/C₁ with C_k = 2k − w/C_{k+1}, so ψ = C₁/2 = 1 − w/(2C₂), in w = z²
+/// only (no square root, no branch). Evaluated backwards from a depth that grows with |z|;
+/// the truncation error falls like (|z|/2)^{2N}/(N!)².
+fn psi_cf(w: Complex64) -> (Complex64, Complex64) {
+    let depth = 12 + (2.0 * w.norm().sqrt()) as usize;
+    let mut c = Complex64::new(2.0 * (depth + 1) as f64, 0.0);
+    for k in (2..=depth).rev() {
+        c = 2.0 * k as f64 - w / c;
     }
-    let z = principal_sqrt(z2);
-    Ok(z * bessel_j_ratio(z)? * 0.5)
+    let half_inv_c2 = 0.5 / c;
+    (1.0 - w * half_inv_c2, half_inv_c2)
 }
 
 /// ψ of eq. P24 as a function of w = z², and dψ/dw. With Q = J₀/J₁, Q′ = −1 − Q² + Q/z
-/// (DLMF 10.6.2), so dψ/dz = Q − z/2 − zQ²/2 and dψ/dw = (dψ/dz)/(2z); the series branch
-/// differentiates 1 − w/8 − w²/192.
+/// (DLMF 10.6.2), dψ/dw = (ψ − ψ²)/w − 1/4 = ψ·(1 − ψ)/w − 1/4; with the continued fraction
+/// (1 − ψ)/w = 1/(2C₂) exactly, without cancellation. The series branch differentiates
+/// 1 − w/8 − w²/192.
 pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
+    if !(w.re.is_finite() && w.im.is_finite()) {
+        return Err(SpecialError::BadArgument(w));
+    }
     if w.norm() < PSI_SERIES_Z2 {
         return Ok((1.0 - w / 8.0 - w * w / 192.0, -1.0 / 8.0 - w / 96.0));
+    }
+    if w.norm() <= PSI_CF_MAX_ABS && !amos_only() {
+        let (psi, one_minus_psi_over_w) = psi_cf(w);
+        if psi.is_finite() && one_minus_psi_over_w.is_finite() {
+            return Ok((psi, psi * one_minus_psi_over_w - 0.25));
+        }
     }
     let z = principal_sqrt(w);
     let q = bessel_j_ratio(z)?;
@@ -274,6 +434,77 @@ mod tests {
             let fd = (psi(w + h).unwrap() - psi(w - h).unwrap()) / (2.0 * h);
             assert!(rel(d, fd) < 1e-7, "dpsi/dw({w}) = {d} vs {fd}");
         }
+    }
+
+    /// The Amos-free ratio against Amos over the sector the model uses (−π < arg z ≤ π/4, and
+    /// the edge of the second quadrant where Amos takes over), |z| from 1e-5 to 3000.
+    #[test]
+    fn fast_hankel_ratio_matches_amos_over_the_sector() {
+        let mut worst: f64 = 0.0;
+        let mut fast = 0usize;
+        for i in 0..=80 {
+            let r = 10f64.powf(-5.0 + 8.5 * i as f64 / 80.0);
+            for j in 0..=72 {
+                let th = -std::f64::consts::PI + 1.5 * std::f64::consts::PI * j as f64 / 72.0;
+                let z = Complex64::from_polar(r, th);
+                if z.im.abs() > 700.0 {
+                    continue;
+                }
+                let w = c(-z.im, z.re);
+                fast += usize::from(in_modified_bessel_sector(w));
+                let (a, b) = (hankel_ratio(z).unwrap(), hankel_ratio_amos(z).unwrap());
+                worst = worst.max(rel(a, b));
+            }
+        }
+        assert!(fast > 4000, "{fast} points on the fast path");
+        assert!(
+            worst < 1e-13,
+            "worst relative difference from Amos {worst:e}"
+        );
+    }
+
+    /// ψ and dψ/dw by the continued fraction against the scaled Amos pair J₀, J₁.
+    #[test]
+    fn psi_continued_fraction_matches_amos() {
+        let mut worst: f64 = 0.0;
+        let mut worst_d: f64 = 0.0;
+        for i in 0..=60 {
+            let r = 10f64.powf(-5.9 + 9.8 * i as f64 / 60.0);
+            for j in 0..72 {
+                let w = Complex64::from_polar(r, std::f64::consts::TAU * j as f64 / 72.0);
+                // Stay clear of the poles of ψ (zeros of J₁ on the positive real w axis).
+                if (w.im.abs() < 0.05 * r) && w.re > 0.0 {
+                    continue;
+                }
+                let z = principal_sqrt(w);
+                let q = bessel_j_ratio(z).unwrap();
+                let want = z * q * 0.5;
+                let want_d = (q - z * 0.5 - z * q * q * 0.5) / (2.0 * z);
+                let (got, got_d) = psi_d(w).unwrap();
+                worst = worst.max(rel(got, want));
+                worst_d = worst_d.max((got_d - want_d).norm() / want_d.norm().max(1.0));
+            }
+        }
+        assert!(worst < 1e-13, "worst relative difference in psi {worst:e}");
+        assert!(worst_d < 1e-9, "worst difference in dpsi/dw {worst_d:e}");
+    }
+
+    /// The v0.1 switch computes by Amos on this thread only, and is undone afterwards.
+    #[test]
+    fn amos_only_switch_is_scoped() {
+        let z = c(1.1, -0.01);
+        let amos = hankel_ratio_amos(z).unwrap();
+        let fast = hankel_ratio(z).unwrap();
+        assert_ne!(fast, amos, "the fast path is a different computation");
+        assert!(rel(fast, amos) < 1e-14);
+        assert_eq!(with_amos_only(|| hankel_ratio(z).unwrap()), amos);
+        let w = c(-0.3, 0.01);
+        let zz = principal_sqrt(w);
+        let want = zz * bessel_j_ratio(zz).unwrap() * 0.5;
+        assert_eq!(with_amos_only(|| psi(w).unwrap()), want);
+        let other = std::thread::spawn(move || with_amos_only(|| hankel_ratio(z).unwrap()));
+        assert_eq!(other.join().unwrap(), amos);
+        assert_eq!(hankel_ratio(z).unwrap(), fast);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! `pipewave bench`: print timing figures (speed is measured here, never asserted in tests).
 //!
-//! Without options: forward-model figures. `--calibrate N`: calibrate throughput on N synthetic
+//! Without options: per-fit times on a realistic synthetic network (`--network N`,
+//! `--materials plastic-heavy`), against pipewave 0.1 in the same run, then forward-model and
+//! single-segment inversion figures. `--verify N`: the default fit against an exhaustive search. `--calibrate N`: calibrate throughput on N synthetic
 //! segments. `--recovery DIR`: how well the calibration of a synthetic network directory
 //! recovered its truth (imports and calibrates DIR first, as `run` does, if needed).
 
@@ -31,6 +33,20 @@ pub struct BenchArgs {
     /// Compare the fits of a synthetic network directory with its truth.csv.
     #[arg(long, value_name = "DIR")]
     recovery: Option<PathBuf>,
+    /// Segments of the realistic synthetic network whose per-fit times are printed, for the
+    /// current algorithm and pipewave 0.1 back to back (0 skips them).
+    #[arg(long, value_name = "N", default_value_t = 200)]
+    network: usize,
+    /// Seed of that network and of --verify's (pass new values for fresh seeds).
+    #[arg(long, value_name = "S", default_value_t = pipewave::batch::throughput::BENCH_NETWORK_SEED)]
+    network_seed: u64,
+    /// Material mix of that network: default (the synthetic network's) or plastic-heavy.
+    #[arg(long, value_name = "MIX", default_value = "default")]
+    materials: pipewave::bench::MaterialMix,
+    /// Compare the default fit with an exhaustive search on N segments of a realistic network
+    /// and print the worst case.
+    #[arg(long, value_name = "N")]
+    verify: Option<usize>,
     /// Database of --recovery (default: DIR/pipewave.sqlite).
     #[arg(long, value_name = "PATH", requires = "recovery")]
     db: Option<PathBuf>,
@@ -95,7 +111,26 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
             recovery::compare(&fits, &truth, &recovery::soil_densities(database.conn())?)
         );
     }
-    if args.calibrate.is_none() && args.recovery.is_none() {
+    if let Some(n) = args.verify {
+        let net = pipewave::bench::bench_network(n, args.network_seed, args.materials);
+        let rows = pipewave::bench::verify(&net, opts.worker_count());
+        pipewave::bench::print_verify(&rows);
+    }
+    if args.calibrate.is_none() && args.recovery.is_none() && args.verify.is_none() {
+        if args.network > 0 {
+            let net =
+                pipewave::bench::bench_network(args.network, args.network_seed, args.materials);
+            let (cur, old) = pipewave::bench::network_figures(&net);
+            let label = format!(
+                "{} mix, seed {}",
+                match args.materials {
+                    pipewave::bench::MaterialMix::Default => "default",
+                    pipewave::bench::MaterialMix::PlasticHeavy => "plastic-heavy",
+                },
+                args.network_seed
+            );
+            pipewave::bench::print_network_figures(&label, &cur, &old);
+        }
         let figs = pipewave::bench::forward_figures(args.scale.max(1));
         pipewave::bench::print_figures("forward model (one core):", &figs);
         if args.fits > 0 {

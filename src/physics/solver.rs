@@ -26,6 +26,9 @@ pub const GROWING_RTOL: f64 = 1e-12;
 /// The correction ratio (P43) is not tested when a step moves the root by less than this
 /// relative amount: both numerator and denominator are then rounding noise.
 pub const RATIO_MIN_STEP_RTOL: f64 = 1e-9;
+/// A continuation that fails within this relative distance of a soil wave speed
+/// (|c/c_soil − 1|, eq. P44) is restarted beyond the grazing point ([`restart_past_grazing`]).
+pub const GRAZING_RESTART_RTOL: f64 = 0.05;
 /// Geometric ramp points below the lowest requested frequency, eq. P41 (the reference's 29).
 pub const RAMP_POINTS: usize = 29;
 /// Start of the ramp: ω₀ = min(2π·5 rad/s, ω_min/2), eq. P41.
@@ -58,6 +61,20 @@ pub enum SolveError {
         /// The correction ratio of the last attempt.
         ratio: f64,
     },
+    /// The tracked root met a soil wave speed (grazing, P44) and left the proper Riemann
+    /// sheet of eq. P3 there, and no root of the proper sheet was found beyond that point.
+    #[error(
+        "no s = 1 root at omega = {omega} rad/s: the wave reached the soil's {wave} speed \
+         ({speed:.1} m/s) at grazing, where the root leaves the proper sheet of the branch rule"
+    )]
+    Grazing {
+        /// Angular frequency, rad/s.
+        omega: f64,
+        /// "compressional" or "shear".
+        wave: &'static str,
+        /// That soil wave speed, m/s.
+        speed: f64,
+    },
     /// The frequency is not a positive finite number.
     #[error("invalid angular frequency {omega} rad/s")]
     InvalidFrequency {
@@ -73,6 +90,7 @@ impl SolveError {
             SolveError::NoConvergence { .. } => "no_convergence",
             SolveError::WrongRoot { .. } => "wrong_root",
             SolveError::BranchJump { .. } => "branch_jump",
+            SolveError::Grazing { .. } => "grazing",
             SolveError::InvalidFrequency { .. } => "invalid_frequency",
         }
     }
@@ -478,7 +496,7 @@ pub fn solve_curve(
         let r = if hist.is_empty() {
             solve_direct_tol(system, w, tol)
         } else {
-            step_to(system, &mut hist, w, tol)
+            advance(system, &mut hist, w, tol)
         };
         match r {
             Ok(root) => {
@@ -510,7 +528,7 @@ pub fn solve_curve(
                 })
             })
         } else {
-            step_to(system, &mut hist, w, tol)
+            advance(system, &mut hist, w, tol)
         };
         if let Err(e) = r {
             failure = Some(e);
@@ -518,6 +536,80 @@ pub fn solve_curve(
         out[i] = Some(r);
     }
     out.into_iter().map(|r| r.expect("filled")).collect()
+}
+
+/// [`step_to`], and when it fails next to a soil wave speed, [`restart_past_grazing`].
+fn advance(
+    system: &System,
+    hist: &mut Vec<PathPoint>,
+    target: f64,
+    tol: Tolerance,
+) -> Result<Root, SolveError> {
+    match step_to(system, hist, target, tol) {
+        Ok(root) => Ok(root),
+        Err(e @ SolveError::InvalidFrequency { .. }) => Err(e),
+        Err(e) => match grazing_wave(system, hist[hist.len() - 1]) {
+            Some(wave) => restart_past_grazing(system, hist, target, tol, wave),
+            None => Err(e),
+        },
+    }
+}
+
+/// The soil wave (name, speed) whose speed the root at `p` is within
+/// [`GRAZING_RESTART_RTOL`] of, if any.
+fn grazing_wave(system: &System, p: PathPoint) -> Option<(&'static str, f64)> {
+    if system.soil.is_absent() || p.k1.re <= 0.0 {
+        return None;
+    }
+    let c = p.omega / p.k1.re;
+    let (cp, cs) = system.soil.wave_speeds();
+    [("compressional", cp), ("shear", cs)]
+        .into_iter()
+        .find(|&(_, v)| (c / v - 1.0).abs() < GRAZING_RESTART_RTOL)
+}
+
+/// The tracked root reached a soil wave speed (grazing, P44): there the branch point of
+/// q = √(k_soil² − k1²) (P15) meets the root, which leaves the proper sheet of the branch rule
+/// (P3) and cannot be followed further. The s = 1 wave continues on the proper sheet as
+/// another root, clear of the soil speed (e.g. a thin plastic pipe whose speed falls below
+/// the soil's compressional speed as the frequency rises). Look for it at `target` from the
+/// in-vacuo root (P39) and from either side of the grazing wavenumber, and restart the
+/// continuation there.
+fn restart_past_grazing(
+    system: &System,
+    hist: &mut Vec<PathPoint>,
+    target: f64,
+    tol: Tolerance,
+    (wave, speed): (&'static str, f64),
+) -> Result<Root, SolveError> {
+    let last = hist[hist.len() - 1];
+    let k_soil = target / speed;
+    let ev = Evaluator::new(system, target);
+    let guesses = [
+        ev.in_vacuo_root(),
+        Complex64::new(k_soil * (1.0 + GRAZING_RESTART_RTOL), last.k1.im),
+        Complex64::new(k_soil * (1.0 - GRAZING_RESTART_RTOL), last.k1.im),
+    ];
+    for g in guesses {
+        let Ok(root) = solve_from_guess_tol(system, target, g, tol) else {
+            continue;
+        };
+        // Not the lost root again: clear of the branch point (the grazing band of P44).
+        let clear = ((target / root.k1.re) / speed - 1.0).abs() >= GRAZING_RTOL;
+        if clear && !root.flags.growing_wave {
+            hist.clear();
+            hist.push(PathPoint {
+                omega: target,
+                k1: root.k1,
+            });
+            return Ok(root);
+        }
+    }
+    Err(SolveError::Grazing {
+        omega: target,
+        wave,
+        speed,
+    })
 }
 
 /// Advance the continuation to `target`, eq. P43: accept the root when the correction ratio
@@ -588,5 +680,92 @@ fn step_to(
             }
             frac *= 0.5;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil};
+
+    /// Issue 11: a thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
+    /// the optimum of a fit that failed. Its s = 1 wave is faster than the soil's compressional
+    /// wave (363.5 m/s) at 136 Hz and slower from about 259 Hz: the tracked root meets the
+    /// branch point there. The reference continuation restarts past it and finds the root of
+    /// the proper sheet that the direct solve (no ramp) finds; before, it ended in a
+    /// branch jump and the fit failed.
+    #[test]
+    fn reference_continuation_restarts_past_grazing() {
+        let pipe = Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.090, 0.0054).unwrap();
+        let soil = Soil::new(4.975_393_44e6, 0.496_719_830_7, 1930.0, 0.0).unwrap();
+        let sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            0.734_144_601_3,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap();
+        let (cp, _) = sys.soil.wave_speeds();
+        assert!((cp - 363.5).abs() < 0.1, "{cp}");
+        let w: Vec<f64> = [136.0, 260.0, 390.0, 520.0, 717.0]
+            .iter()
+            .map(|f| f * std::f64::consts::TAU)
+            .collect();
+        let reference = solve_curve(&sys, &w, Continuation::default());
+        let direct = solve_curve(
+            &sys,
+            &w,
+            Continuation {
+                ramp_points: 0,
+                tolerance: Tolerance::REFERENCE,
+            },
+        );
+        for (r, d) in reference.iter().zip(&direct) {
+            let (r, d) = (r.as_ref().unwrap(), d.as_ref().unwrap());
+            assert!(
+                (r.k1 - d.k1).norm() < 1e-10 * d.k1.norm(),
+                "{} vs {}",
+                r.k1,
+                d.k1
+            );
+        }
+        let r = reference[0].as_ref().unwrap();
+        assert!(r.phase_speed() > cp);
+        let r = reference[1].as_ref().unwrap();
+        assert!(r.phase_speed() < cp * (1.0 - GRAZING_RTOL));
+        assert!((r.k1 - Complex64::new(4.635_094_676, -0.308_124_806)).norm() < 1e-8);
+    }
+
+    /// Without a soil wave speed nearby a failure is not turned into a restart: the grazing
+    /// test names the wave only within its band.
+    #[test]
+    fn grazing_wave_is_named_only_inside_its_band() {
+        let pipe = Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.090, 0.0054).unwrap();
+        let soil = Soil::new(1.8e7, 0.32, 1930.0, 0.0).unwrap();
+        let sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            0.3,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap();
+        let (cp, cs) = sys.soil.wave_speeds();
+        let at = |c: f64| PathPoint {
+            omega: 1000.0,
+            k1: Complex64::new(1000.0 / c, -0.1),
+        };
+        assert_eq!(
+            grazing_wave(&sys, at(cp * 1.03)).map(|g| g.0),
+            Some("compressional")
+        );
+        assert_eq!(
+            grazing_wave(&sys, at(cs * 0.97)).map(|g| g.0),
+            Some("shear")
+        );
+        assert_eq!(grazing_wave(&sys, at(cp * 1.2)), None);
     }
 }

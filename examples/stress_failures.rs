@@ -1,0 +1,89 @@
+//! Failed fits on a stress network (issue 11): every effect hidden at its default range in a
+//! quarter of the segments each, all materials, thin walls included, fitted as `calibrate`
+//! fits (default settings, seeds from the ids).
+//!
+//! Usage: stress_failures [SEGMENTS] [SEED] [JOBS] [v0_1]
+
+use pipewave::bench::{Algorithm, BenchSegment};
+use pipewave::physics::effects::Effect;
+use pipewave::synth::{default_hidden_range, generate, SynthOptions};
+use rayon::prelude::*;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let n: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(10_000);
+    let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(11);
+    let jobs: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2);
+    let alg = if args.get(4).map(String::as_str) == Some("v0_1") {
+        Algorithm::V0_1
+    } else {
+        Algorithm::Current
+    };
+    let effects = [
+        Effect::SoilDamping,
+        Effect::AirInWater,
+        Effect::WallThinning,
+        Effect::PipeLoss,
+    ];
+    let mut net: Vec<(Effect, pipewave::synth::SynthSegment)> = Vec::new();
+    for (i, e) in effects.iter().enumerate() {
+        let (lo, hi) = default_hidden_range(*e).expect("range");
+        let segs = generate(&SynthOptions {
+            segments: n / effects.len(),
+            seed: seed + i as u64,
+            defect_fraction: 0.0,
+            hidden_effect: Some((*e, lo, hi)),
+            ..SynthOptions::default()
+        });
+        net.extend(segs.into_iter().map(|s| (*e, s)));
+    }
+    if let Ok(only) = std::env::var("ONLY") {
+        net.retain(|(e, s)| format!("{}-{}", e.name(), s.id) == only);
+    }
+    let t = std::time::Instant::now();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .build()
+        .unwrap();
+    let results: Vec<_> = pool.install(|| {
+        net.par_iter()
+            .map(|(e, s)| {
+                let seg = BenchSegment {
+                    id: format!("{}-{}", e.name(), s.id),
+                    material: s.material,
+                    data: s.segment_data(),
+                    seed: pipewave::batch::segment_seed(seed, &s.id),
+                };
+                let r = pipewave::invert::fit_segment(&seg.data, &alg.settings(), seg.seed);
+                (seg.id, r.status, r.message, s.clone())
+            })
+            .collect()
+    });
+    let failed: Vec<_> = results
+        .iter()
+        .filter(|r| r.1 == pipewave::invert::FitStatus::Failed)
+        .collect();
+    println!(
+        "{} segments, {} failed, {:.1} s on {} jobs ({:?})",
+        results.len(),
+        failed.len(),
+        t.elapsed().as_secs_f64(),
+        jobs,
+        alg
+    );
+    for (id, _, msg, s) in failed {
+        println!(
+            "  {id} {:?} OD {} wall {} E {:.3e} nu {:.3} xi {:.3} rho {} hidden {:?} freqs {:?}: {}",
+            s.material,
+            s.size.od_mm,
+            s.size.wall_mm,
+            s.soil_modulus,
+            s.soil_poisson,
+            s.contact,
+            s.soil_density,
+            s.hidden,
+            s.measurements.iter().map(|m| m.frequency_hz).collect::<Vec<_>>(),
+            msg.as_deref().unwrap_or("")
+        );
+    }
+}
