@@ -284,7 +284,8 @@ impl Effect {
                 return Err(InputError::Unknown {
                     what: "model change",
                     value: "inventory_error".into(),
-                    expected: "an effect with a parameter (inventory_error refits candidate records)",
+                    expected:
+                        "an effect with a parameter (inventory_error refits candidate records)",
                 })
             }
         }
