@@ -23,6 +23,7 @@ pub mod inventory;
 pub mod report;
 pub mod run;
 pub mod stats;
+pub mod trial;
 
 use num_complex::Complex64;
 
