@@ -31,6 +31,10 @@ pub struct Ambiguity {
     pub separating: String,
 }
 
+/// What two effects without a known shared quantity both change.
+pub const GENERIC_QUANTITY: &str =
+    "the same change of the fitted wavenumbers over the measured band";
+
 /// The physical quantity two effects both change (spec §8 signatures).
 pub fn shared_quantity(a: Effect, b: Effect) -> &'static str {
     use Effect::*;
@@ -49,8 +53,13 @@ pub fn shared_quantity(a: Effect, b: Effect) -> &'static str {
             "compliance: a softer pipe record and air both slow the wave"
         }
         (SoilDamping, ViscoelasticWall) => "loss rising with frequency",
-        _ => "the same change of the fitted wavenumbers over the measured band",
+        _ => GENERIC_QUANTITY,
     }
+}
+
+/// True when two effects change the same physical quantity (a pair of [`shared_quantity`]).
+pub fn same_quantity(a: Effect, b: Effect) -> bool {
+    a != b && shared_quantity(a, b) != GENERIC_QUANTITY
 }
 
 /// A field test that measures the effect directly.

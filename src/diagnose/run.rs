@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use rusqlite::Connection;
 
-use super::group::{group_key, test_groups, GroupBy, GroupTest};
+use super::group::{group_key, member_scores, test_groups, GroupBy, GroupTest};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
 use super::{diagnose_segment, extended_fit, DiagnoseSettings, Diagnosis};
 use crate::batch::{curve_points, fit_row, segment_data, settings_hash};
@@ -251,17 +251,8 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
             )
         })
         .collect();
-    let scores: Vec<Vec<(Effect, f64)>> = diags
-        .iter()
-        .map(|d| {
-            d.diagnosis
-                .candidates
-                .iter()
-                .filter(|c| c.score.is_finite())
-                .map(|c| (c.effect, c.score))
-                .collect()
-        })
-        .collect();
+    let scores: Vec<Vec<(Effect, f64)>> =
+        diags.iter().map(|d| member_scores(&d.diagnosis)).collect();
     let mut groups = test_groups(&keys, &scores);
     let rows = pool.install(|| refit_groups(&diags, &mut groups));
     summary.groups_detected = groups.iter().filter(|g| g.effect.is_some()).count();
