@@ -11,6 +11,8 @@ pub mod network;
 pub mod optimize;
 pub mod physics;
 pub mod report;
+pub mod seed;
 pub mod special;
+pub mod stats;
 pub mod synth;
 pub mod units;

@@ -55,6 +55,21 @@ fn fit(database: &Database, id: &str, run: i64, settings: &str) -> FitRow {
     f.correlations = Some("[[1,0.2],[0.2,1]]".into());
     f.flags = "high_condition".into();
     f.flag_reasons = "condition number 1e9".into();
+    f.soil_p_wave_speed_m_per_s = Some(212.0);
+    f.soil_p_wave_speed_std_m_per_s = Some(9.0);
+    f.soil_s_wave_speed_m_per_s = Some(96.0);
+    f.soil_s_wave_speed_std_m_per_s = Some(40.0);
+    f.soil_youngs_modulus_lo_pa = Some(1.2e7);
+    f.soil_youngs_modulus_hi_pa = Some(8.1e7);
+    f.soil_poisson_lo = Some(0.0);
+    f.soil_poisson_hi = Some(0.499);
+    f.contact_lo = Some(0.1);
+    f.contact_hi = Some(0.7);
+    f.leak_band_speed_m_per_s = Some(1183.0);
+    f.leak_band_speed_std_m_per_s = Some(6.0);
+    f.notes = "soil_via_cp".into();
+    f.note_reasons = "soil_via_cp: E_m and nu_m known only through c_P = 212 ± 9 m/s".into();
+    f.algorithm_version = Some(2);
     f.evaluations = Some(4200);
     f.seed = Some(u64::MAX - 5);
     f.inputs_hash = seg.inputs_hash;
@@ -103,11 +118,15 @@ fn runs_fits_and_curves_round_trip() {
             frequency_hz: 200.0,
             phase_speed_m_per_s: Some(1150.0),
             attenuation_db_per_m: Some(0.04),
+            phase_speed_std_m_per_s: Some(6.0),
+            attenuation_std_db_per_m: Some(0.003),
         },
         CurvePoint {
             frequency_hz: 100.0,
             phase_speed_m_per_s: None,
             attenuation_db_per_m: None,
+            phase_speed_std_m_per_s: None,
+            attenuation_std_db_per_m: None,
         },
     ];
     let id = insert_fit_with_curves(database.conn_mut(), &f, &curve).unwrap();
@@ -153,6 +172,8 @@ fn a_fit_and_its_curve_are_stored_together_or_not_at_all() {
         frequency_hz: 100.0,
         phase_speed_m_per_s: Some(1000.0),
         attenuation_db_per_m: Some(0.1),
+        phase_speed_std_m_per_s: None,
+        attenuation_std_db_per_m: None,
     };
     // The same frequency twice violates the curve's primary key after the fit row is written.
     assert!(insert_fit_with_curves(database.conn_mut(), &f, &[p, p]).is_err());

@@ -15,7 +15,10 @@
 //! The library prints nothing: progress goes to a [`RunObserver`] the caller supplies, and the
 //! outcome is returned as a [`CalibrateSummary`].
 
+pub mod rows;
 pub mod throughput;
+
+pub use rows::{curve_points, fit_row, segment_data};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -31,11 +34,10 @@ use crate::db::{
     self, CurvePoint, DbError, FitRow, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
 };
-use crate::invert::fit::splitmix64;
-use crate::invert::{self, fit_segment, FitResult, FitSettings, Measurement, Method, Param};
-use crate::physics::curves::{curve, STANDARD_GRID_HZ};
+use crate::invert::{fit_segment, FitSettings, Method};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
-use crate::physics::{ContactMode, InputError, Model};
+use crate::physics::{ContactMode, Model};
+use crate::seed::splitmix64;
 
 pub use db::Connection;
 
@@ -205,6 +207,9 @@ pub struct CalibrateSummary {
     pub selected: usize,
     /// Segments in scope whose latest fit was current.
     pub up_to_date: usize,
+    /// Selected segments whose latest fit was made by another version of the fitting
+    /// algorithm (refitted on that account).
+    pub algorithm_refits: usize,
     /// Segments named with `segments` that have no measurements (nothing to fit).
     pub without_measurements: Vec<String>,
     /// Fits stored with status ok.
@@ -274,6 +279,14 @@ impl CalibrateSummary {
             self.jobs,
             if self.jobs == 1 { "" } else { "s" }
         );
+        if self.algorithm_refits > 0 {
+            let _ = write!(
+                s,
+                "; {} refitted because the fitting algorithm changed (now version {})",
+                self.algorithm_refits,
+                crate::invert::FIT_ALGORITHM_VERSION
+            );
+        }
         if self.interrupted {
             let _ = write!(
                 s,
@@ -367,6 +380,7 @@ pub fn calibrate(
         settings_hash: settings_hash.clone(),
         selected: 0,
         up_to_date: 0,
+        algorithm_refits: 0,
         without_measurements: Vec::new(),
         ok: 0,
         flagged: 0,
@@ -455,11 +469,15 @@ fn locked_run(
     let states = db::fit_states(conn)?;
     let mut needing = Vec::new();
     let mut with_measurements = Vec::new();
+    let mut by_other_algorithm = std::collections::BTreeSet::new();
     for st in states.iter().filter(|st| st.has_measurements) {
         with_measurements.push(st.segment_id.clone());
         let (_, hash) = settings_for(&st.segment_id)?;
         if opts.force || st.is_stale(&hash) {
             needing.push(st.segment_id.clone());
+            if st.made_by_other_algorithm() {
+                by_other_algorithm.insert(st.segment_id.clone());
+            }
         }
     }
     let (selected, in_scope): (Vec<String>, usize) = match &opts.segments {
@@ -488,6 +506,10 @@ fn locked_run(
         }
     };
     summary.selected = selected.len();
+    summary.algorithm_refits = selected
+        .iter()
+        .filter(|id| by_other_algorithm.contains(*id))
+        .count();
     summary.up_to_date = in_scope.saturating_sub(selected.len());
 
     let records = if selected.is_empty() {
@@ -653,14 +675,14 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     let outcome = catch_unwind(AssertUnwindSafe(|| {
         segment_data(rec).map(|data| {
             let result = fit_segment(&data, settings, job.seed);
-            let curve = result.system.as_ref().map(curve_points).unwrap_or_default();
+            let curve = curve_points(&result);
             (result, curve)
         })
     }));
     let (mut fit, curve) = match outcome {
         Ok(Ok((result, curve))) => (fit_row(rec, run_id, &result), curve),
         Ok(Err(e)) => (
-            failed_row(rec, run_id, settings, format!("invalid inputs: {e}")),
+            rows::failed_row(rec, run_id, settings, format!("invalid inputs: {e}")),
             Vec::new(),
         ),
         Err(panic) => {
@@ -670,7 +692,7 @@ fn compute(job: &Job, run_id: i64) -> Computed {
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown".into());
             (
-                failed_row(
+                rows::failed_row(
                     rec,
                     run_id,
                     settings,
@@ -685,154 +707,6 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     fit.settings_hash = settings_hash.to_string();
     fit.elapsed_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
     Computed { fit, curve }
-}
-
-/// The checked inputs of a fit from a stored segment.
-pub fn segment_data(rec: &SegmentRecord) -> Result<invert::SegmentData, InputError> {
-    let measurements = rec
-        .measurements
-        .iter()
-        .map(|m| {
-            Measurement::new(
-                m.omega_rad_s,
-                m.k_re_rad_per_m,
-                m.attenuation_np_per_m,
-                m.k_re_std,
-                m.attenuation_std,
-            )
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok(invert::SegmentData {
-        fluid: rec.fluid()?,
-        pipe: rec.pipe()?,
-        soil_density: rec.soil_density()?,
-        material: Some(rec.material),
-        measurements,
-    })
-}
-
-/// The fitted curve on the standard grid; points whose root was not found are stored as NULL.
-pub fn curve_points(sys: &crate::physics::System) -> Vec<CurvePoint> {
-    let finite = |v: f64| v.is_finite().then_some(v);
-    curve(sys, &STANDARD_GRID_HZ)
-        .into_iter()
-        .map(|p| {
-            let ok = p.status.is_ok();
-            CurvePoint {
-                frequency_hz: p.frequency_hz,
-                phase_speed_m_per_s: if ok { finite(p.phase_speed) } else { None },
-                attenuation_db_per_m: if ok { finite(p.attenuation_db) } else { None },
-            }
-        })
-        .collect()
-}
-
-/// A number, or NULL for NaN (infinities are stored: an infinite condition number means a
-/// singular Jacobian).
-fn not_nan(v: f64) -> Option<f64> {
-    (!v.is_nan()).then_some(v)
-}
-
-fn db_status(s: invert::FitStatus) -> FitStatus {
-    match s {
-        invert::FitStatus::Ok => FitStatus::Ok,
-        invert::FitStatus::Flagged => FitStatus::Flagged,
-        invert::FitStatus::Failed => FitStatus::Failed,
-    }
-}
-
-/// A failed fit whose inputs could not be built.
-fn failed_row(rec: &SegmentRecord, run_id: i64, settings: &FitSettings, msg: String) -> FitRow {
-    let mut f = FitRow::new(
-        rec.segment_id.clone(),
-        run_id,
-        FitStatus::Failed,
-        settings.model,
-        settings.contact_mode,
-    );
-    f.method = settings.method.as_str().to_string();
-    f.effects = effects_text(&settings.effects);
-    f.n_measurements = i64::try_from(rec.measurements.len()).ok();
-    f.evaluations = Some(0);
-    f.message = Some(msg);
-    f
-}
-
-/// The `fits` row of a fit result (segment, run and result columns; the caller adds seed,
-/// hashes and time).
-pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
-    let mut f = FitRow::new(
-        rec.segment_id.clone(),
-        run_id,
-        db_status(r.status),
-        r.model,
-        r.contact_mode,
-    );
-    f.method = r.method.as_str().to_string();
-    f.effects = effects_text(&r.effects);
-    let value = |p: Param| r.get(p).map(|e| e.value).and_then(not_nan);
-    let std = |p: Param| r.get(p).and_then(|e| e.std).and_then(not_nan);
-    f.soil_youngs_modulus_pa = value(Param::SoilModulus);
-    f.soil_poisson = value(Param::SoilPoisson);
-    f.contact = value(Param::Contact);
-    f.soil_youngs_modulus_std_pa = std(Param::SoilModulus);
-    f.soil_poisson_std = std(Param::SoilPoisson);
-    f.contact_std = std(Param::Contact);
-    for &e in &r.effects {
-        let p = Param::Effect(e);
-        let (v, s) = (value(p), std(p));
-        match e {
-            Effect::SoilDamping => (f.soil_loss_factor, f.soil_loss_factor_std) = (v, s),
-            Effect::AirInWater => (f.air_fraction, f.air_fraction_std) = (v, s),
-            Effect::WallThinning => (f.wall_thickness_ratio, f.wall_thickness_ratio_std) = (v, s),
-            Effect::PipeLoss => (f.pipe_loss_factor, f.pipe_loss_factor_std) = (v, s),
-            // No `fits` column yet for the viscoelastic exponent (its value is in the
-            // fit's message); inventory_error has no parameter.
-            Effect::FullModel | Effect::ViscoelasticWall | Effect::InventoryError => {}
-        }
-    }
-    f.misfit = not_nan(r.misfit);
-    f.chi2_per_dof = r.chi2_per_dof.and_then(not_nan);
-    f.n_measurements = i64::try_from(r.n_measurements).ok();
-    f.condition_number = r.condition_number.and_then(not_nan);
-    f.correlations =
-        (!r.correlations.is_empty()).then(|| correlations_json(&r.correlations, r.estimates.len()));
-    f.flags = r.flag_codes();
-    f.flag_reasons = r
-        .flags
-        .iter()
-        .map(|fl| fl.to_string())
-        .collect::<Vec<_>>()
-        .join("\n");
-    f.evaluations = i64::try_from(r.evaluations).ok();
-    f.message = r.message.clone();
-    f
-}
-
-/// The correlation matrix as JSON: an array of `n` rows of `n` numbers, in the order of the
-/// fitted parameters (E_m, ν_m, ξ, then the effects' parameters in the order of `fits.effects`);
-/// a flat array when the length is not `n²`. Non-finite entries are `null`. Numbers are written
-/// as the shortest decimal that reads back to the same `f64`.
-pub fn correlations_json(values: &[f64], n: usize) -> String {
-    let num = |v: f64| {
-        if v.is_finite() {
-            // Rust's Display never uses an exponent and never prints "-0" for a JSON reader
-            // to stumble on other than as minus zero, which JSON allows.
-            format!("{v}")
-        } else {
-            "null".to_string()
-        }
-    };
-    let row = |vs: &[f64]| {
-        let items: Vec<String> = vs.iter().map(|&v| num(v)).collect();
-        format!("[{}]", items.join(","))
-    };
-    if n > 0 && values.len() == n * n {
-        let rows: Vec<String> = values.chunks(n).map(row).collect();
-        format!("[{}]", rows.join(","))
-    } else {
-        row(values)
-    }
 }
 
 #[cfg(test)]
@@ -911,16 +785,6 @@ mod tests {
     }
 
     #[test]
-    fn correlations_are_a_json_matrix() {
-        assert_eq!(
-            correlations_json(&[1.0, -0.25, -0.25, 1.0], 2),
-            "[[1,-0.25],[-0.25,1]]"
-        );
-        assert_eq!(correlations_json(&[1.0, f64::NAN], 3), "[1,null]");
-        assert_eq!(correlations_json(&[1e-20], 1), "[[0.00000000000000000001]]");
-    }
-
-    #[test]
     fn summary_line_names_counts_flags_and_interruption() {
         let mut s = CalibrateSummary {
             run_id: Some(3),
@@ -928,6 +792,7 @@ mod tests {
             settings_hash: String::new(),
             selected: 5,
             up_to_date: 7,
+            algorithm_refits: 0,
             without_measurements: Vec::new(),
             ok: 2,
             flagged: 1,

@@ -65,17 +65,29 @@ pub struct FitState {
     pub fit_inputs_hash: Option<String>,
     /// The settings hash of its latest fit.
     pub fit_settings_hash: Option<String>,
+    /// The fitting algorithm's version of its latest fit (None: never fitted, or fitted before
+    /// the version was recorded).
+    pub fit_algorithm_version: Option<i64>,
     /// It has at least one measurement.
     pub has_measurements: bool,
 }
 
 impl FitState {
     /// Whether the segment needs a (re)fit under settings whose hash is `settings_hash`: it has
-    /// measurements and no fit yet, or its latest fit was made from other inputs or settings.
+    /// measurements and no fit yet, or its latest fit was made from other inputs or settings,
+    /// or by another version of the fitting algorithm.
     pub fn is_stale(&self, settings_hash: &str) -> bool {
         self.has_measurements
             && (self.fit_inputs_hash.as_deref() != Some(self.inputs_hash.as_str())
-                || self.fit_settings_hash.as_deref() != Some(settings_hash))
+                || self.fit_settings_hash.as_deref() != Some(settings_hash)
+                || self.made_by_other_algorithm())
+    }
+
+    /// Its latest fit exists and was made by another version of the fitting algorithm
+    /// ([`crate::invert::FIT_ALGORITHM_VERSION`]).
+    pub fn made_by_other_algorithm(&self) -> bool {
+        self.fit_inputs_hash.is_some()
+            && self.fit_algorithm_version != Some(crate::invert::FIT_ALGORITHM_VERSION)
     }
 }
 
@@ -83,7 +95,7 @@ impl FitState {
 pub fn fit_states(conn: &Connection) -> Result<Vec<FitState>, DbError> {
     let mut stmt = conn.prepare(
         "SELECT s.segment_id, s.inputs_hash, f.inputs_hash, f.settings_hash, \
-                EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id) \
+                f.algorithm_version, EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id) \
          FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
          ORDER BY s.segment_id",
     )?;
@@ -94,7 +106,8 @@ pub fn fit_states(conn: &Connection) -> Result<Vec<FitState>, DbError> {
                 inputs_hash: r.get(1)?,
                 fit_inputs_hash: r.get(2)?,
                 fit_settings_hash: r.get(3)?,
-                has_measurements: r.get(4)?,
+                fit_algorithm_version: r.get(4)?,
+                has_measurements: r.get(5)?,
             })
         })?
         .collect::<Result<Vec<_>, _>>()?;

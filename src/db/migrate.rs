@@ -37,6 +37,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0003_segment_effects.sql",
         sql: include_str!("../../migrations/0003_segment_effects.sql"),
     },
+    Migration {
+        version: 4,
+        name: "0004_determined.sql",
+        sql: include_str!("../../migrations/0004_determined.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

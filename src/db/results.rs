@@ -4,7 +4,6 @@
 //! Seeds are `u64` in Rust and SQLite INTEGER (`i64`) in the database: they are stored bit for
 //! bit (a seed above `i64::MAX` reads back negative in SQL, and exactly in Rust).
 
-use std::fmt;
 use std::str::FromStr;
 
 use rusqlite::{params, Connection, OptionalExtension, Row, TransactionBehavior};
@@ -12,45 +11,7 @@ use rusqlite::{params, Connection, OptionalExtension, Row, TransactionBehavior};
 use super::DbError;
 use crate::physics::{ContactMode, Model};
 
-/// Outcome of one segment's fit (`fits.status`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum FitStatus {
-    /// A good fit.
-    Ok,
-    /// A fit was produced but is poor or suspicious (see `flags`).
-    Flagged,
-    /// No fit could be produced (see `message`).
-    Failed,
-}
-
-impl FitStatus {
-    /// The text stored in the database.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            FitStatus::Ok => "ok",
-            FitStatus::Flagged => "flagged",
-            FitStatus::Failed => "failed",
-        }
-    }
-}
-
-impl fmt::Display for FitStatus {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for FitStatus {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "ok" => Ok(FitStatus::Ok),
-            "flagged" => Ok(FitStatus::Flagged),
-            "failed" => Ok(FitStatus::Failed),
-            _ => Err(format!("unknown fit status '{s}'")),
-        }
-    }
-}
+pub use crate::invert::FitStatus;
 
 /// State of a calibrate run (`runs.status`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -184,6 +145,30 @@ pub struct FitRow {
     pub pipe_loss_factor: Option<f64>,
     /// Its one-sigma error.
     pub pipe_loss_factor_std: Option<f64>,
+    /// The soil's compressional speed c_P, m/s (physics P63).
+    pub soil_p_wave_speed_m_per_s: Option<f64>,
+    /// Its one-sigma error (P65).
+    pub soil_p_wave_speed_std_m_per_s: Option<f64>,
+    /// The soil's shear speed c_S, m/s (P64).
+    pub soil_s_wave_speed_m_per_s: Option<f64>,
+    /// Its one-sigma error (P65).
+    pub soil_s_wave_speed_std_m_per_s: Option<f64>,
+    /// 95 % interval of E_m, Pa: lower end.
+    pub soil_youngs_modulus_lo_pa: Option<f64>,
+    /// 95 % interval of E_m, Pa: upper end.
+    pub soil_youngs_modulus_hi_pa: Option<f64>,
+    /// 95 % interval of ν_m: lower end.
+    pub soil_poisson_lo: Option<f64>,
+    /// 95 % interval of ν_m: upper end.
+    pub soil_poisson_hi: Option<f64>,
+    /// 95 % interval of ξ: lower end.
+    pub contact_lo: Option<f64>,
+    /// 95 % interval of ξ: upper end.
+    pub contact_hi: Option<f64>,
+    /// Mean predicted phase speed over the leak band, m/s.
+    pub leak_band_speed_m_per_s: Option<f64>,
+    /// Its one-sigma error, m/s.
+    pub leak_band_speed_std_m_per_s: Option<f64>,
     /// Objective value at the optimum.
     pub misfit: Option<f64>,
     /// χ² per degree of freedom, when measurement standard deviations are known.
@@ -198,6 +183,13 @@ pub struct FitRow {
     pub flags: String,
     /// One line per flag.
     pub flag_reasons: String,
+    /// Comma-separated note codes: what the data leave undetermined.
+    pub notes: String,
+    /// One line per note.
+    pub note_reasons: String,
+    /// The fitting algorithm's version (`invert::FIT_ALGORITHM_VERSION`; None: before it was
+    /// recorded).
+    pub algorithm_version: Option<i64>,
     /// Forward-model evaluations.
     pub evaluations: Option<i64>,
     /// The segment's seed.
@@ -246,6 +238,18 @@ impl FitRow {
             wall_thickness_ratio_std: None,
             pipe_loss_factor: None,
             pipe_loss_factor_std: None,
+            soil_p_wave_speed_m_per_s: None,
+            soil_p_wave_speed_std_m_per_s: None,
+            soil_s_wave_speed_m_per_s: None,
+            soil_s_wave_speed_std_m_per_s: None,
+            soil_youngs_modulus_lo_pa: None,
+            soil_youngs_modulus_hi_pa: None,
+            soil_poisson_lo: None,
+            soil_poisson_hi: None,
+            contact_lo: None,
+            contact_hi: None,
+            leak_band_speed_m_per_s: None,
+            leak_band_speed_std_m_per_s: None,
             misfit: None,
             chi2_per_dof: None,
             n_measurements: None,
@@ -253,6 +257,9 @@ impl FitRow {
             correlations: None,
             flags: String::new(),
             flag_reasons: String::new(),
+            notes: String::new(),
+            note_reasons: String::new(),
+            algorithm_version: None,
             evaluations: None,
             seed: None,
             inputs_hash: String::new(),
@@ -273,6 +280,10 @@ pub struct CurvePoint {
     pub phase_speed_m_per_s: Option<f64>,
     /// Attenuation, dB/m.
     pub attenuation_db_per_m: Option<f64>,
+    /// One-sigma error of the phase speed, m/s.
+    pub phase_speed_std_m_per_s: Option<f64>,
+    /// One-sigma error of the attenuation, dB/m.
+    pub attenuation_std_db_per_m: Option<f64>,
 }
 
 fn seed_to_sql(seed: u64) -> i64 {
@@ -404,58 +415,21 @@ pub fn insert_fit_with_curves(
     curve: &[CurvePoint],
 ) -> Result<i64, DbError> {
     let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
-    tx.prepare_cached(
-        "INSERT INTO fits (segment_id, run_id, status, model, contact_mode, method, effects, \
-         soil_youngs_modulus_pa, soil_poisson, contact, soil_youngs_modulus_std_pa, \
-         soil_poisson_std, contact_std, soil_loss_factor, soil_loss_factor_std, air_fraction, \
-         air_fraction_std, wall_thickness_ratio, wall_thickness_ratio_std, pipe_loss_factor, \
-         pipe_loss_factor_std, misfit, chi2_per_dof, n_measurements, condition_number, \
-         correlations, flags, flag_reasons, evaluations, seed, inputs_hash, settings_hash, \
-         elapsed_ms, message) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, \
-         ?18, ?19, ?20, ?21, ?22, ?23, ?24, ?25, ?26, ?27, ?28, ?29, ?30, ?31, ?32, ?33, ?34)",
-    )?
-    .execute(params![
-        fit.segment_id,
-        fit.run_id,
-        fit.status.as_str(),
-        fit.model.as_str(),
-        fit.contact_mode.as_str(),
-        fit.method,
-        fit.effects,
-        fit.soil_youngs_modulus_pa,
-        fit.soil_poisson,
-        fit.contact,
-        fit.soil_youngs_modulus_std_pa,
-        fit.soil_poisson_std,
-        fit.contact_std,
-        fit.soil_loss_factor,
-        fit.soil_loss_factor_std,
-        fit.air_fraction,
-        fit.air_fraction_std,
-        fit.wall_thickness_ratio,
-        fit.wall_thickness_ratio_std,
-        fit.pipe_loss_factor,
-        fit.pipe_loss_factor_std,
-        fit.misfit,
-        fit.chi2_per_dof,
-        fit.n_measurements,
-        fit.condition_number,
-        fit.correlations,
-        fit.flags,
-        fit.flag_reasons,
-        fit.evaluations,
-        fit.seed.map(seed_to_sql),
-        fit.inputs_hash,
-        fit.settings_hash,
-        fit.elapsed_ms,
-        fit.message,
-    ])?;
+    let values = fit_values(fit);
+    let names: Vec<&str> = values.iter().map(|(n, _)| *n).collect();
+    let marks: Vec<String> = (1..=values.len()).map(|i| format!("?{i}")).collect();
+    tx.prepare_cached(&format!(
+        "INSERT INTO fits ({}) VALUES ({})",
+        names.join(", "),
+        marks.join(", ")
+    ))?
+    .execute(rusqlite::params_from_iter(values.iter().map(|(_, v)| v)))?;
     let fit_id = tx.last_insert_rowid();
     {
         let mut ins = tx.prepare_cached(
             "INSERT INTO curves (segment_id, run_id, frequency_hz, phase_speed_m_per_s, \
-             attenuation_db_per_m) VALUES (?1, ?2, ?3, ?4, ?5)",
+             attenuation_db_per_m, phase_speed_std_m_per_s, attenuation_std_db_per_m) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
         )?;
         for p in curve {
             ins.execute(params![
@@ -464,6 +438,8 @@ pub fn insert_fit_with_curves(
                 p.frequency_hz,
                 p.phase_speed_m_per_s,
                 p.attenuation_db_per_m,
+                p.phase_speed_std_m_per_s,
+                p.attenuation_std_db_per_m,
             ])?;
         }
     }
@@ -471,62 +447,149 @@ pub fn insert_fit_with_curves(
     Ok(fit_id)
 }
 
-const FIT_COLUMNS: &str = "id, segment_id, run_id, status, model, contact_mode, method, effects, \
-    soil_youngs_modulus_pa, soil_poisson, contact, soil_youngs_modulus_std_pa, soil_poisson_std, \
-    contact_std, soil_loss_factor, soil_loss_factor_std, air_fraction, air_fraction_std, \
-    wall_thickness_ratio, wall_thickness_ratio_std, pipe_loss_factor, pipe_loss_factor_std, \
-    misfit, chi2_per_dof, n_measurements, condition_number, correlations, flags, flag_reasons, \
-    evaluations, seed, inputs_hash, settings_hash, elapsed_ms, message, created_at";
-
-/// A fit row with status, model and contact mode still as text (checked by [`finish_fit`]).
-type RawFit = (FitRow, String, String, String);
-
-fn fit_from_row(r: &Row<'_>) -> rusqlite::Result<RawFit> {
-    let mut f = FitRow::new(
-        r.get::<_, String>(1)?,
-        r.get(2)?,
-        FitStatus::Failed,
-        Model::default(),
-        ContactMode::default(),
-    );
-    f.id = Some(r.get(0)?);
-    f.method = r.get(6)?;
-    f.effects = r.get(7)?;
-    f.soil_youngs_modulus_pa = r.get(8)?;
-    f.soil_poisson = r.get(9)?;
-    f.contact = r.get(10)?;
-    f.soil_youngs_modulus_std_pa = r.get(11)?;
-    f.soil_poisson_std = r.get(12)?;
-    f.contact_std = r.get(13)?;
-    f.soil_loss_factor = r.get(14)?;
-    f.soil_loss_factor_std = r.get(15)?;
-    f.air_fraction = r.get(16)?;
-    f.air_fraction_std = r.get(17)?;
-    f.wall_thickness_ratio = r.get(18)?;
-    f.wall_thickness_ratio_std = r.get(19)?;
-    f.pipe_loss_factor = r.get(20)?;
-    f.pipe_loss_factor_std = r.get(21)?;
-    f.misfit = r.get(22)?;
-    f.chi2_per_dof = r.get(23)?;
-    f.n_measurements = r.get(24)?;
-    f.condition_number = r.get(25)?;
-    f.correlations = r.get(26)?;
-    f.flags = r.get(27)?;
-    f.flag_reasons = r.get(28)?;
-    f.evaluations = r.get(29)?;
-    f.seed = r.get::<_, Option<i64>>(30)?.map(seed_from_sql);
-    f.inputs_hash = r.get(31)?;
-    f.settings_hash = r.get(32)?;
-    f.elapsed_ms = r.get(33)?;
-    f.message = r.get(34)?;
-    f.created_at = Some(r.get(35)?);
-    Ok((f, r.get(3)?, r.get(4)?, r.get(5)?))
+/// The stored columns of a fit, by name (everything but `id` and `created_at`, which the
+/// database sets). The one list both the insert and the read follow.
+fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
+    use rusqlite::types::Value as V;
+    let real = |v: Option<f64>| v.map_or(V::Null, V::Real);
+    let int = |v: Option<i64>| v.map_or(V::Null, V::Integer);
+    let text = |v: &str| V::Text(v.to_string());
+    vec![
+        ("segment_id", text(&f.segment_id)),
+        ("run_id", V::Integer(f.run_id)),
+        ("status", text(f.status.as_str())),
+        ("model", text(f.model.as_str())),
+        ("contact_mode", text(f.contact_mode.as_str())),
+        ("method", text(&f.method)),
+        ("effects", text(&f.effects)),
+        ("soil_youngs_modulus_pa", real(f.soil_youngs_modulus_pa)),
+        ("soil_poisson", real(f.soil_poisson)),
+        ("contact", real(f.contact)),
+        (
+            "soil_youngs_modulus_std_pa",
+            real(f.soil_youngs_modulus_std_pa),
+        ),
+        ("soil_poisson_std", real(f.soil_poisson_std)),
+        ("contact_std", real(f.contact_std)),
+        ("soil_loss_factor", real(f.soil_loss_factor)),
+        ("soil_loss_factor_std", real(f.soil_loss_factor_std)),
+        ("air_fraction", real(f.air_fraction)),
+        ("air_fraction_std", real(f.air_fraction_std)),
+        ("wall_thickness_ratio", real(f.wall_thickness_ratio)),
+        ("wall_thickness_ratio_std", real(f.wall_thickness_ratio_std)),
+        ("pipe_loss_factor", real(f.pipe_loss_factor)),
+        ("pipe_loss_factor_std", real(f.pipe_loss_factor_std)),
+        (
+            "soil_p_wave_speed_m_per_s",
+            real(f.soil_p_wave_speed_m_per_s),
+        ),
+        (
+            "soil_p_wave_speed_std_m_per_s",
+            real(f.soil_p_wave_speed_std_m_per_s),
+        ),
+        (
+            "soil_s_wave_speed_m_per_s",
+            real(f.soil_s_wave_speed_m_per_s),
+        ),
+        (
+            "soil_s_wave_speed_std_m_per_s",
+            real(f.soil_s_wave_speed_std_m_per_s),
+        ),
+        (
+            "soil_youngs_modulus_lo_pa",
+            real(f.soil_youngs_modulus_lo_pa),
+        ),
+        (
+            "soil_youngs_modulus_hi_pa",
+            real(f.soil_youngs_modulus_hi_pa),
+        ),
+        ("soil_poisson_lo", real(f.soil_poisson_lo)),
+        ("soil_poisson_hi", real(f.soil_poisson_hi)),
+        ("contact_lo", real(f.contact_lo)),
+        ("contact_hi", real(f.contact_hi)),
+        ("leak_band_speed_m_per_s", real(f.leak_band_speed_m_per_s)),
+        (
+            "leak_band_speed_std_m_per_s",
+            real(f.leak_band_speed_std_m_per_s),
+        ),
+        ("misfit", real(f.misfit)),
+        ("chi2_per_dof", real(f.chi2_per_dof)),
+        ("n_measurements", int(f.n_measurements)),
+        ("condition_number", real(f.condition_number)),
+        (
+            "correlations",
+            f.correlations.as_deref().map_or(V::Null, text),
+        ),
+        ("flags", text(&f.flags)),
+        ("flag_reasons", text(&f.flag_reasons)),
+        ("notes", text(&f.notes)),
+        ("note_reasons", text(&f.note_reasons)),
+        ("algorithm_version", int(f.algorithm_version)),
+        ("evaluations", int(f.evaluations)),
+        ("seed", int(f.seed.map(seed_to_sql))),
+        ("inputs_hash", text(&f.inputs_hash)),
+        ("settings_hash", text(&f.settings_hash)),
+        ("elapsed_ms", real(f.elapsed_ms)),
+        ("message", f.message.as_deref().map_or(V::Null, text)),
+    ]
 }
 
-fn finish_fit((mut f, status, model, contact_mode): RawFit) -> Result<FitRow, DbError> {
-    f.status = parse_stored("fit status", &status)?;
-    f.model = parse_stored("model", &model)?;
-    f.contact_mode = parse_stored("contact mode", &contact_mode)?;
+/// A fit row read by column name, status, model and contact mode checked.
+fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
+    let get_text = |name: &str| -> Result<String, DbError> { Ok(r.get::<_, String>(name)?) };
+    let mut f = FitRow::new(
+        get_text("segment_id")?,
+        r.get("run_id")?,
+        parse_stored("fit status", &get_text("status")?)?,
+        parse_stored("model", &get_text("model")?)?,
+        parse_stored("contact mode", &get_text("contact_mode")?)?,
+    );
+    f.id = Some(r.get("id")?);
+    f.method = r.get("method")?;
+    f.effects = r.get("effects")?;
+    f.soil_youngs_modulus_pa = r.get("soil_youngs_modulus_pa")?;
+    f.soil_poisson = r.get("soil_poisson")?;
+    f.contact = r.get("contact")?;
+    f.soil_youngs_modulus_std_pa = r.get("soil_youngs_modulus_std_pa")?;
+    f.soil_poisson_std = r.get("soil_poisson_std")?;
+    f.contact_std = r.get("contact_std")?;
+    f.soil_loss_factor = r.get("soil_loss_factor")?;
+    f.soil_loss_factor_std = r.get("soil_loss_factor_std")?;
+    f.air_fraction = r.get("air_fraction")?;
+    f.air_fraction_std = r.get("air_fraction_std")?;
+    f.wall_thickness_ratio = r.get("wall_thickness_ratio")?;
+    f.wall_thickness_ratio_std = r.get("wall_thickness_ratio_std")?;
+    f.pipe_loss_factor = r.get("pipe_loss_factor")?;
+    f.pipe_loss_factor_std = r.get("pipe_loss_factor_std")?;
+    f.soil_p_wave_speed_m_per_s = r.get("soil_p_wave_speed_m_per_s")?;
+    f.soil_p_wave_speed_std_m_per_s = r.get("soil_p_wave_speed_std_m_per_s")?;
+    f.soil_s_wave_speed_m_per_s = r.get("soil_s_wave_speed_m_per_s")?;
+    f.soil_s_wave_speed_std_m_per_s = r.get("soil_s_wave_speed_std_m_per_s")?;
+    f.soil_youngs_modulus_lo_pa = r.get("soil_youngs_modulus_lo_pa")?;
+    f.soil_youngs_modulus_hi_pa = r.get("soil_youngs_modulus_hi_pa")?;
+    f.soil_poisson_lo = r.get("soil_poisson_lo")?;
+    f.soil_poisson_hi = r.get("soil_poisson_hi")?;
+    f.contact_lo = r.get("contact_lo")?;
+    f.contact_hi = r.get("contact_hi")?;
+    f.leak_band_speed_m_per_s = r.get("leak_band_speed_m_per_s")?;
+    f.leak_band_speed_std_m_per_s = r.get("leak_band_speed_std_m_per_s")?;
+    f.misfit = r.get("misfit")?;
+    f.chi2_per_dof = r.get("chi2_per_dof")?;
+    f.n_measurements = r.get("n_measurements")?;
+    f.condition_number = r.get("condition_number")?;
+    f.correlations = r.get("correlations")?;
+    f.flags = r.get("flags")?;
+    f.flag_reasons = r.get("flag_reasons")?;
+    f.notes = r.get("notes")?;
+    f.note_reasons = r.get("note_reasons")?;
+    f.algorithm_version = r.get("algorithm_version")?;
+    f.evaluations = r.get("evaluations")?;
+    f.seed = r.get::<_, Option<i64>>("seed")?.map(seed_from_sql);
+    f.inputs_hash = r.get("inputs_hash")?;
+    f.settings_hash = r.get("settings_hash")?;
+    f.elapsed_ms = r.get("elapsed_ms")?;
+    f.message = r.get("message")?;
+    f.created_at = Some(r.get("created_at")?);
     Ok(f)
 }
 
@@ -536,23 +599,23 @@ pub fn latest_fits(conn: &Connection, ids: Option<&[String]>) -> Result<Vec<FitR
     let mut out = Vec::new();
     match ids {
         None => {
-            let mut stmt = conn.prepare(&format!(
-                "SELECT {FIT_COLUMNS} FROM latest_fits ORDER BY segment_id"
-            ))?;
-            for raw in stmt.query_map([], fit_from_row)? {
-                out.push(finish_fit(raw?)?);
+            let mut stmt = conn.prepare("SELECT * FROM latest_fits ORDER BY segment_id")?;
+            let mut rows = stmt.query([])?;
+            while let Some(r) = rows.next()? {
+                out.push(fit_from_row(r)?);
             }
         }
         Some(ids) => {
             let mut ids: Vec<&String> = ids.iter().collect();
             ids.sort();
             ids.dedup();
-            let mut stmt = conn.prepare_cached(&format!(
-                "SELECT {FIT_COLUMNS} FROM fits WHERE segment_id = ?1 ORDER BY id DESC LIMIT 1"
-            ))?;
+            let mut stmt = conn.prepare_cached(
+                "SELECT * FROM fits WHERE segment_id = ?1 ORDER BY id DESC LIMIT 1",
+            )?;
             for id in ids {
-                if let Some(raw) = stmt.query_row([id], fit_from_row).optional()? {
-                    out.push(finish_fit(raw)?);
+                let mut rows = stmt.query([id])?;
+                if let Some(r) = rows.next()? {
+                    out.push(fit_from_row(r)?);
                 }
             }
         }
@@ -567,14 +630,17 @@ pub fn curves_for(
     run_id: i64,
 ) -> Result<Vec<CurvePoint>, DbError> {
     let mut stmt = conn.prepare_cached(
-        "SELECT frequency_hz, phase_speed_m_per_s, attenuation_db_per_m FROM curves \
+        "SELECT frequency_hz, phase_speed_m_per_s, attenuation_db_per_m, \
+         phase_speed_std_m_per_s, attenuation_std_db_per_m FROM curves \
          WHERE segment_id = ?1 AND run_id = ?2 ORDER BY frequency_hz",
     )?;
     let rows = stmt.query_map(params![segment_id, run_id], |r| {
         Ok(CurvePoint {
-            frequency_hz: r.get(0)?,
-            phase_speed_m_per_s: r.get(1)?,
-            attenuation_db_per_m: r.get(2)?,
+            frequency_hz: r.get("frequency_hz")?,
+            phase_speed_m_per_s: r.get("phase_speed_m_per_s")?,
+            attenuation_db_per_m: r.get("attenuation_db_per_m")?,
+            phase_speed_std_m_per_s: r.get("phase_speed_std_m_per_s")?,
+            attenuation_std_db_per_m: r.get("attenuation_std_db_per_m")?,
         })
     })?;
     Ok(rows.collect::<Result<_, _>>()?)

@@ -509,8 +509,7 @@ pub fn extended_fit(
     effects: Vec<Effect>,
     base: &FitResult,
 ) -> FitResult {
-    let _ = base;
-    fit_segment(data, &fit_settings(settings, effects), settings.seed)
+    crate::invert::fit::fit_extended(data, &fit_settings(settings, effects), settings.seed, base)
 }
 
 /// Step 2b (name, by refitting): refit the planned candidates and test each against the base.

@@ -366,7 +366,7 @@ fn store(
                 ""
             }
         ));
-        let curve = fit.system.as_ref().map(curve_points).unwrap_or_default();
+        let curve = curve_points(&fit);
         db::insert_fit_with_curves(conn, &row, &curve)?;
         db::set_segment_effects(
             conn,

@@ -1,4 +1,5 @@
-//! The distributions of the diagnosis's tests, from `statrs` (issue 11: no hand-written tails).
+//! The distributions of the diagnosis's tests, from `statrs` (issue 11: no hand-written tails);
+//! the plain χ² tail is the crate's [`crate::stats::chi2_upper_tail`].
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
@@ -13,7 +14,7 @@ pub fn chi2_sf(x: f64, dof: f64) -> f64 {
     if x.is_infinite() {
         return 0.0;
     }
-    ChiSquared::new(dof).map(|d| d.sf(x)).unwrap_or(f64::NAN)
+    crate::stats::chi2_upper_tail(x, dof)
 }
 
 /// Upper-tail probability of the χ̄² = ½χ²₀ + ½χ²₁ mixture: the likelihood-ratio (or score)

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 
 use crate::db::wkt::LineString;
 use crate::db::{self, CurvePoint, Database, FitRow, SegmentRecord};
-use crate::physics::curves::LEAK_BAND_HZ;
+use crate::physics::curves::{band_mean, LEAK_BAND_HZ};
 
 use super::ExportError;
 
@@ -100,35 +100,14 @@ fn point_at(curve: &[CurvePoint], f_hz: f64) -> Option<&CurvePoint> {
         .find(|p| (p.frequency_hz - f_hz).abs() <= FREQUENCY_MATCH_REL_TOL * f_hz)
 }
 
-/// Mean phase speed over a band, m/s: (1/(f₂ − f₁)) ∫ c(f) df by the trapezoidal rule over the
-/// stored curve points with f₁ ≤ f ≤ f₂. On the standard grid the leak band 100–800 Hz holds 17
-/// points (25–50 Hz apart), on which the speed varies smoothly, so this differs from a dense
-/// quadrature by far less than the fit's own uncertainty.
-///
-/// `None` unless the stored points cover the whole band (a point at each end, within
-/// [`FREQUENCY_MATCH_REL_TOL`]) and every point in it has a finite speed: a mean over part of the
-/// band would be a different figure under the same name.
+/// Mean phase speed over a band of a stored curve, m/s ([`band_mean`], which says when it is
+/// `None`).
 pub fn band_mean_speed(curve: &[CurvePoint], band_hz: (f64, f64)) -> Option<f64> {
-    let (lo, hi) = band_hz;
-    let tol = |f: f64| FREQUENCY_MATCH_REL_TOL * f.abs();
-    let pts: Vec<&CurvePoint> = curve
+    let pts: Vec<(f64, Option<f64>)> = curve
         .iter()
-        .filter(|p| p.frequency_hz >= lo - tol(lo) && p.frequency_hz <= hi + tol(hi))
+        .map(|p| (p.frequency_hz, p.phase_speed_m_per_s))
         .collect();
-    let (first, last) = (pts.first()?, pts.last()?);
-    if pts.len() < 2
-        || (first.frequency_hz - lo).abs() > tol(lo)
-        || (last.frequency_hz - hi).abs() > tol(hi)
-    {
-        return None;
-    }
-    let mut integral = 0.0;
-    for w in pts.windows(2) {
-        let c0 = w[0].phase_speed_m_per_s.filter(|v| v.is_finite())?;
-        let c1 = w[1].phase_speed_m_per_s.filter(|v| v.is_finite())?;
-        integral += 0.5 * (c0 + c1) * (w[1].frequency_hz - w[0].frequency_hz);
-    }
-    Some(integral / (last.frequency_hz - first.frequency_hz))
+    band_mean(&pts, band_hz)
 }
 
 /// Every segment of the inventory, sorted by id, with its latest fit and that fit's curve.
@@ -298,6 +277,24 @@ pub const PROPERTIES: &[Property] = &[
         get: |r| Value::text(r.fit.as_ref().map(|f| f.flags.as_str())),
     },
     Property {
+        name: "flag_reasons",
+        kind: Kind::Text,
+        doc: "one line per flag: what to act on and why",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.flag_reasons.as_str())),
+    },
+    Property {
+        name: "notes",
+        kind: Kind::Text,
+        doc: "comma-separated note codes: what the data leave undetermined",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.notes.as_str())),
+    },
+    Property {
+        name: "note_reasons",
+        kind: Kind::Text,
+        doc: "one line per note, e.g. E_m and nu_m known only through c_P = 212 +- 9 m/s",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.note_reasons.as_str())),
+    },
+    Property {
         name: "run_id",
         kind: Kind::Integer,
         doc: "the calibrate run of the latest fit",
@@ -337,6 +334,48 @@ pub const PROPERTIES: &[Property] = &[
         "fitted pipe-soil contact coefficient xi"
     ),
     fit_real!("contact_std", contact_std, "its one-sigma error"),
+    fit_real!(
+        "soil_p_wave_speed_m_per_s",
+        soil_p_wave_speed_m_per_s,
+        "the soil's compressional speed c_P, m/s (what metal pipes determine)"
+    ),
+    fit_real!(
+        "soil_p_wave_speed_std_m_per_s",
+        soil_p_wave_speed_std_m_per_s,
+        "its one-sigma error, m/s"
+    ),
+    fit_real!(
+        "soil_s_wave_speed_m_per_s",
+        soil_s_wave_speed_m_per_s,
+        "the soil's shear speed c_S, m/s (what plastic pipes also determine)"
+    ),
+    fit_real!(
+        "soil_s_wave_speed_std_m_per_s",
+        soil_s_wave_speed_std_m_per_s,
+        "its one-sigma error, m/s"
+    ),
+    fit_real!(
+        "soil_youngs_modulus_lo_pa",
+        soil_youngs_modulus_lo_pa,
+        "95 % interval of E, lower end, Pa"
+    ),
+    fit_real!(
+        "soil_youngs_modulus_hi_pa",
+        soil_youngs_modulus_hi_pa,
+        "95 % interval of E, upper end, Pa"
+    ),
+    fit_real!(
+        "soil_poisson_lo",
+        soil_poisson_lo,
+        "95 % interval of nu, lower end"
+    ),
+    fit_real!(
+        "soil_poisson_hi",
+        soil_poisson_hi,
+        "95 % interval of nu, upper end"
+    ),
+    fit_real!("contact_lo", contact_lo, "95 % interval of xi, lower end"),
+    fit_real!("contact_hi", contact_hi, "95 % interval of xi, upper end"),
     fit_real!(
         "soil_loss_factor",
         soil_loss_factor,
@@ -440,6 +479,11 @@ pub const PROPERTIES: &[Property] = &[
               the figure to type into a leak correlator",
         get: |r| Value::real(r.leak_band_speed),
     },
+    fit_real!(
+        "leak_band_speed_std_m_per_s",
+        leak_band_speed_std_m_per_s,
+        "one-sigma error of the leak-band speed, m/s (physics P65)"
+    ),
 ];
 
 #[cfg(test)]
@@ -454,6 +498,8 @@ mod tests {
                 frequency_hz: f,
                 phase_speed_m_per_s: c(f),
                 attenuation_db_per_m: Some(f * 1e-4),
+                phase_speed_std_m_per_s: None,
+                attenuation_std_db_per_m: None,
             })
             .collect()
     }

@@ -1,20 +1,27 @@
-//! Fitting one segment: differential evolution, polish, uncertainty and flags.
+//! Fitting one segment: the search (differential evolution, polish, restarts), then the result,
+//! built once: what the data determine (spec §7.10), the predicted curve with its errors, and
+//! the findings (flags and notes).
+
+use std::fmt;
+use std::str::FromStr;
 
 use num_complex::Complex64;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::flags::{assess, Flag};
+use super::flags::{assess, Evidence, Flag, Separated, Severity};
 use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
-use crate::optimize::linalg::{covariance_from_jacobian, widen_along_flat_directions};
+use super::uncertainty::{determine, propagate, Determined, Interval, WithError};
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, Objective, OptimizeError,
 };
+use crate::physics::curves::{band_mean, curve, LEAK_BAND_HZ, STANDARD_GRID_HZ};
 use crate::physics::effects::Effect;
+use crate::physics::solver::{solve_from_guess_tol, Root, Tolerance};
 use crate::physics::{ContactMode, Model, System};
-use crate::units::sig;
+use crate::units::{db_to_np, hz_to_omega, sig};
 
 /// Settings of a fit.
 #[derive(Debug, Clone, PartialEq)]
@@ -91,6 +98,15 @@ pub const SEPARATION_SIGMAS: f64 = 3.0;
 /// … and by more than this fraction of its search range.
 pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 
+/// Version of the fitting algorithm. A fit made by another version is stale: `calibrate`
+/// refits it on its own (issue 9). Version 1: pipewave 0.1.0. Version 2: what the data
+/// determine (soil speeds, intervals, curve errors), flags and notes re-derived.
+pub const FIT_ALGORITHM_VERSION: i64 = 2;
+
+/// Relative step (of each coordinate's search range) of the finite differences that give the
+/// predicted curve's sensitivity to the fitted parameters (P65).
+pub const CURVE_FD_STEP_FRACTION: f64 = 1e-3;
+
 /// A fitted parameter.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Estimate {
@@ -98,22 +114,26 @@ pub struct Estimate {
     pub param: Param,
     /// Value in physical units.
     pub value: f64,
-    /// One-sigma standard error in physical units; `None` when not identifiable.
+    /// One-sigma error in physical units, consistent with `interval` (its width / 3.92);
+    /// `None` only for a parameter of a failed fit.
     pub std: Option<f64>,
-    /// The search coordinate and its standard error (log10 for E_m in the default method).
+    /// The search coordinate (log10 for E_m in the default method).
     pub coordinate: f64,
-    /// Standard error of the coordinate (may be huge or infinite when not identifiable).
+    /// One-sigma error of the coordinate, from the covariance.
     pub coordinate_std: f64,
+    /// 95 % interval in physical units (P66 construction, clipped to the search box).
+    pub interval: Interval,
 }
 
 /// Outcome status of a fit (`fits.status`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum FitStatus {
-    /// A fit without flags.
+    /// The prediction can be trusted: the model explains the data, the optimum is unique where
+    /// it matters and the leak-band speed is determined.
     Ok,
-    /// A fit with at least one flag.
+    /// A fit with at least one flag: something for the user to act on.
     Flagged,
-    /// No fit could be produced.
+    /// No fit could be produced (see `message`).
     Failed,
 }
 
@@ -126,6 +146,39 @@ impl FitStatus {
             FitStatus::Failed => "failed",
         }
     }
+}
+
+impl fmt::Display for FitStatus {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for FitStatus {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "ok" => Ok(FitStatus::Ok),
+            "flagged" => Ok(FitStatus::Flagged),
+            "failed" => Ok(FitStatus::Failed),
+            _ => Err(format!("unknown fit status '{s}'")),
+        }
+    }
+}
+
+/// One point of the predicted curve, with its errors (P65).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PredictedPoint {
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Phase speed, m/s (None where the root was not found).
+    pub phase_speed: Option<f64>,
+    /// Its one-sigma error, m/s.
+    pub phase_speed_std: Option<f64>,
+    /// Attenuation, dB/m.
+    pub attenuation_db: Option<f64>,
+    /// Its one-sigma error, dB/m.
+    pub attenuation_db_std: Option<f64>,
 }
 
 /// The result of fitting one segment.
@@ -152,24 +205,34 @@ pub struct FitResult {
     pub weighting: Weighting,
     /// Number of measurements M.
     pub n_measurements: usize,
-    /// Condition number of the column-scaled Jacobian.
+    /// Condition number of the column-scaled information matrix.
     pub condition_number: Option<f64>,
     /// Correlation matrix of the fitted coordinates, row-major.
     pub correlations: Vec<f64>,
-    /// Flags.
+    /// Flags: what the user must act on (empty: status `ok`).
     pub flags: Vec<Flag>,
-    /// Forward-model evaluations used (DE + polish + uncertainty).
+    /// Notes: what the data leave undetermined.
+    pub notes: Vec<Flag>,
+    /// Forward-model evaluations used (search + polish + uncertainty).
     pub evaluations: usize,
-    /// The fitted system (for curves), `None` when the fit failed.
+    /// The fitted system, `None` when the fit failed.
     pub system: Option<System>,
     /// Model wavenumbers at the measured frequencies.
     pub predicted: Vec<Complex64>,
     /// Why the fit failed.
     pub message: Option<String>,
-    /// Best objective of every restart, after polish (diagnostics).
+    /// Best objective of every restart (and of the nested start), after polish.
     pub restart_misfits: Vec<f64>,
     /// The search path's roots agreed with the reference path at the optimum.
     pub path_checked: bool,
+    /// The soil's compressional speed c_P, m/s (P63, P65).
+    pub p_wave_speed: Option<WithError>,
+    /// The soil's shear speed c_S, m/s (P64, P65).
+    pub s_wave_speed: Option<WithError>,
+    /// The predicted curve on [`STANDARD_GRID_HZ`] with errors (empty when failed).
+    pub curve: Vec<PredictedPoint>,
+    /// Mean phase speed over [`LEAK_BAND_HZ`], m/s, with its error.
+    pub leak_band_speed: Option<WithError>,
 }
 
 impl FitResult {
@@ -191,11 +254,11 @@ impl FitResult {
     }
     /// Comma-separated flag codes.
     pub fn flag_codes(&self) -> String {
-        self.flags
-            .iter()
-            .map(|f| f.code.as_str())
-            .collect::<Vec<_>>()
-            .join(",")
+        codes(&self.flags)
+    }
+    /// Comma-separated note codes.
+    pub fn note_codes(&self) -> String {
+        codes(&self.notes)
     }
 
     fn failed(settings: &FitSettings, weighting: Weighting, n: usize, msg: String) -> Self {
@@ -213,30 +276,34 @@ impl FitResult {
             condition_number: None,
             correlations: Vec::new(),
             flags: Vec::new(),
+            notes: Vec::new(),
             evaluations: 0,
             system: None,
             predicted: Vec::new(),
             message: Some(msg),
             restart_misfits: Vec::new(),
             path_checked: true,
+            p_wave_speed: None,
+            s_wave_speed: None,
+            curve: Vec::new(),
+            leak_band_speed: None,
         }
     }
 }
 
-/// The seed of restart `r` of a fit seeded with `seed` (SplitMix64 of the pair).
+fn codes(v: &[Flag]) -> String {
+    v.iter()
+        .map(|f| f.code.as_str())
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// The seed of restart `r` of a fit seeded with `seed`.
 pub fn restart_seed(seed: u64, r: usize) -> u64 {
-    splitmix64(seed ^ splitmix64(r as u64 + 0x9e37_79b9_7f4a_7c15))
+    crate::seed::derive(seed, r as u64)
 }
 
-/// SplitMix64 (Steele, Lea & Flood 2014): a well-mixed 64-bit hash for deriving seeds.
-pub fn splitmix64(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
-/// One optimum found by one restart.
+/// One optimum found by one restart (or by the nested start).
 struct Optimum {
     x: Vec<f64>,
     cost: f64,
@@ -244,6 +311,29 @@ struct Optimum {
 
 /// Fit one segment. Deterministic for a given `seed`.
 pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> FitResult {
+    fit_from(data, settings, seed, None)
+}
+
+/// Fit one segment with effects beyond those of a `base` fit of the same segment (issue 16):
+/// besides the usual search, start from the base optimum with every added effect at its
+/// neutral value, and keep the better. The extended model contains the base model, so the
+/// result's misfit is never above the base fit's (up to the solver's tolerance), whatever the
+/// search does.
+pub fn fit_extended(
+    data: &SegmentData,
+    settings: &FitSettings,
+    seed: u64,
+    base: &FitResult,
+) -> FitResult {
+    fit_from(data, settings, seed, Some(base))
+}
+
+fn fit_from(
+    data: &SegmentData,
+    settings: &FitSettings,
+    seed: u64,
+    base: Option<&FitResult>,
+) -> FitResult {
     let problem = Problem::new(
         data,
         settings.method,
@@ -260,7 +350,8 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
             "no measurements for this segment".into(),
         );
     }
-    match run(&problem, settings, seed) {
+    let start = base.and_then(|b| nested_start(&problem, b));
+    match run(&problem, settings, seed, start.as_deref()) {
         Ok(r) if r.path_checked => r,
         Ok(fast) => {
             // The fast search path tracked another root at its optimum: search again with the
@@ -273,7 +364,7 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
                 &settings.effects,
             );
             safe.path = SolvePath::Safe;
-            match run(&safe, settings, seed) {
+            match run(&safe, settings, seed, start.as_deref()) {
                 Ok(mut r) => {
                     r.evaluations += fast.evaluations;
                     r
@@ -293,65 +384,149 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
     }
 }
 
-fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitResult, String> {
-    let bounds = problem.bounds().map_err(|e| e.to_string())?;
-    let n = problem.specs.len();
+/// The base optimum in this problem's coordinates, every added effect at its neutral value.
+fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
+    if base.status == FitStatus::Failed {
+        return None;
+    }
+    problem
+        .specs
+        .iter()
+        .map(|s| {
+            let v = match (base.get(s.param), s.param) {
+                (Some(b), _) => b.value,
+                (None, Param::Effect(e)) => {
+                    let neutral = e.parameter()?.neutral;
+                    match e {
+                        // NaN: the material's own value.
+                        Effect::PipeLoss if neutral.is_nan() => problem.data.pipe.loss_factor,
+                        _ => neutral,
+                    }
+                }
+                (None, _) => return None,
+            };
+            let c = s.coordinate(v);
+            Some(if c.is_nan() {
+                s.lower
+            } else {
+                c.clamp(s.lower, s.upper)
+            })
+        })
+        .collect()
+}
+
+/// The search: every restart's DE run polished, and the nested start polished.
+fn search(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    seed: u64,
+    bounds: &crate::optimize::Bounds,
+    start: Option<&[f64]>,
+) -> Result<Vec<Optimum>, String> {
     let restarts = settings.restarts.max(1);
-    let mut optima: Vec<Optimum> = Vec::with_capacity(restarts);
+    let mut optima: Vec<Optimum> = Vec::with_capacity(restarts + 1);
     for r in 0..restarts {
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
         let de = de_for(settings, problem).map_err(|e| e.to_string())?;
         let res = de
-            .minimize(problem, &bounds, &mut rng)
+            .minimize(problem, bounds, &mut rng)
             .map_err(|e| e.to_string())?;
         if !res.f.is_finite()
             || (settings.method == Method::Paper && res.f >= FAILED_SOLVE_OBJECTIVE)
         {
             continue;
         }
-        let opt = match settings.method {
-            // The paper's answer is the best member of the final population (P59): no polish.
-            Method::Paper => Optimum {
-                cost: res.f,
-                x: res.x,
-            },
-            Method::Default => polish(problem, &res.x, &bounds).unwrap_or(Optimum {
-                cost: res.f,
-                x: res.x,
-            }),
-        };
-        optima.push(opt);
+        optima.push(refine(problem, settings, bounds, res.x, res.f));
     }
+    if let Some(x0) = start {
+        let f0 = problem.value(x0);
+        if f0.is_finite() {
+            optima.push(refine(problem, settings, bounds, x0.to_vec(), f0));
+        }
+    }
+    Ok(optima)
+}
+
+/// The paper's answer is the best member of the final population (P59): no polish. The
+/// default method polishes with Levenberg–Marquardt, keeping the start if that is better.
+fn refine(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    bounds: &crate::optimize::Bounds,
+    x: Vec<f64>,
+    cost: f64,
+) -> Optimum {
+    match settings.method {
+        Method::Paper => Optimum { x, cost },
+        Method::Default => polish(problem, &x, bounds).unwrap_or(Optimum { x, cost }),
+    }
+}
+
+fn run(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    seed: u64,
+    start: Option<&[f64]>,
+) -> Result<FitResult, String> {
+    let bounds = problem.bounds().map_err(|e| e.to_string())?;
+    let optima = search(problem, settings, seed, &bounds, start)?;
     let best_i = (0..optima.len())
         .min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost))
         .ok_or_else(|| {
             "the forward model could not be solved anywhere in the search space".to_string()
         })?;
-    let best = &optima[best_i];
-    let x = best.x.clone();
+    let x = optima[best_i].x.clone();
     let sys = problem
         .system_at(&x)
         .ok_or_else(|| "the best parameters give a non-physical input".to_string())?;
     // The answer is reported on the reference path (spec §5.3–5.4); the search path must agree.
     // If the reference path cannot solve where the fast search ended, the search tracked
     // another root: the caller searches again on the safe path.
-    let (predicted, path_checked) = match (
-        problem.predict_reference(&sys),
-        problem.predict_system(&sys),
-    ) {
-        (Some(r), fast) => {
+    let reference = problem.reference_roots(&sys);
+    let (predicted, roots, path_checked) = match (reference, problem.predict_system(&sys)) {
+        (Some(roots), fast) => {
+            let r: Vec<Complex64> = roots.iter().map(|x| x.k1).collect();
             let agree = fast.is_some_and(|k| {
                 k.iter()
                     .zip(&r)
                     .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
             });
-            (r, problem.path == SolvePath::Safe || agree)
+            (r, roots, problem.path == SolvePath::Safe || agree)
         }
-        (None, Some(f)) if problem.path == SolvePath::Fast => (f, false),
+        (None, Some(f)) if problem.path == SolvePath::Fast => (f, Vec::new(), false),
         _ => return Err("forward solve failed at the optimum".to_string()),
     };
+    if !path_checked {
+        // Only the status matters: the caller searches again on the safe path.
+        let mut r = FitResult::failed(
+            settings,
+            problem.weighting,
+            problem.data.measurements.len(),
+            String::new(),
+        );
+        r.path_checked = false;
+        r.evaluations = problem.evaluations();
+        return Ok(r);
+    }
+    assemble(
+        problem, settings, &bounds, &optima, best_i, sys, predicted, &roots,
+    )
+}
 
-    // Uncertainty from the Jacobian of the weighted residuals at the optimum.
+/// Build the result once from the search's optima.
+#[allow(clippy::too_many_arguments)]
+fn assemble(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    bounds: &crate::optimize::Bounds,
+    optima: &[Optimum],
+    best_i: usize,
+    sys: System,
+    predicted: Vec<Complex64>,
+    roots: &[Root],
+) -> Result<FitResult, String> {
+    let x = &optima[best_i].x;
+    let n = problem.specs.len();
     let m = problem.n_residuals();
     let ss = problem.sum_of_squares(&predicted);
     let dof = m.saturating_sub(n);
@@ -364,52 +539,50 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         Weighting::Relative if dof > 0 => ss / dof as f64,
         Weighting::Relative => 1.0,
     };
-    let mut r0 = vec![0.0; m];
-    problem.residuals_of(&predicted, &mut r0);
-    let mut j = vec![0.0; m * n];
-    let jac = crate::optimize::jacobian_fd(
-        problem,
-        &x,
-        &r0,
-        Some(&bounds),
-        FiniteDifference::Central,
-        FiniteDifference::Central.default_rel_step(),
-        &mut j,
-    )
-    .ok()
-    .map(|_| j);
-    let cov = jac.as_ref().map(|j| {
-        let mut c = covariance_from_jacobian(j, m, n, scale);
-        // The E_m–ν_m valley of a buried pipe is curved (spec §7.5). Measured on the 100
-        // segments of tests/invert_recovery.rs: without this, true log10 E within 2σ for
-        // 84/100 and one unflagged fit 14 % off; with it, 85/100 and that fit flagged
-        // (unflagged worst 8.1 %).
-        widen_along_flat_directions(&x, ss, scale, &bounds, &mut c, |p| {
-            problem.predict(p).map(|k| problem.sum_of_squares(&k))
-        });
-        c
-    });
+    let determined = uncertainty(problem, bounds, x, &predicted, ss, scale)
+        .ok_or_else(|| "the Jacobian could not be evaluated at the optimum".to_string())?;
     let estimates: Vec<Estimate> = problem
         .specs
         .iter()
         .enumerate()
         .map(|(i, s)| {
-            let sx = cov
-                .as_ref()
-                .map(|c| c.std_errors[i])
-                .unwrap_or(f64::INFINITY);
+            let iv = determined.intervals[i];
+            let sx = determined.cov[i * n + i].max(0.0).sqrt();
+            // One sigma consistent with the 95 % interval: its width in the coordinate / 3.92,
+            // carried to physical units at the estimate.
+            let width = (s.coordinate(iv.hi) - s.coordinate(iv.lo)).abs();
+            let s_coord = width / (2.0 * super::uncertainty::Z_95);
             Estimate {
                 param: s.param,
                 value: s.value(x[i]),
-                std: identifiable(s, sx).then(|| s.value_std(x[i], sx)),
+                std: Some(s.value_std(x[i], s_coord)),
                 coordinate: x[i],
                 coordinate_std: sx,
+                interval: iv,
             }
         })
         .collect();
-
-    let mut result = FitResult {
-        status: FitStatus::Ok,
+    let (curve, leak_band_speed) = predicted_curve(problem, bounds, x, &sys, &determined.cov);
+    let separated = separated_minima(problem, optima, best_i, &determined);
+    let findings = assess(&Evidence {
+        problem,
+        x,
+        predicted: &predicted,
+        roots,
+        chi2_per_dof,
+        determined: &determined,
+        leak_band_speed,
+        separated,
+    });
+    let (flags, notes): (Vec<Flag>, Vec<Flag>) = findings
+        .into_iter()
+        .partition(|f| f.code.severity() == Severity::Flag);
+    Ok(FitResult {
+        status: if flags.is_empty() {
+            FitStatus::Ok
+        } else {
+            FitStatus::Flagged
+        },
         method: settings.method,
         model: problem.model,
         contact_mode: settings.contact_mode,
@@ -422,28 +595,212 @@ fn run(problem: &Problem<'_>, settings: &FitSettings, seed: u64) -> Result<FitRe
         chi2_per_dof,
         weighting: problem.weighting,
         n_measurements: problem.data.measurements.len(),
-        condition_number: cov.as_ref().map(|c| c.scaled_condition_number),
-        correlations: cov
-            .as_ref()
-            .map(|c| c.correlation.clone())
-            .unwrap_or_default(),
-        flags: Vec::new(),
-        evaluations: 0,
+        condition_number: Some(determined.condition_number),
+        correlations: determined.correlation.clone(),
+        flags,
+        notes,
+        evaluations: problem.evaluations(),
         system: Some(sys),
         predicted,
         message: None,
         restart_misfits: optima.iter().map(|o| o.cost).collect(),
-        path_checked,
+        path_checked: true,
+        p_wave_speed: Some(determined.p_wave_speed),
+        s_wave_speed: Some(determined.s_wave_speed),
+        curve,
+        leak_band_speed,
+    })
+}
+
+/// What the data determine, from the Jacobian of the weighted residuals at the optimum.
+fn uncertainty(
+    problem: &Problem<'_>,
+    bounds: &crate::optimize::Bounds,
+    x: &[f64],
+    predicted: &[Complex64],
+    ss: f64,
+    scale: f64,
+) -> Option<Determined> {
+    let m = problem.n_residuals();
+    let n = problem.specs.len();
+    let mut r0 = vec![0.0; m];
+    problem.residuals_of(predicted, &mut r0);
+    let mut j = vec![0.0; m * n];
+    crate::optimize::jacobian_fd(
+        problem,
+        x,
+        &r0,
+        Some(bounds),
+        FiniteDifference::Central,
+        FiniteDifference::Central.default_rel_step(),
+        &mut j,
+    )
+    .ok()?;
+    Some(determine(
+        &problem.specs,
+        bounds,
+        x,
+        problem.data.soil_density,
+        &j,
+        m,
+        scale,
+        ss,
+        |p| problem.predict(p).map(|k| problem.sum_of_squares(&k)),
+        |p| profile_misfit(problem, bounds, p),
+    ))
+}
+
+/// Iterations of the profile minimisation at a point of the valley scan.
+pub const PROFILE_LM_ITERATIONS: usize = 3;
+
+/// The misfit at `x` minimised over every coordinate but E_m and ν_m (a few Levenberg–Marquardt
+/// iterations from `x`): the profile of P66 along the valley.
+fn profile_misfit(
+    problem: &Problem<'_>,
+    bounds: &crate::optimize::Bounds,
+    x: &[f64],
+) -> Option<f64> {
+    let free: Vec<usize> = problem
+        .specs
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !matches!(s.param, Param::SoilModulus | Param::SoilPoisson))
+        .map(|(i, _)| i)
+        .collect();
+    let at_x = problem.predict(x).map(|k| problem.sum_of_squares(&k));
+    if free.is_empty() {
+        return at_x;
+    }
+    let restricted = Restricted {
+        problem,
+        base: x.to_vec(),
+        free: free.clone(),
     };
-    let separated = separated_minima(problem, &optima, best_i, &result);
-    result.flags = assess(problem, &result, separated);
-    result.status = if result.flags.is_empty() {
-        FitStatus::Ok
-    } else {
-        FitStatus::Flagged
+    let sub_bounds = crate::optimize::Bounds::new(
+        free.iter().map(|&i| bounds.lower()[i]).collect(),
+        free.iter().map(|&i| bounds.upper()[i]).collect(),
+    )
+    .ok()?;
+    let x0: Vec<f64> = free.iter().map(|&i| x[i]).collect();
+    let lm = LevenbergMarquardt::new()
+        .max_iterations(PROFILE_LM_ITERATIONS)
+        .ok()?
+        .finite_difference(FiniteDifference::Forward)
+        .fd_rel_step(1e-6)
+        .ok()?;
+    let best = lm
+        .minimize(&restricted, &x0, Some(&sub_bounds))
+        .ok()
+        .map(|r| r.cost)
+        .filter(|c| c.is_finite());
+    match (best, at_x) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    }
+}
+
+/// The problem with some coordinates held fixed.
+struct Restricted<'p> {
+    problem: &'p Problem<'p>,
+    base: Vec<f64>,
+    free: Vec<usize>,
+}
+
+impl crate::optimize::LeastSquares for Restricted<'_> {
+    fn n_params(&self) -> usize {
+        self.free.len()
+    }
+    fn n_residuals(&self) -> usize {
+        self.problem.n_residuals()
+    }
+    fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+        let mut full = self.base.clone();
+        for (&i, &v) in self.free.iter().zip(x) {
+            full[i] = v;
+        }
+        crate::optimize::LeastSquares::residuals(self.problem, &full, out)
+    }
+}
+
+/// The predicted curve on the standard grid with one-sigma errors (P65), and the leak-band
+/// mean speed with its error. Values come from the reference path; the sensitivities from one
+/// perturbed system per fitted coordinate, each root solved from the unperturbed one.
+fn predicted_curve(
+    problem: &Problem<'_>,
+    bounds: &crate::optimize::Bounds,
+    x: &[f64],
+    sys: &System,
+    cov: &[f64],
+) -> (Vec<PredictedPoint>, Option<WithError>) {
+    let base = curve(sys, &STANDARD_GRID_HZ);
+    let n = x.len();
+    let k_of = |c: f64, att_db: f64, f: f64| {
+        let w = hz_to_omega(f);
+        Complex64::new(w / c, -db_to_np(att_db))
     };
-    result.evaluations = problem.evaluations();
-    Ok(result)
+    // Sensitivities: per coordinate, the perturbed speeds and attenuations.
+    let mut d_speed = vec![vec![None; n]; base.len()];
+    let mut d_att = vec![vec![None; n]; base.len()];
+    let mut d_band = vec![None; n];
+    let band_of = |pts: &[(f64, Option<f64>)]| band_mean(pts, LEAK_BAND_HZ);
+    let base_pts: Vec<(f64, Option<f64>)> = base
+        .iter()
+        .map(|p| (p.frequency_hz, p.status.is_ok().then_some(p.phase_speed)))
+        .collect();
+    let band0 = band_of(&base_pts);
+    for q in 0..n {
+        let w = bounds.width(q);
+        let mut h = CURVE_FD_STEP_FRACTION * w;
+        if x[q] + h > bounds.upper()[q] {
+            h = -h;
+        }
+        let mut xp = x.to_vec();
+        xp[q] += h;
+        let Some(sp) = problem.system_at(&xp) else {
+            continue;
+        };
+        let mut pts = Vec::with_capacity(base.len());
+        for (i, p) in base.iter().enumerate() {
+            let mut c1 = None;
+            if p.status.is_ok() {
+                let guess = k_of(p.phase_speed, p.attenuation_db, p.frequency_hz);
+                if let Ok(r) =
+                    solve_from_guess_tol(&sp, hz_to_omega(p.frequency_hz), guess, Tolerance::FAST)
+                {
+                    d_speed[i][q] = Some((r.phase_speed() - p.phase_speed) / h);
+                    d_att[i][q] = Some((r.attenuation_db() - p.attenuation_db) / h);
+                    c1 = Some(r.phase_speed());
+                }
+            }
+            pts.push((p.frequency_hz, c1));
+        }
+        if let (Some(b0), Some(b1)) = (band0, band_of(&pts)) {
+            d_band[q] = Some((b1 - b0) / h);
+        }
+    }
+    let sigma = |g: &[Option<f64>]| -> Option<f64> {
+        let g: Option<Vec<f64>> = g.iter().copied().collect();
+        g.map(|g| propagate(&g, cov))
+    };
+    let points = base
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let ok = p.status.is_ok();
+            let finite = |v: f64| (ok && v.is_finite()).then_some(v);
+            let phase_speed = finite(p.phase_speed);
+            let attenuation_db = finite(p.attenuation_db);
+            PredictedPoint {
+                frequency_hz: p.frequency_hz,
+                phase_speed,
+                phase_speed_std: phase_speed.and(sigma(&d_speed[i])),
+                attenuation_db,
+                attenuation_db_std: attenuation_db.and(sigma(&d_att[i])),
+            }
+        })
+        .collect();
+    let band = band0.and_then(|v| sigma(&d_band).map(|s| WithError { value: v, std: s }));
+    (points, band)
 }
 
 /// The DE configured for the method.
@@ -489,21 +846,16 @@ fn polish(problem: &Problem<'_>, x0: &[f64], bounds: &crate::optimize::Bounds) -
     }
 }
 
-/// A parameter is identifiable when its one-sigma error is under a quarter of its range.
-pub const IDENTIFIABLE_RANGE_FRACTION: f64 = 0.25;
-
-fn identifiable(spec: &super::problem::ParamSpec, sx: f64) -> bool {
-    sx.is_finite() && sx <= IDENTIFIABLE_RANGE_FRACTION * (spec.upper - spec.lower)
-}
-
-/// Whether another restart found an equally good optimum far from the best one.
+/// Whether another restart found an equally good optimum far from the best one (in units of
+/// the determined covariance), and the leak-band speed it predicts.
 fn separated_minima(
     problem: &Problem<'_>,
     optima: &[Optimum],
     best_i: usize,
-    result: &FitResult,
-) -> Option<String> {
+    determined: &Determined,
+) -> Option<Separated> {
     let best = &optima[best_i];
+    let n = problem.specs.len();
     for (i, o) in optima.iter().enumerate() {
         if i == best_i {
             continue;
@@ -517,19 +869,32 @@ fn separated_minima(
         }
         for (j, s) in problem.specs.iter().enumerate() {
             let d = (o.x[j] - best.x[j]).abs();
-            let sigma = result.estimates[j].coordinate_std;
+            let sigma = determined.cov[j * n + j].max(0.0).sqrt();
             let width = s.upper - s.lower;
             let far = d > SEPARATION_RANGE_FRACTION * width
                 && (!sigma.is_finite() || d > SEPARATION_SIGMAS * sigma);
             if far {
-                return Some(format!(
-                    "restarts found equally good fits (misfit {} and {}) with {} = {} and {}",
-                    sig(best.cost, 4),
-                    sig(o.cost, 4),
-                    s.param.name(),
-                    sig(s.value(best.x[j]), 4),
-                    sig(s.value(o.x[j]), 4)
-                ));
+                let other_leak_band_speed = problem.system_at(&o.x).and_then(|sys| {
+                    let pts: Vec<(f64, Option<f64>)> = curve(&sys, &STANDARD_GRID_HZ)
+                        .into_iter()
+                        .filter(|p| {
+                            p.frequency_hz >= LEAK_BAND_HZ.0 && p.frequency_hz <= LEAK_BAND_HZ.1
+                        })
+                        .map(|p| (p.frequency_hz, p.status.is_ok().then_some(p.phase_speed)))
+                        .collect();
+                    band_mean(&pts, LEAK_BAND_HZ)
+                });
+                return Some(Separated {
+                    description: format!(
+                        "restarts found equally good fits (misfit {} and {}) with {} = {} and {}",
+                        sig(best.cost, 4),
+                        sig(o.cost, 4),
+                        s.param.name(),
+                        sig(s.value(best.x[j]), 4),
+                        sig(s.value(o.x[j]), 4)
+                    ),
+                    other_leak_band_speed,
+                });
             }
         }
     }

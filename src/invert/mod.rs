@@ -5,12 +5,22 @@
 //! * `paper` method: the paper's DE/rand/1/bin exactly (P51–P59), its objective and bounds.
 //! * default method: SHADE over (log10 E_m, ν_m, ξ, …), chi-square in the measurement standard
 //!   deviations when given (otherwise the paper's relative errors, squared), a
-//!   Levenberg–Marquardt polish, restarts to detect separated minima, standard errors and
-//!   correlations from the Jacobian at the optimum.
+//!   Levenberg–Marquardt polish, restarts to detect separated minima.
+//! * what the data determine (spec §7.10, `uncertainty`): the soil's c_P and c_S with errors,
+//!   95 % intervals of every parameter, the predicted curve with errors;
+//! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
+//!
+//! `fit` searches and builds the result once; `uncertainty` and `flags` are pure functions of
+//! what the search found.
 pub mod fit;
 pub mod flags;
 pub mod problem;
+pub mod uncertainty;
 
-pub use fit::{fit_segment, Estimate, FitResult, FitSettings, FitStatus};
-pub use flags::{Flag, FlagCode};
+pub use fit::{
+    fit_extended, fit_segment, Estimate, FitResult, FitSettings, FitStatus, PredictedPoint,
+    FIT_ALGORITHM_VERSION,
+};
+pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
+pub use uncertainty::{Interval, WithError};

@@ -395,13 +395,13 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// Model wavenumbers by the reference path (29-point ramp, reference tolerance, spec
-    /// §5.3–5.4), for checking the search's answer.
-    pub fn predict_reference(&self, sys: &System) -> Option<Vec<Complex64>> {
-        accept_roots(
-            sys,
-            &solve_curve(sys, &self.omegas, Continuation::default()),
-        )
+    /// The roots at the measured frequencies by the reference path (29-point ramp, reference
+    /// tolerance, spec §5.3–5.4), for checking and reporting the search's answer; `None` when
+    /// one is not found or is a growing wave under `reciprocal`/`blend`.
+    pub fn reference_roots(&self, sys: &System) -> Option<Vec<crate::physics::Root>> {
+        let res = solve_curve(sys, &self.omegas, Continuation::default());
+        accept_roots(sys, &res)?;
+        res.into_iter().collect::<Result<Vec<_>, _>>().ok()
     }
 
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.

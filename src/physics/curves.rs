@@ -14,7 +14,7 @@ pub const STANDARD_GRID_HZ: [f64; 32] = [
 ];
 
 /// The typical leak-noise band a correlator operator uses, Hz (issue 5). Its mean speed is
-/// `export::record::band_mean_speed`, from the stored curve.
+/// [`band_mean`].
 pub const LEAK_BAND_HZ: (f64, f64) = (100.0, 800.0);
 
 /// One point of a curve.
@@ -51,4 +51,33 @@ pub fn curve(system: &System, frequencies_hz: &[f64]) -> Vec<CurvePoint> {
             },
         })
         .collect()
+}
+
+/// Mean of a curve over a band: (1/(f₂ − f₁)) ∫ v(f) df by the trapezoidal rule over the points
+/// `(f, v)` (increasing f) with f₁ ≤ f ≤ f₂. On the standard grid the leak band 100–800 Hz holds
+/// 17 points (25–50 Hz apart), on which the speed varies smoothly, so this differs from a dense
+/// quadrature by far less than the fit's own uncertainty.
+///
+/// `None` unless the points cover the whole band (a point at each end, to 1e-9 relative) and
+/// every point in it has a value: a mean over part of the band would be a different figure
+/// under the same name.
+pub fn band_mean(points: &[(f64, Option<f64>)], band_hz: (f64, f64)) -> Option<f64> {
+    const REL_TOL: f64 = 1e-9;
+    let (lo, hi) = band_hz;
+    let tol = |f: f64| REL_TOL * f.abs();
+    let pts: Vec<&(f64, Option<f64>)> = points
+        .iter()
+        .filter(|p| p.0 >= lo - tol(lo) && p.0 <= hi + tol(hi))
+        .collect();
+    let (first, last) = (pts.first()?, pts.last()?);
+    if pts.len() < 2 || (first.0 - lo).abs() > tol(lo) || (last.0 - hi).abs() > tol(hi) {
+        return None;
+    }
+    let mut integral = 0.0;
+    for w in pts.windows(2) {
+        let c0 = w[0].1.filter(|v| v.is_finite())?;
+        let c1 = w[1].1.filter(|v| v.is_finite())?;
+        integral += 0.5 * (c0 + c1) * (w[1].0 - w[0].0);
+    }
+    Some(integral / (last.0 - first.0))
 }

@@ -1,0 +1,30 @@
+//! Statistical tails used by the fit's misfit test and the diagnosis (from `statrs`).
+
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// Upper-tail probability P(χ²_k > x); NaN for a non-finite x or k ≤ 0.
+pub fn chi2_upper_tail(x: f64, k: f64) -> f64 {
+    if !(x.is_finite() && k > 0.0) {
+        return f64::NAN;
+    }
+    ChiSquared::new(k).map_or(f64::NAN, |d| d.sf(x.max(0.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi2_tail_matches_tables() {
+        // chi-square 0.999 quantiles (Abramowitz & Stegun Table 26.8): k = 1: 10.828;
+        // k = 5: 20.515; k = 13: 34.528.
+        for (x, k) in [(10.828, 1.0), (20.515, 5.0), (34.528, 13.0)] {
+            let p = chi2_upper_tail(x, k);
+            assert!((p / 1e-3 - 1.0).abs() < 1e-3, "k = {k}: p = {p}");
+        }
+        // Median of chi-square(10) is 9.342.
+        assert!((chi2_upper_tail(9.342, 10.0) - 0.5).abs() < 1e-3);
+        assert!(chi2_upper_tail(f64::NAN, 3.0).is_nan());
+        assert_eq!(chi2_upper_tail(-1.0, 3.0), 1.0);
+    }
+}
