@@ -21,6 +21,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+/// (hidden effect, structured base, named effect, the set it is reported with).
+type Outcome = (Option<Effect>, bool, Option<Effect>, Vec<Effect>);
+/// A member's pooled-test scores, and whether its own diagnosis named the hidden effect.
+type Member = (Vec<(Effect, f64)>, Option<bool>);
+
 fn material<R: Rng>(rng: &mut R, plastic_only: bool) -> Material {
     loop {
         let mut u = rng.gen::<f64>();
@@ -54,7 +59,7 @@ fn effects(n: usize) {
             cases.push((e, (k * 10_000 + i) as u64));
         }
     }
-    let out: Vec<(Option<Effect>, bool, Option<Effect>, Vec<Effect>)> = cases
+    let out: Vec<Outcome> = cases
         .par_iter()
         .map(|&(e, seed)| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -188,7 +193,7 @@ fn groups(seeds: u64) {
                     }
                 })
                 .collect();
-            let res: Vec<(Vec<(Effect, f64)>, Option<bool>)> = trials
+            let res: Vec<Member> = trials
                 .par_iter()
                 .enumerate()
                 .map(|(i, t)| {

@@ -366,7 +366,7 @@ fn store(
                 ""
             }
         ));
-        let curve = curve_points(&fit);
+        let curve = curve_points(fit);
         db::insert_fit_with_curves(conn, &row, &curve)?;
         db::set_segment_effects(
             conn,
