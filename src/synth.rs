@@ -293,7 +293,8 @@ pub fn default_hidden_range(effect: Effect) -> Option<(f64, f64)> {
         Effect::AirInWater => Some((2e-5, 5e-4)),
         Effect::WallThinning => Some((0.5, 0.85)),
         Effect::PipeLoss => Some((0.04, 0.15)),
-        Effect::FullModel => None,
+        Effect::ViscoelasticWall => Some((0.03, 0.15)),
+        Effect::FullModel | Effect::InventoryError => None,
     }
 }
 

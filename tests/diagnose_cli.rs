@@ -131,20 +131,33 @@ fn diagnose_names_adds_and_the_next_calibrate_uses_the_effect() {
     for svg in svgs {
         report_check::parse_xml(svg);
     }
-    // Pooling: each named segment's material group names the same effect.
-    let material: BTreeMap<String, String> = rows(&net.join("segments.csv"))
-        .into_iter()
-        .map(|r| (r["segment_id"].clone(), r["material"].clone()))
+    // Pooling (default groups: material x age class): every group of 3 or more segments is
+    // tested; a group holding a named segment detects thinning, or the compliance pair it is
+    // reported in.
+    let groups = rows(&out.join("groups.csv"));
+    let group_of: BTreeMap<String, String> = diag
+        .iter()
+        .map(|r| (r["segment_id"].clone(), r["group"].clone()))
         .collect();
-    let pooled = &html[html.find("Pooled over groups").expect("pooled table")..];
-    let pooled = &pooled[..pooled.find("</table>").unwrap()];
-    for id in &named {
-        let row = pooled
-            .split("<tr>")
-            .find(|r| r.contains(&format!("<td>material={}</td>", material[id])))
-            .unwrap_or_else(|| panic!("no pooled row for {id}'s material"));
-        assert!(row.contains("<td>wall_thinning</td>"), "{row}");
+    for g in &groups {
+        let n: usize = g["n_segments"].parse().unwrap();
+        assert!(n >= 3, "{g:?}");
+        let p: f64 = g["p_value"].parse().unwrap();
+        assert!((0.0..=1.0).contains(&p), "{g:?}");
     }
+    for id in &named {
+        if let Some(g) = groups
+            .iter()
+            .find(|g| g["group"] == group_of[id] && !group_of[id].is_empty())
+        {
+            assert!(
+                g["named_effect"] == "wall_thinning"
+                    || g["ambiguous_with"].contains("wall_thinning"),
+                "{g:?}"
+            );
+        }
+    }
+    assert!(html.contains("Pooled over groups") || groups.is_empty());
 
     // Step 3: the extended fits are stored and the effect is switched on for those segments.
     let conn = rusqlite::Connection::open(&db).unwrap();

@@ -1,10 +1,11 @@
 //! `pipewave diagnose --db DB [--segment ID]... --out DIR [--candidates NAME,...] [--no-apply]
-//! [--jobs N]`: the discrepancy workflow (find, name, add, show).
+//! [--group-by COLUMN] [--jobs N]`: the discrepancy workflow (find, name, add, show).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
+use pipewave::diagnose::group::GroupBy;
 use pipewave::diagnose::run::{diagnose_database, DiagnoseOptions};
 use pipewave::physics::effects::{parse_effects, Effect};
 
@@ -23,13 +24,17 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Candidate effects, comma-separated (default: all of soil_damping, air_in_water,
-    /// wall_thinning, pipe_loss, full_model).
+    /// wall_thinning, pipe_loss, full_model, viscoelastic_wall, inventory_error).
     #[arg(long, value_name = "NAME,...")]
     candidates: Option<String>,
     /// Report only: do not store the extended fits or switch the named effects on for the
     /// segments.
     #[arg(long)]
     no_apply: bool,
+    /// Group the pooled test by this inventory column: soil_zone, material, soil_type or
+    /// install_year (by decade); default: material x age class (30-year classes).
+    #[arg(long, value_name = "COLUMN")]
+    group_by: Option<String>,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
     jobs: Option<u32>,
@@ -47,6 +52,12 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
         Some(t) => parse_effects(t).context("--candidates")?,
         None => Effect::ALL.to_vec(),
     };
+    let group_by = match &args.group_by {
+        Some(c) => c
+            .parse::<GroupBy>()
+            .map_err(|e| anyhow::anyhow!("--group-by: {e}"))?,
+        None => GroupBy::default(),
+    };
     let mut database = super::open_database(&args.db)?;
     let opts = DiagnoseOptions {
         segments: (!args.segments.is_empty()).then(|| args.segments.clone()),
@@ -57,6 +68,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
         apply: !args.no_apply,
         candidates,
         out_dir: args.out.clone(),
+        group_by,
     };
     let s = diagnose_database(database.conn_mut(), &opts)?;
     for (id, why) in &s.skipped {
@@ -64,8 +76,9 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
     }
     println!("{}", s.line());
     println!(
-        "report: {} and {}",
+        "report: {}, {} and {}",
         args.out.join("diagnosis.csv").display(),
+        args.out.join("groups.csv").display(),
         args.out.join("diagnosis.html").display()
     );
     Ok(Outcome::Done)

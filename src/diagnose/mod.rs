@@ -17,8 +17,13 @@
 //! 3. **Add** and 4. **Show** are done by the `diagnose` command: a new fit row with the effect
 //!    and its value, and a report.
 
+pub mod ambiguity;
+pub mod group;
+pub mod inventory;
 pub mod report;
 pub mod run;
+pub mod stats;
+pub mod trial;
 
 use num_complex::Complex64;
 
@@ -27,7 +32,6 @@ use crate::invert::problem::{predict, Measurement, Param, Problem, SegmentData};
 use crate::optimize::{FiniteDifference, LevenbergMarquardt};
 use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Model};
-use crate::stats::chi2_upper_tail;
 
 /// Assumed relative noise on Re k when a segment has no stated standard deviations (typical
 /// of two-sensor field estimates; it only matters for such segments and is reported).
@@ -49,12 +53,17 @@ pub const TIE_LR: f64 = 2.0;
 /// is the least certain input (plastics 0.04–0.1, iron a single published value, spec §3.3);
 /// wall thinning is common in old iron; free air needs a reason (a high point, a recent
 /// repair); soil damping shows only in stiff soil (spec §8 E1); the full model is the default.
-pub const PRIOR_ORDER: [Effect; 5] = [
+/// A viscoelastic wall is a wall loss with a rising modulus: it comes after the plain loss
+/// factor. An inventory record comes last: it is named over a physical effect only when it
+/// fits clearly better (see [`name_effect`]).
+pub const PRIOR_ORDER: [Effect; 7] = [
     Effect::PipeLoss,
+    Effect::ViscoelasticWall,
     Effect::WallThinning,
     Effect::AirInWater,
     Effect::SoilDamping,
     Effect::FullModel,
+    Effect::InventoryError,
 ];
 /// The leave-one-frequency-out prediction error must fall by at least this fraction.
 pub const MIN_HOLDOUT_GAIN: f64 = 0.2;
@@ -189,7 +198,7 @@ pub fn structure(r: &Residuals, n_params: usize) -> Structure {
     let chi2_att: f64 = r.att.iter().map(|v| v * v).sum();
     let dof = (2 * r.re.len()).saturating_sub(n_params);
     let p_value = if dof > 0 {
-        chi2_upper_tail(chi2_re + chi2_att, dof as f64)
+        stats::chi2_sf(chi2_re + chi2_att, dof as f64)
     } else {
         1.0
     };
@@ -295,11 +304,54 @@ pub struct Diagnosis {
     pub named: Option<Effect>,
     /// Other accepted effects that explain the data as well (within [`TIE_LR`]).
     pub ambiguous_with: Vec<Effect>,
+    /// For each of them: the quantity both change and the measurement that separates them.
+    pub ambiguity: Vec<ambiguity::Ambiguity>,
+    /// The best candidate inventory record, when the inventory was checked, and the segment
+    /// with that record.
+    pub record: Option<(inventory::RecordCandidate, SegmentData)>,
     /// Residuals after adding it.
     pub after: Option<Residuals>,
+    /// Leave-one-frequency-out prediction χ² of the base model (computed once, when needed).
+    pub holdout_base: Option<f64>,
 }
 
 impl Diagnosis {
+    /// True when the base model could not be fitted.
+    pub fn base_failed(&self) -> bool {
+        self.base.status == FitStatus::Failed
+    }
+
+    /// The segment data an effect's refit was made on: the candidate record's for
+    /// `inventory_error`, the segment's otherwise.
+    pub fn fit_data(&self, e: Effect) -> &SegmentData {
+        match (&self.record, e) {
+            (Some((_, d)), Effect::InventoryError) => d,
+            _ => &self.data,
+        }
+    }
+
+    /// The base model's leave-one-frequency-out prediction χ² (∞ without a base fit).
+    pub fn holdout_base(&mut self, settings: &DiagnoseSettings) -> f64 {
+        if let Some(v) = self.holdout_base {
+            return v;
+        }
+        let v = if self.base_failed() {
+            f64::INFINITY
+        } else {
+            holdout(&self.data, &self.base, settings, &settings.base_effects)
+        };
+        self.holdout_base = Some(v);
+        v
+    }
+
+    /// The refit of an effect, if it was tried.
+    pub fn refit_of(&self, e: Effect) -> Option<&Refit> {
+        self.candidates
+            .iter()
+            .find(|c| c.effect == e)
+            .and_then(|c| c.refit.as_ref())
+    }
+
     /// The accepted refit.
     pub fn chosen(&self) -> Option<&Refit> {
         self.candidates
@@ -345,9 +397,32 @@ fn fit_settings(s: &DiagnoseSettings, effects: Vec<Effect>) -> FitSettings {
     }
 }
 
-/// Diagnose one segment. `base` is its current fit when it already has stated stds and was made
-/// with `settings`; otherwise the base is refitted with the assumed noise.
+/// Diagnose one segment, in the steps of the module's description: prepare the base fit and
+/// its residuals ([`prepare`]), score every candidate ([`score_candidates`]), refit the ones
+/// worth refitting and test them ([`refit_candidates`]), check the inventory record when no
+/// physics explains the misfit ([`check_inventory`]), then name the effect and the ones the data
+/// cannot tell apart from it ([`name_effect`]). `base` is the segment's current fit when it
+/// already has stated stds and was made with `settings`; otherwise the base is refitted with
+/// the assumed noise.
 pub fn diagnose_segment(
+    data: &SegmentData,
+    base: Option<FitResult>,
+    settings: &DiagnoseSettings,
+) -> Diagnosis {
+    let mut diag = prepare(data, base, settings);
+    diag.candidates = score_candidates(&diag, settings);
+    if needs_explanation(&diag) {
+        refit_candidates(&mut diag, settings);
+        if settings.candidates.contains(&Effect::InventoryError) {
+            check_inventory(&mut diag, settings);
+        }
+        name_effect(&mut diag);
+    }
+    diag
+}
+
+/// Step 1 (find): the data with stds, the base fit, its residuals and their structure.
+pub fn prepare(
     data: &SegmentData,
     base: Option<FitResult>,
     settings: &DiagnoseSettings,
@@ -362,24 +437,35 @@ pub fn diagnose_segment(
         ),
     };
     let before = Residuals::of(&data, &base.predicted);
-    let st = structure(&before, base.estimates.len());
-    let mut diag = Diagnosis {
+    let structure = structure(&before, base.estimates.len());
+    Diagnosis {
         base,
         data,
         assumed_noise,
         before,
-        structure: st,
+        structure,
         candidates: Vec::new(),
         named: None,
         ambiguous_with: Vec::new(),
+        ambiguity: Vec::new(),
+        record: None,
         after: None,
-    };
-    let base_failed = diag.base.status == FitStatus::Failed;
-    // Score every candidate at the current fit.
+        holdout_base: None,
+    }
+}
+
+/// Whether the base leaves something to explain: misfit far above the noise, or no base fit.
+pub fn needs_explanation(diag: &Diagnosis) -> bool {
+    diag.structure.structured || diag.base_failed()
+}
+
+/// Step 2a (name, cheaply): the score statistic of every candidate physical effect at the base
+/// fit, best first (`full_model` only for a `seed` base; `inventory_error` is not scored).
+pub fn score_candidates(diag: &Diagnosis, settings: &DiagnoseSettings) -> Vec<Candidate> {
     let mut cands: Vec<Candidate> = settings
         .candidates
         .iter()
-        .filter(|e| !settings.base_effects.contains(e))
+        .filter(|e| !settings.base_effects.contains(e) && **e != Effect::InventoryError)
         .filter(|e| **e != Effect::FullModel || diag.base.model == Model::Seed)
         .map(|&e| Candidate {
             effect: e,
@@ -387,146 +473,216 @@ pub fn diagnose_segment(
             refit: None,
         })
         .collect();
-    cands.sort_by(|a, b| {
-        let key = |c: &Candidate| {
-            if c.score.is_nan() {
-                f64::INFINITY
-            } else {
-                c.score
-            }
-        };
-        key(b).total_cmp(&key(a))
-    });
-    if !diag.structure.structured && !base_failed {
-        diag.candidates = cands;
-        return diag;
-    }
-    // Refit the candidates with a positive score; when the best of them could remove less than
-    // half the excess χ² (the score is a local, first-order view, and a base fit far from the
-    // truth can point the wrong way), or the base could not be fitted at all, refit them all.
+    let key = |c: &Candidate| {
+        if c.score.is_nan() {
+            f64::INFINITY
+        } else {
+            c.score
+        }
+    };
+    cands.sort_by(|a, b| key(b).total_cmp(&key(a)));
+    cands
+}
+
+/// The candidates to refit: those with a positive score; all of them when the best could
+/// remove less than half the excess χ² (the score is a local, first-order view, and a base fit
+/// far from the truth can point the wrong way), or the base could not be fitted at all.
+pub fn refit_plan(diag: &Diagnosis) -> Vec<usize> {
     let excess = diag.before.chi2() - diag.structure.dof as f64;
-    let best_score = cands
+    let best_score = diag
+        .candidates
         .iter()
         .map(|c| c.score)
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max);
-    let all = base_failed || best_score < 0.5 * excess;
-    let tried: Vec<usize> = (0..cands.len())
-        .filter(|&i| all || cands[i].score.is_nan() || cands[i].score > 0.0)
-        .collect();
-    let n_tests = tried.len().max(1) as f64;
-    for &i in &tried {
-        let e = cands[i].effect;
+    let all = diag.base_failed() || best_score < 0.5 * excess;
+    (0..diag.candidates.len())
+        .filter(|&i| all || diag.candidates[i].score.is_nan() || diag.candidates[i].score > 0.0)
+        .collect()
+}
+
+/// The fit with `effects` added to the base model, never worse than the base (issue 16): the
+/// search also starts from the base optimum with the added effects at their neutral values.
+pub fn extended_fit(
+    data: &SegmentData,
+    settings: &DiagnoseSettings,
+    effects: Vec<Effect>,
+    base: &FitResult,
+) -> FitResult {
+    crate::invert::fit::fit_extended(data, &fit_settings(settings, effects), settings.seed, base)
+}
+
+/// Step 2b (name, by refitting): refit the planned candidates and test each against the base.
+pub fn refit_candidates(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
+    let tried = refit_plan(diag);
+    let n_tests = tried.len().max(1);
+    for i in tried {
+        let e = diag.candidates[i].effect;
         let mut effects = settings.base_effects.clone();
         effects.push(e);
         effects.sort();
-        let fit = fit_segment(
-            &diag.data,
-            &fit_settings(settings, effects.clone()),
-            settings.seed,
-        );
+        let fit = extended_fit(&diag.data, settings, effects.clone(), &diag.base);
         if fit.status == FitStatus::Failed {
             continue;
         }
-        let chi2_base = if base_failed {
-            f64::INFINITY
-        } else {
-            diag.before.chi2()
-        };
-        let after = Residuals::of(&diag.data, &fit.predicted);
-        let lr = chi2_base - after.chi2();
-        let has_param = e.parameter().is_some();
-        let p_value = if lr <= 0.0 {
-            1.0
-        } else if lr.is_infinite() {
-            0.0
-        } else if has_param {
-            0.5 * chi2_upper_tail(lr, 1.0)
-        } else {
-            chi2_upper_tail(lr, 1.0)
-        };
-        let n = 2 * diag.data.measurements.len();
-        let (k0, k1) = (diag.base.estimates.len(), fit.estimates.len());
-        let d_aicc = aicc(after.chi2(), n, k1) - aicc(chi2_base, n, k0);
-        let (hb, he) = if base_failed {
-            let (_, he) = holdout(&diag.data, &fit, &fit, settings, &effects, &effects);
-            (f64::INFINITY, he)
-        } else {
-            holdout(
-                &diag.data,
-                &diag.base,
-                &fit,
-                settings,
-                &settings.base_effects,
-                &effects,
-            )
-        };
-        // The extension must itself explain the data: an effect that removes part of a gross
-        // misfit (a wrong inventory material, a unit mix-up) is not the missing physics.
-        let explains = structure(&after, fit.estimates.len()).p_value >= EXPLAINED_P;
-        let accepted = p_value < ALPHA / n_tests
-            && explains
-            && d_aicc < 0.0
-            && he.is_finite()
-            && he < (1.0 - MIN_HOLDOUT_GAIN) * hb;
-        cands[i].refit = Some(Refit {
+        let data = diag.data.clone();
+        let refit = judge(
+            diag,
+            settings,
+            &data,
             fit,
-            lr,
-            p_value,
-            d_aicc,
-            holdout_base: hb,
-            holdout_ext: he,
-            accepted: false,
-        });
-        if accepted {
-            cands[i].refit.as_mut().expect("set above").accepted = true;
-        }
+            &effects,
+            e.parameter().is_some(),
+            n_tests,
+        );
+        diag.candidates[i].refit = Some(refit);
     }
-    // Among accepted effects keep the one that explains most (largest χ² drop, or lowest χ²
-    // after when the base could not be fitted). Effects within TIE_LR of it explain the data
-    // equally well: the tie is broken by PRIOR_ORDER and reported as ambiguous.
-    let accepted: Vec<(usize, f64)> = cands
+}
+
+/// The evidence for an extended fit of `data` (the segment's data, or an inventory candidate's)
+/// against the base: likelihood ratio and its p-value (χ̄² for a parameter on its bound, χ²₁
+/// otherwise), ΔAICc, leave-one-frequency-out prediction, and whether the extended fit itself
+/// explains the data. Accepted when all pass at level [`ALPHA`]/`n_tests`.
+fn judge(
+    diag: &mut Diagnosis,
+    settings: &DiagnoseSettings,
+    data: &SegmentData,
+    fit: FitResult,
+    effects: &[Effect],
+    on_bound: bool,
+    n_tests: usize,
+) -> Refit {
+    let chi2_base = if diag.base_failed() {
+        f64::INFINITY
+    } else {
+        diag.before.chi2()
+    };
+    let after = Residuals::of(data, &fit.predicted);
+    let lr = chi2_base - after.chi2();
+    let p_value = if lr.is_infinite() {
+        0.0
+    } else if on_bound {
+        stats::chibar_sf(lr)
+    } else {
+        stats::chi2_sf(lr, 1.0)
+    };
+    let n = 2 * data.measurements.len();
+    let (k0, k1) = (diag.base.estimates.len(), fit.estimates.len());
+    let d_aicc = aicc(after.chi2(), n, k1) - aicc(chi2_base, n, k0);
+    let hb = diag.holdout_base(settings);
+    let he = holdout(data, &fit, settings, effects);
+    // The extension must itself explain the data: an effect that removes part of a gross
+    // misfit (a wrong inventory material, a unit mix-up) is not the missing physics.
+    let explains = structure(&after, fit.estimates.len()).p_value >= EXPLAINED_P;
+    let accepted = p_value < ALPHA / n_tests as f64
+        && explains
+        && d_aicc < 0.0
+        && he.is_finite()
+        && he < (1.0 - MIN_HOLDOUT_GAIN) * hb;
+    Refit {
+        fit,
+        lr,
+        p_value,
+        d_aicc,
+        holdout_base: hb,
+        holdout_ext: he,
+        accepted,
+    }
+}
+
+/// Step 2c (inventory, spec §8 E8): when no physical effect was accepted, fit the candidate
+/// records; when a compliance effect (thinning, air) was, fit the neighbouring wall classes,
+/// which the data may not tell apart from it. The best record is tested like an effect, with
+/// the number of records tried in the significance level.
+pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
+    let physical = diag
+        .candidates
+        .iter()
+        .filter_map(|c| c.refit.as_ref().filter(|r| r.accepted).map(|_| c.effect))
+        .collect::<Vec<_>>();
+    let only_walls = !physical.is_empty();
+    if only_walls
+        && !physical
+            .iter()
+            .any(|e| matches!(e, Effect::WallThinning | Effect::AirInWater))
+    {
+        return;
+    }
+    let fs = fit_settings(settings, settings.base_effects.clone());
+    let best = if only_walls {
+        inventory::fit_best_record_among(&diag.data, &fs, settings.seed, |c| {
+            c.change == inventory::RecordChange::WallClass
+        })
+    } else {
+        inventory::fit_best_record(&diag.data, &fs, settings.seed)
+    };
+    let Some(best) = best else { return };
+    let effects = settings.base_effects.clone();
+    let n_tests = best.tried.max(1);
+    let refit = judge(
+        diag, settings, &best.data, best.fit, &effects, false, n_tests,
+    );
+    diag.record = Some((best.candidate, best.data));
+    diag.candidates.push(Candidate {
+        effect: Effect::InventoryError,
+        score: f64::NAN,
+        refit: Some(refit),
+    });
+}
+
+/// Step 2d: among accepted effects keep the one that explains most (lowest χ² after). Effects
+/// within [`TIE_LR`] of it explain the data equally well: the tie is broken by [`PRIOR_ORDER`]
+/// and the others are reported as ambiguous, with the quantity both change and the measurement
+/// that would separate them. An inventory record is named over a physical effect only when it
+/// fits better by more than [`TIE_LR`] (a record is a discrete choice, an effect a continuum
+/// that can mimic it).
+pub fn name_effect(diag: &mut Diagnosis) {
+    let chi2_of = |c: &Candidate| -> Option<f64> {
+        let r = c.refit.as_ref().filter(|r| r.accepted)?;
+        Some(r.fit.misfit)
+    };
+    let accepted: Vec<(usize, f64)> = diag
+        .candidates
         .iter()
         .enumerate()
-        .filter_map(|(i, c)| {
-            c.refit
-                .as_ref()
-                .filter(|r| r.accepted)
-                .map(|r| (i, -Residuals::of(&diag.data, &r.fit.predicted).chi2()))
-        })
+        .filter_map(|(i, c)| chi2_of(c).map(|x| (i, x)))
         .collect();
-    let top = accepted
-        .iter()
-        .map(|a| a.1)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let top = accepted.iter().map(|a| a.1).fold(f64::INFINITY, f64::min);
     let tied: Vec<usize> = accepted
         .iter()
-        .filter(|a| a.1 >= top - TIE_LR)
+        .filter(|a| a.1 <= top + TIE_LR)
         .map(|a| a.0)
         .collect();
-    let best = tied
-        .iter()
-        .copied()
-        .min_by_key(|&i| PRIOR_ORDER.iter().position(|e| *e == cands[i].effect));
-    if tied.len() > 1 {
-        diag.ambiguous_with = tied
+    let rank = |i: &usize| {
+        PRIOR_ORDER
             .iter()
-            .filter(|&&i| Some(i) != best)
-            .map(|&i| cands[i].effect)
-            .collect();
-    }
-    for (i, c) in cands.iter_mut().enumerate() {
+            .position(|e| *e == diag.candidates[*i].effect)
+            .unwrap_or(PRIOR_ORDER.len())
+    };
+    let best = tied.iter().copied().min_by_key(rank);
+    for (i, c) in diag.candidates.iter_mut().enumerate() {
         if let Some(r) = c.refit.as_mut() {
             r.accepted = Some(i) == best;
         }
     }
-    if let Some(i) = best {
-        diag.named = Some(cands[i].effect);
-        let fit = &cands[i].refit.as_ref().expect("accepted refit").fit;
-        diag.after = Some(Residuals::of(&diag.data, &fit.predicted));
+    let Some(b) = best else { return };
+    let named = diag.candidates[b].effect;
+    let named_fit = diag.candidates[b]
+        .refit
+        .as_ref()
+        .expect("accepted")
+        .fit
+        .clone();
+    diag.named = Some(named);
+    let named_data = diag.fit_data(named).clone();
+    diag.after = Some(Residuals::of(&named_data, &named_fit.predicted));
+    for &i in tied.iter().filter(|&&i| i != b) {
+        let other = diag.candidates[i].effect;
+        let fit = &diag.candidates[i].refit.as_ref().expect("accepted").fit;
+        let band = ambiguity::separating_band(&diag.data, &named_fit, fit);
+        diag.ambiguous_with.push(other);
+        diag.ambiguity.push(ambiguity::describe(named, other, band));
     }
-    diag.candidates = cands;
-    diag
 }
 
 /// AICc = χ² + 2k + 2k(k + 1)/(n − k − 1) (Hurvich & Tsai 1989), ∞ when n ≤ k + 1.
@@ -541,10 +697,12 @@ pub fn aicc(chi2: f64, n: usize, k: usize) -> f64 {
 /// in the effect's natural parameter at its neutral value, and I = J_θᵀJ_θ − J_θᵀJ_b(J_bᵀJ_b)⁻¹J_bᵀJ_θ
 /// the information left after the base parameters adjust (the efficient score). One-sided:
 /// 0 when lowering χ² needs the parameter to leave its allowed side. `NaN` for `full_model`.
+/// `NaN` also for `viscoelastic_wall`, whose nearest wall to the base's (same loss factor) still
+/// differs from it away from ω_ref: the model is not nested, so it is judged by its refit.
 fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) -> f64 {
-    let Some(par) = e.parameter() else {
+    if e.parameter().is_none() || e == Effect::ViscoelasticWall {
         return f64::NAN;
-    };
+    }
     let Some(sys0) = base.system else {
         return 0.0;
     };
@@ -558,11 +716,10 @@ fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) 
     };
     let r0 = resid(&base.predicted);
     // Neutral value and allowed direction of the natural parameter.
-    let (neutral, dir) = match e {
-        Effect::PipeLoss => (sys0.pipe.loss_factor, 1.0),
-        Effect::WallThinning => (1.0, -1.0),
-        _ => (par.neutral, 1.0),
+    let Some(neutral) = e.neutral_value(&sys0) else {
+        return f64::NAN;
     };
+    let dir = if e == Effect::WallThinning { -1.0 } else { 1.0 };
     // One-sided step in the natural parameter: 1e-6 in air fraction (it acts on the scale of
     // 1e-5, spec §8 E3), 1e-3 in the loss factors and the wall ratio.
     let h = if e == Effect::AirInWater { 1e-6 } else { 1e-3 };
@@ -627,132 +784,50 @@ fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) 
     ue * ue / info
 }
 
-/// Leave-one-frequency-out prediction χ² of the base and the extended model: each measurement
-/// is dropped in turn, both models are refitted locally (Levenberg–Marquardt from their
-/// full-data optimum) on the rest, and the dropped measurement is predicted.
-fn holdout(
+/// Leave-one-frequency-out prediction χ² of a fitted model: each measurement is dropped in
+/// turn, the model is refitted locally (Levenberg–Marquardt from its full-data optimum) on the
+/// rest, and the dropped measurement is predicted. NaN with fewer than 3 measurements.
+pub fn holdout(
     data: &SegmentData,
-    base: &FitResult,
-    ext: &FitResult,
+    fit: &FitResult,
     s: &DiagnoseSettings,
-    base_effects: &[Effect],
-    ext_effects: &[Effect],
-) -> (f64, f64) {
+    effects: &[Effect],
+) -> f64 {
     let m = data.measurements.len();
     if m < 3 {
-        return (f64::NAN, f64::NAN);
+        return f64::NAN;
     }
-    let one = |fit: &FitResult, effects: &[Effect]| -> f64 {
-        let x0: Vec<f64> = fit.estimates.iter().map(|e| e.coordinate).collect();
-        let mut total = 0.0;
-        for i in 0..m {
-            let mut d = data.clone();
-            let held: Measurement = d.measurements.remove(i);
-            let p = Problem::new(
-                &d,
-                crate::invert::Method::Default,
-                s.model,
-                s.contact_mode,
-                effects,
-            );
-            let Ok(b) = p.bounds() else {
-                return f64::INFINITY;
-            };
-            let lm = LevenbergMarquardt::new();
-            let x = match lm.minimize(&p, &x0, Some(&b)) {
-                Ok(r) => r.x,
-                Err(_) => x0.clone(),
-            };
-            let Some(sys) = p.system_at(&x) else {
-                return f64::INFINITY;
-            };
-            let omegas: Vec<f64> = data.measurements.iter().map(|m| m.omega).collect();
-            let Some(k) = predict(&sys, &omegas) else {
-                return f64::INFINITY;
-            };
-            let k = k[i];
-            total += ((k.re - held.k_re) / held.k_re_std.unwrap_or(f64::NAN)).powi(2)
-                + ((-k.im - held.attenuation) / held.attenuation_std.unwrap_or(f64::NAN)).powi(2);
-        }
-        total
-    };
-    (one(base, base_effects), one(ext, ext_effects))
-}
-
-/// A pooled finding over a group of segments that share material, diameter class or soil.
-#[derive(Debug, Clone, PartialEq)]
-pub struct GroupFinding {
-    /// Group label, e.g. `material=CI`.
-    pub group: String,
-    /// Segments diagnosed in the group.
-    pub segments: usize,
-    /// Segments with structured misfit.
-    pub structured: usize,
-    /// The effect named most often in the group (None if none named).
-    pub effect: Option<Effect>,
-    /// How many segments named it.
-    pub named: usize,
-    /// Σ LR of that effect over the group's segments where it was refitted.
-    pub pooled_lr: f64,
-    /// p-value of the pooled statistic (χ² with one dof per contributing segment).
-    pub pooled_p: f64,
-}
-
-/// Pool the evidence over groups: `groups[i]` lists the group labels of `diags[i]`.
-pub fn pool(diags: &[Diagnosis], groups: &[Vec<String>]) -> Vec<GroupFinding> {
-    use std::collections::BTreeMap;
-    let mut by: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
-    for (i, gs) in groups.iter().enumerate() {
-        for g in gs {
-            by.entry(g.as_str()).or_default().push(i);
-        }
+    let x0: Vec<f64> = fit.estimates.iter().map(|e| e.coordinate).collect();
+    let omegas: Vec<f64> = data.measurements.iter().map(|m| m.omega).collect();
+    let mut total = 0.0;
+    for i in 0..m {
+        let mut d = data.clone();
+        let held: Measurement = d.measurements.remove(i);
+        let p = Problem::new(
+            &d,
+            crate::invert::Method::Default,
+            s.model,
+            s.contact_mode,
+            effects,
+        );
+        let Ok(b) = p.bounds() else {
+            return f64::INFINITY;
+        };
+        let x = match LevenbergMarquardt::new().minimize(&p, &x0, Some(&b)) {
+            Ok(r) => r.x,
+            Err(_) => x0.clone(),
+        };
+        let Some(sys) = p.system_at(&x) else {
+            return f64::INFINITY;
+        };
+        let Some(k) = predict(&sys, &omegas) else {
+            return f64::INFINITY;
+        };
+        let k = k[i];
+        total += ((k.re - held.k_re) / held.k_re_std.unwrap_or(f64::NAN)).powi(2)
+            + ((-k.im - held.attenuation) / held.attenuation_std.unwrap_or(f64::NAN)).powi(2);
     }
-    let mut out = Vec::new();
-    for (g, idx) in by {
-        if idx.len() < 2 {
-            continue;
-        }
-        let mut counts: BTreeMap<Effect, usize> = BTreeMap::new();
-        for &i in &idx {
-            if let Some(e) = diags[i].named {
-                *counts.entry(e).or_default() += 1;
-            }
-        }
-        let top = counts
-            .iter()
-            .max_by_key(|(_, c)| **c)
-            .map(|(e, c)| (*e, *c));
-        let (mut lr, mut k) = (0.0, 0usize);
-        if let Some((e, _)) = top {
-            for &i in &idx {
-                for c in &diags[i].candidates {
-                    if c.effect == e {
-                        if let Some(r) = &c.refit {
-                            lr += r.lr.max(0.0);
-                            k += 1;
-                        }
-                    }
-                }
-            }
-        }
-        out.push(GroupFinding {
-            group: g.to_string(),
-            segments: idx.len(),
-            structured: idx
-                .iter()
-                .filter(|&&i| diags[i].structure.structured)
-                .count(),
-            effect: top.map(|t| t.0),
-            named: top.map(|t| t.1).unwrap_or(0),
-            pooled_lr: lr,
-            pooled_p: if k > 0 {
-                chi2_upper_tail(lr, k as f64)
-            } else {
-                f64::NAN
-            },
-        });
-    }
-    out
+    total
 }
 
 /// The effect's fitted value and standard error in a fit.

@@ -3,13 +3,15 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::{effect_value, Diagnosis, GroupFinding, Residuals};
+use super::group::GroupTest;
+use super::{effect_value, Diagnosis, Residuals};
 use crate::export::spreadsheet::{self, spreadsheet_safe};
+use crate::physics::effects::Effect;
 use crate::report::svg::escape as esc;
 use crate::units::sig;
 
 /// Columns of `diagnosis.csv`: the interface's, then details.
-pub const CSV_COLUMNS: [&str; 15] = [
+pub const CSV_COLUMNS: [&str; 20] = [
     "segment_id",
     "named_effect",
     "effect_value",
@@ -25,7 +27,130 @@ pub const CSV_COLUMNS: [&str; 15] = [
     "p_value",
     "holdout_chi2_before",
     "holdout_chi2_after",
+    "ambiguity",
+    "group_effect",
+    "group_chi2_per_dof_after",
+    "candidates_chi2_per_dof",
+    "record_to_check",
 ];
+
+/// Columns of `groups.csv` (interface.md).
+pub const GROUP_CSV_COLUMNS: [&str; 8] = [
+    "group",
+    "n_segments",
+    "named_effect",
+    "ambiguous_with",
+    "statistic",
+    "p_value",
+    "n_refitted",
+    "pooled_by_effect",
+];
+
+/// A segment's place in the pooled test: the key of its group when that group detected an
+/// effect, the effect, and the segment's χ²/dof after its refit with it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GroupRow {
+    /// The group's key (empty: in no detected group).
+    pub key: String,
+    /// The group's effect.
+    pub effect: Option<Effect>,
+    /// χ²/dof of the member refitted with it.
+    pub chi2_per_dof_after: Option<f64>,
+}
+
+/// "The measured data fit … far better than the recorded …" for a named inventory error.
+pub fn record_sentence(d: &Diagnosis) -> Option<String> {
+    let (c, _) = d.record.as_ref()?;
+    if d.named != Some(Effect::InventoryError) {
+        return None;
+    }
+    let (od, wall) = super::inventory::recorded_size(&d.data);
+    let mm = |v: f64| ((v * 10.0).round() / 10.0).to_string();
+    Some(format!(
+        "measured data fit {} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
+        c.label(),
+        d.data.material.map(|m| m.code()).unwrap_or("pipe"),
+        mm(od),
+        mm(wall),
+        c.change.describe()
+    ))
+}
+
+/// χ²/dof before and after each refitted candidate: `base 38.4; pipe_loss 38.1; …`.
+pub fn candidates_chi2(d: &Diagnosis) -> String {
+    let mut v = vec![format!("base {}", sig(d.chi2_per_dof_before(), 3))];
+    for c in &d.candidates {
+        if let Some(r) = &c.refit {
+            v.push(format!(
+                "{} {}",
+                c.effect.name(),
+                sig(r.fit.chi2_per_dof.unwrap_or(f64::NAN), 3)
+            ));
+        }
+    }
+    v.join("; ")
+}
+
+/// The ambiguity column: for each indistinguishable effect, why and what would separate it.
+pub fn ambiguity_text(d: &Diagnosis) -> String {
+    d.ambiguity
+        .iter()
+        .map(|a| format!("{}: {}; {}", a.effect.name(), a.quantity, a.separating))
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
+/// The named effect's value for the CSV: its parameter, or the record to check.
+fn value_and_std(d: &Diagnosis) -> (String, String) {
+    if d.named == Some(Effect::InventoryError) {
+        return (
+            d.record
+                .as_ref()
+                .map(|(c, _)| c.label())
+                .unwrap_or_default(),
+            String::new(),
+        );
+    }
+    d.named
+        .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
+        .map(|(v, s)| (v.to_string(), s.map(|s| s.to_string()).unwrap_or_default()))
+        .unwrap_or_default()
+}
+
+/// Write `groups.csv`, one row per group tested.
+pub fn write_groups_csv(path: &Path, groups: &[GroupTest]) -> Result<(), csv::Error> {
+    let mut w = spreadsheet::writer_from_path(path)?;
+    w.write_record(GROUP_CSV_COLUMNS)?;
+    for g in groups {
+        w.write_record([
+            spreadsheet_safe(&g.group).into_owned(),
+            g.members.len().to_string(),
+            g.effect.map(|e| e.name()).unwrap_or("none").to_string(),
+            g.ambiguous_with
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(","),
+            num(g.statistic()),
+            num(g.p_value()),
+            g.n_refitted.to_string(),
+            g.pooled
+                .iter()
+                .map(|p| {
+                    format!(
+                        "{} {} (p {})",
+                        p.effect.name(),
+                        sig(p.statistic, 3),
+                        sig(p.p_value, 2)
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; "),
+        ])?;
+    }
+    w.flush()?;
+    Ok(())
+}
 
 /// The evidence column: the statistic used and its value.
 pub fn evidence(d: &Diagnosis) -> String {
@@ -71,37 +196,38 @@ pub fn write_csv(
     path: &Path,
     ids: &[String],
     diags: &[Diagnosis],
-    groups: &[String],
+    groups: &[GroupRow],
 ) -> Result<(), csv::Error> {
     let mut w = spreadsheet::writer_from_path(path)?;
     w.write_record(CSV_COLUMNS)?;
     for ((id, d), g) in ids.iter().zip(diags).zip(groups) {
-        let (val, std) = d
-            .named
-            .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
-            .map(|(v, s)| (v.to_string(), s.map(|s| s.to_string()).unwrap_or_default()))
-            .unwrap_or_default();
+        let (val, std) = value_and_std(d);
         let r = d.chosen();
         w.write_record([
             spreadsheet_safe(id).as_ref(),
             d.named.map(|e| e.name()).unwrap_or("none"),
-            &val,
+            spreadsheet_safe(&val).as_ref(),
             &std,
             &num(d.chi2_per_dof_before()),
             &num(d.chi2_per_dof_after()),
             &evidence(d),
-            spreadsheet_safe(g).as_ref(),
+            spreadsheet_safe(&g.key).as_ref(),
             if d.structure.structured { "1" } else { "0" },
             &d.structure.pattern,
             &d.ambiguous_with
                 .iter()
                 .map(|e| e.name())
                 .collect::<Vec<_>>()
-                .join(" "),
+                .join(","),
             &r.map(|r| num(r.lr)).unwrap_or_default(),
             &r.map(|r| num(r.p_value)).unwrap_or_default(),
             &r.map(|r| num(r.holdout_base)).unwrap_or_default(),
             &r.map(|r| num(r.holdout_ext)).unwrap_or_default(),
+            &ambiguity_text(d),
+            g.effect.map(|e| e.name()).unwrap_or(""),
+            &g.chi2_per_dof_after.map(num).unwrap_or_default(),
+            &candidates_chi2(d),
+            &record_sentence(d).unwrap_or_default(),
         ])?;
     }
     w.flush()?;
@@ -208,7 +334,8 @@ pub fn write_html(
     path: &Path,
     ids: &[String],
     diags: &[Diagnosis],
-    groups: &[GroupFinding],
+    groups: &[GroupTest],
+    notes: &[String],
 ) -> std::io::Result<()> {
     let mut h = String::new();
     h.push_str("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>pipewave diagnosis</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px}th{background:#f0f0f0}.seg{border-top:2px solid #ddd;margin-top:1.5em;padding-top:.5em}.ok{color:#2a7}.none{color:#888}</style></head><body>");
@@ -220,16 +347,19 @@ pub fn write_html(
         "<p>{} segments diagnosed; {structured} with misfit far above the noise; an effect named for {named}.</p>",
         diags.len()
     );
+    for n in notes {
+        let _ = write!(h, "<p>{}</p>", esc(n));
+    }
     h.push_str("<h2>Summary</h2><table><tr><th>segment</th><th>pattern</th><th>named effect</th><th>value ± 1σ</th><th>χ²/dof before</th><th>after</th><th>evidence</th></tr>");
     for (id, d) in ids.iter().zip(diags) {
-        let val = d
-            .named
-            .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
-            .map(|(v, s)| match s {
-                Some(s) => format!("{} ± {}", sig(v, 3), sig(s, 2)),
-                None => sig(v, 3),
-            })
-            .unwrap_or_default();
+        let val = match value_and_std(d) {
+            (v, s) if s.is_empty() => v.parse::<f64>().map(|x| sig(x, 3)).unwrap_or(v),
+            (v, s) => format!(
+                "{} ± {}",
+                sig(v.parse().unwrap_or(f64::NAN), 3),
+                sig(s.parse().unwrap_or(f64::NAN), 2)
+            ),
+        };
         let _ = write!(
             h,
             "<tr><td><a href=\"#s-{0}\">{0}</a></td><td>{1}</td><td class=\"{2}\">{3}</td><td>{4}</td><td>{5}</td><td>{6}</td><td>{7}</td></tr>",
@@ -245,18 +375,24 @@ pub fn write_html(
     }
     h.push_str("</table>");
     if !groups.is_empty() {
-        h.push_str("<h2>Pooled over groups</h2><table><tr><th>group</th><th>segments</th><th>structured</th><th>most named effect</th><th>named by</th><th>pooled LR</th><th>pooled p</th></tr>");
+        h.push_str("<h2>Pooled over groups</h2><p>The pooled score test adds the members' one-sided score statistics for each candidate effect; under \"no effect\" the sum of n members follows the mixture Σ C(n,k)2<sup>−n</sup>χ²<sub>k</sub>. A group detects an effect when its p-value is below 0.01 divided by the number of effects tested; its members are then refitted with the effect.</p><table><tr><th>group</th><th>segments</th><th>detected effect</th><th>ambiguous with</th><th>statistic</th><th>p</th><th>refitted</th><th>all effects</th></tr>");
         for g in groups {
             let _ = write!(
                 h,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&g.group),
-                g.segments,
-                g.structured,
+                g.members.len(),
                 g.effect.map(|e| e.name()).unwrap_or("none"),
-                g.named,
-                sig(g.pooled_lr, 4),
-                sig(g.pooled_p, 2)
+                g.ambiguous_with.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+                sig(g.statistic(), 4),
+                sig(g.p_value(), 2),
+                g.n_refitted,
+                esc(&g
+                    .pooled
+                    .iter()
+                    .map(|p| format!("{} {} (p {})", p.effect.name(), sig(p.statistic, 3), sig(p.p_value, 2)))
+                    .collect::<Vec<_>>()
+                    .join("; "))
             );
         }
         h.push_str("</table>");
@@ -284,9 +420,33 @@ pub fn write_html(
         if d.assumed_noise {
             h.push_str("<p><em>No measurement standard deviations were stated: 1 % on Re k and 10 % on the attenuation were assumed.</em></p>");
         }
+        let _ = write!(
+            h,
+            "<p>Residual pattern: {}. χ²/dof before and after each candidate: {}.</p>",
+            esc(&d.structure.pattern),
+            esc(&candidates_chi2(d))
+        );
+        if let Some(t) = record_sentence(d) {
+            let _ = write!(h, "<p><strong>{}</strong></p>", esc(&t));
+        }
+        for a in &d.ambiguity {
+            let _ = write!(
+                h,
+                "<p>Indistinguishable from {}: both change the {}. To separate them: {}.</p>",
+                a.effect.name(),
+                esc(a.quantity),
+                esc(&a.separating)
+            );
+        }
         h.push_str(&residual_svg(&d.before, d.after.as_ref()));
-        h.push_str("<table><tr><th>candidate</th><th>meaning</th><th>score</th><th>LR</th><th>p</th><th>ΔAICc</th><th>held-out χ² base → ext</th><th>accepted</th></tr>");
+        h.push_str("<table><tr><th>candidate</th><th>meaning</th><th>score</th><th>χ²/dof after</th><th>LR</th><th>p</th><th>ΔAICc</th><th>held-out χ² base → ext</th><th>accepted</th></tr>");
         for c in &d.candidates {
+            let after = c
+                .refit
+                .as_ref()
+                .and_then(|r| r.fit.chi2_per_dof)
+                .map(|v| sig(v, 3))
+                .unwrap_or_default();
             let (lr, p, da, ho, acc) = match &c.refit {
                 Some(r) => (
                     sig(r.lr, 4),
@@ -305,7 +465,7 @@ pub fn write_html(
             };
             let _ = write!(
                 h,
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{lr}</td><td>{p}</td><td>{da}</td><td>{ho}</td><td>{acc}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td>{after}</td><td>{lr}</td><td>{p}</td><td>{da}</td><td>{ho}</td><td>{acc}</td></tr>",
                 c.effect.name(),
                 esc(c.effect.meaning()),
                 if c.score.is_nan() { "n/a".to_string() } else { sig(c.score, 3) }

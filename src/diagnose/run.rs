@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use rusqlite::Connection;
 
-use super::report::{evidence, write_csv, write_html};
-use super::{diagnose_segment, pool, DiagnoseSettings, Diagnosis};
+use super::group::{group_key, member_scores, test_groups, GroupBy, GroupTest};
+use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
+use super::{diagnose_segment, extended_fit, DiagnoseSettings, Diagnosis};
 use crate::batch::{curve_points, fit_row, segment_data, settings_hash};
 use crate::db::{self, DbError, NewRun, RunCounts, RunStatus, SegmentRecord};
 use crate::invert::{fit_segment, FitSettings, FitStatus, Method};
@@ -29,6 +30,8 @@ pub struct DiagnoseOptions {
     pub candidates: Vec<Effect>,
     /// Report directory.
     pub out_dir: PathBuf,
+    /// How segments are grouped for the pooled test.
+    pub group_by: GroupBy,
 }
 
 /// Errors of a diagnosis run.
@@ -48,6 +51,9 @@ pub enum DiagnoseError {
     /// The worker threads could not be started.
     #[error("cannot start {0} worker threads")]
     Threads(usize),
+    /// The group column is not in the database's inventory.
+    #[error("--group-by soil_zone: the inventory in this database has no soil_zone column (import a segments.csv with soil_zone)")]
+    NoZones,
 }
 
 /// What a diagnosis run did.
@@ -65,6 +71,8 @@ pub struct DiagnoseSummary {
     pub run_id: Option<i64>,
     /// Extended fits stored.
     pub stored: usize,
+    /// Groups in which the pooled test detected an effect.
+    pub groups_detected: usize,
 }
 
 impl DiagnoseSummary {
@@ -72,36 +80,34 @@ impl DiagnoseSummary {
     pub fn line(&self) -> String {
         let named: Vec<String> = self.named.iter().map(|(e, n)| format!("{e} {n}")).collect();
         format!(
-            "diagnose: {} segments, {} with misfit far above the noise; named: {}; {} extended fits stored; {} skipped",
+            "diagnose: {} segments, {} with misfit far above the noise; named: {}; {} groups with a pooled effect; {} extended fits stored; {} skipped",
             self.diagnosed,
             self.structured,
             if named.is_empty() { "none".to_string() } else { named.join(", ") },
+            self.groups_detected,
             self.stored,
             self.skipped.len()
         )
     }
 }
 
-/// The groups a segment is pooled in: its material, diameter class and soil type.
-pub fn groups_of(rec: &SegmentRecord) -> Vec<String> {
-    let od = rec.outer_diameter_mm;
-    let class = if od < 100.0 {
-        "<100 mm"
-    } else if od < 200.0 {
-        "100-200 mm"
-    } else if od < 300.0 {
-        "200-300 mm"
-    } else {
-        ">=300 mm"
-    };
-    let mut g = vec![
-        format!("material={}", rec.material.code()),
-        format!("diameter={class}"),
-    ];
-    if let Some(s) = rec.soil_type.as_deref().filter(|s| !s.is_empty()) {
-        g.push(format!("soil={s}"));
+/// The soil zone of every segment, when the inventory has a `soil_zone` column.
+fn soil_zones(conn: &Connection) -> Result<Option<BTreeMap<String, String>>, DiagnoseError> {
+    let has: bool = conn
+        .prepare("SELECT 1 FROM pragma_table_info('segments') WHERE name = 'soil_zone'")
+        .and_then(|mut st| st.exists([]))
+        .map_err(|e| DiagnoseError::Db(DbError::from(e)))?;
+    if !has {
+        return Ok(None);
     }
-    g
+    let mut st = conn
+        .prepare("SELECT segment_id, soil_zone FROM segments WHERE soil_zone IS NOT NULL")
+        .map_err(|e| DiagnoseError::Db(DbError::from(e)))?;
+    let rows = st
+        .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, String>(1)?)))
+        .and_then(|it| it.collect::<Result<BTreeMap<_, _>, _>>())
+        .map_err(|e| DiagnoseError::Db(DbError::from(e)))?;
+    Ok(Some(rows))
 }
 
 /// One diagnosed segment.
@@ -222,11 +228,76 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
             *summary.named.entry(e.name().to_string()).or_default() += 1;
         }
     }
+    // Group detection: the pooled score test over each group, and the members of a detected
+    // group refitted with its effect.
+    let zones = if opts.group_by == GroupBy::SoilZone {
+        Some(soil_zones(conn)?.ok_or(DiagnoseError::NoZones)?)
+    } else {
+        None
+    };
+    let keys: Vec<Option<String>> = diags
+        .iter()
+        .map(|d| {
+            let r = &d.record;
+            group_key(
+                opts.group_by,
+                r.material.code(),
+                r.install_year,
+                r.soil_type.as_deref(),
+                zones
+                    .as_ref()
+                    .and_then(|z| z.get(&r.segment_id))
+                    .map(String::as_str),
+            )
+        })
+        .collect();
+    let scores: Vec<Vec<(Effect, f64)>> =
+        diags.iter().map(|d| member_scores(&d.diagnosis)).collect();
+    let mut groups = test_groups(&keys, &scores);
+    let rows = pool.install(|| refit_groups(&diags, &mut groups));
+    summary.groups_detected = groups.iter().filter(|g| g.effect.is_some()).count();
     if opts.apply {
         store(conn, &diags, opts, &mut summary)?;
     }
-    report(&diags, &opts.out_dir)?;
+    report(&diags, &groups, &rows, &opts.out_dir)?;
     Ok(summary)
+}
+
+/// Refit the members of every detected group with the group's effect (those whose own
+/// diagnosis did not already add it), and give each segment its row of the pooled test.
+fn refit_groups(diags: &[Done], groups: &mut [GroupTest]) -> Vec<GroupRow> {
+    let mut rows = vec![GroupRow::default(); diags.len()];
+    for g in groups.iter_mut() {
+        let Some(e) = g.effect else { continue };
+        let refits: Vec<(usize, Option<f64>)> = g
+            .members
+            .par_iter()
+            .map(|&i| {
+                let d = &diags[i];
+                if d.diagnosis.named == Some(e) {
+                    return (i, Some(d.diagnosis.chi2_per_dof_after()));
+                }
+                if d.diagnosis.base_failed() {
+                    return (i, None);
+                }
+                let mut effects = d.settings.base_effects.clone();
+                effects.push(e);
+                effects.sort();
+                effects.dedup();
+                let fit = extended_fit(&d.diagnosis.data, &d.settings, effects, &d.diagnosis.base);
+                (i, fit.chi2_per_dof)
+            })
+            .collect();
+        g.n_refitted = refits.iter().filter(|r| r.1.is_some()).count();
+        for (i, chi2) in refits {
+            rows[i] = GroupRow {
+                key: g.group.clone(),
+                effect: Some(e),
+                chi2_per_dof_after: chi2,
+            };
+        }
+    }
+    rows
 }
 
 /// Step 3: a new fit row per named effect, and the segment's effects for the next calibrate.
@@ -236,9 +307,15 @@ fn store(
     opts: &DiagnoseOptions,
     summary: &mut DiagnoseSummary,
 ) -> Result<(), DiagnoseError> {
+    // An inventory error is reported, not stored: its fit belongs to another record, which a
+    // person must check and correct in the inventory.
     let named: Vec<&Done> = diags
         .iter()
-        .filter(|d| d.diagnosis.named.is_some())
+        .filter(|d| {
+            d.diagnosis
+                .named
+                .is_some_and(|e| e != Effect::InventoryError)
+        })
         .collect();
     if named.is_empty() {
         return Ok(());
@@ -274,8 +351,14 @@ fn store(
             &effects,
         );
         let ev = evidence(&d.diagnosis);
+        let value = d
+            .diagnosis
+            .named
+            .and_then(|e| super::effect_value(fit, e))
+            .map(|(v, _)| format!(" = {}", crate::units::sig(v, 4)))
+            .unwrap_or_default();
         row.message = Some(format!(
-            "diagnose: added {}{}: {ev}",
+            "diagnose: added {}{value}{}: {ev}",
             d.diagnosis.named.map(|e| e.name()).unwrap_or(""),
             if d.diagnosis.assumed_noise {
                 " (noise assumed: 1 % Re k, 10 % attenuation)"
@@ -283,7 +366,7 @@ fn store(
                 ""
             }
         ));
-        let curve = curve_points(&fit);
+        let curve = curve_points(fit);
         db::insert_fit_with_curves(conn, &row, &curve)?;
         db::set_segment_effects(
             conn,
@@ -305,36 +388,23 @@ fn store(
     Ok(())
 }
 
-/// Step 4: `diagnosis.csv` and `diagnosis.html` in `dir`.
-fn report(diags: &[Done], dir: &Path) -> Result<(), DiagnoseError> {
+/// Step 4: `diagnosis.csv`, `groups.csv` and `diagnosis.html` in `dir`.
+fn report(
+    diags: &[Done],
+    groups: &[GroupTest],
+    rows: &[GroupRow],
+    dir: &Path,
+) -> Result<(), DiagnoseError> {
     let err = |m: String| DiagnoseError::Report {
         dir: dir.to_path_buf(),
         message: m,
     };
     std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
     let ids: Vec<String> = diags.iter().map(|d| d.record.segment_id.clone()).collect();
-    let all_groups: Vec<Vec<String>> = diags.iter().map(|d| groups_of(&d.record)).collect();
     let ds: Vec<Diagnosis> = diags.iter().map(|d| d.diagnosis.clone()).collect();
-    let findings = pool(&ds, &all_groups);
-    // The group column: the pooled groups of the segment in which its named effect is also
-    // the group's most named one.
-    let group_col: Vec<String> = ds
-        .iter()
-        .zip(&all_groups)
-        .map(|(d, gs)| {
-            gs.iter()
-                .filter(|g| {
-                    findings.iter().any(|f| {
-                        &f.group == *g && f.effect.is_some() && f.effect == d.named && f.named >= 2
-                    })
-                })
-                .cloned()
-                .collect::<Vec<_>>()
-                .join(" ")
-        })
-        .collect();
-    write_csv(&dir.join("diagnosis.csv"), &ids, &ds, &group_col).map_err(|e| err(e.to_string()))?;
-    write_html(&dir.join("diagnosis.html"), &ids, &ds, &findings)
+    write_csv(&dir.join("diagnosis.csv"), &ids, &ds, rows).map_err(|e| err(e.to_string()))?;
+    write_groups_csv(&dir.join("groups.csv"), groups).map_err(|e| err(e.to_string()))?;
+    write_html(&dir.join("diagnosis.html"), &ids, &ds, groups, &[])
         .map_err(|e| err(e.to_string()))?;
     Ok(())
 }

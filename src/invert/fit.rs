@@ -399,14 +399,7 @@ fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
         .map(|s| {
             let v = match (base.get(s.param), s.param) {
                 (Some(b), _) => b.value,
-                (None, Param::Effect(e)) => {
-                    let neutral = e.parameter()?.neutral;
-                    match e {
-                        // NaN: the material's own value.
-                        Effect::PipeLoss if neutral.is_nan() => problem.data.pipe.loss_factor,
-                        _ => neutral,
-                    }
-                }
+                (None, Param::Effect(e)) => e.neutral_value(base.system.as_ref()?)?,
                 (None, _) => return None,
             };
             let c = s.coordinate(v);

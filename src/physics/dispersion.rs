@@ -179,7 +179,7 @@ impl Evaluator {
     /// Precompute eqs. P8–P14 for `system` at angular frequency `omega` (rad/s).
     pub fn new(system: &System, omega: f64) -> Self {
         let (fl, p, s) = (&system.fluid, &system.pipe, &system.soil);
-        let e_hat = Complex64::new(p.youngs_modulus, p.youngs_modulus * p.loss_factor); // P9
+        let e_hat = p.complex_modulus(omega); // P9 (P70 for a viscoelastic wall)
         let one_nu2 = 1.0 - p.poisson * p.poisson;
         let (a, h) = (p.mean_radius, p.wall_thickness);
         let soil = if s.is_absent() {

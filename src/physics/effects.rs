@@ -3,7 +3,10 @@
 //! Each effect changes one forward-model input: soil damping the soil loss factor η_m (E1,
 //! eq. P13), pipe loss the wall loss factor η_p (E2, eq. P9), air in the water the fluid's bulk
 //! modulus and density by Wood's equation (E3, eqs. P60–P61), wall thinning the effective wall
-//! thickness (E4, eq. P62), and the full model the model variant (E6, eq. P33).
+//! thickness (E4, eq. P62), the full model the model variant (E6, eq. P33), and the
+//! viscoelastic wall the frequency dependence of the wall modulus (E7, eqs. P70–P71).
+//! `inventory_error` (E8) is not a model input: it is tested by refitting candidate inventory
+//! records ([`crate::diagnose::inventory`]).
 
 use super::inputs::{check_range, Fluid, InputError, Model, Pipe, System};
 
@@ -19,6 +22,14 @@ pub const DEFAULT_TEMPERATURE_K: f64 = 288.15;
 pub const MAX_AIR_FRACTION: f64 = 0.02;
 /// Smallest effective / nominal wall thickness ratio (spec §8 E4).
 pub const MIN_WALL_RATIO: f64 = 0.3;
+/// Largest exponent n of the power-law wall modulus (spec §8 E7: η_p = tan(nπ/2) ≤ 0.32).
+pub const MAX_VISCOELASTIC_EXPONENT: f64 = 0.2;
+
+/// The exponent n of the power-law wall modulus whose loss factor tan(nπ/2) equals η (eq. P71
+/// inverted): the viscoelastic wall closest to a constant-loss wall of loss factor η.
+pub fn exponent_of_loss_factor(eta: f64) -> f64 {
+    eta.atan() / std::f64::consts::FRAC_PI_2
+}
 
 /// Free air in the water (spec §8 E3).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -140,16 +151,34 @@ pub enum Effect {
     PipeLoss,
     /// E6: the `full` model in place of `seed` (no parameter).
     FullModel,
+    /// E7: a causal power-law wall modulus, exponent n (replaces the constant η_p).
+    ViscoelasticWall,
+    /// E8: the inventory describes another pipe (no continuous parameter: candidate records
+    /// are refitted, [`crate::diagnose::inventory`]).
+    InventoryError,
 }
 
 impl Effect {
     /// Every effect, in the interface's order.
-    pub const ALL: [Effect; 5] = [
+    pub const ALL: [Effect; 7] = [
         Effect::SoilDamping,
         Effect::AirInWater,
         Effect::WallThinning,
         Effect::PipeLoss,
         Effect::FullModel,
+        Effect::ViscoelasticWall,
+        Effect::InventoryError,
+    ];
+
+    /// The effects that change the physics of the model (every effect but `inventory_error`,
+    /// which changes the record).
+    pub const PHYSICAL: [Effect; 6] = [
+        Effect::SoilDamping,
+        Effect::AirInWater,
+        Effect::WallThinning,
+        Effect::PipeLoss,
+        Effect::FullModel,
+        Effect::ViscoelasticWall,
     ];
 
     /// Canonical name.
@@ -160,11 +189,14 @@ impl Effect {
             Effect::WallThinning => "wall_thinning",
             Effect::PipeLoss => "pipe_loss",
             Effect::FullModel => "full_model",
+            Effect::ViscoelasticWall => "viscoelastic_wall",
+            Effect::InventoryError => "inventory_error",
         }
     }
 
     /// The parameter it adds, its range and the value that means "effect absent"; `None` for
-    /// `full_model`, which is a switch.
+    /// `full_model`, which is a switch, and for `inventory_error`, which is a choice among
+    /// records. A NaN neutral value depends on the pipe: see [`Effect::neutral_value`].
     pub fn parameter(self) -> Option<EffectParameter> {
         let p = |name, lower, upper, neutral| {
             Some(EffectParameter {
@@ -179,8 +211,28 @@ impl Effect {
             Effect::AirInWater => p("air_fraction", 0.0, MAX_AIR_FRACTION, 0.0),
             Effect::WallThinning => p("wall_thickness_ratio", MIN_WALL_RATIO, 1.0, 1.0),
             Effect::PipeLoss => p("pipe_loss_factor", 0.0, 0.3, f64::NAN),
-            Effect::FullModel => None,
+            Effect::ViscoelasticWall => p(
+                "viscoelastic_exponent",
+                0.0,
+                MAX_VISCOELASTIC_EXPONENT,
+                f64::NAN,
+            ),
+            Effect::FullModel | Effect::InventoryError => None,
         }
+    }
+
+    /// The parameter value at which the effect changes the least for `system`: the neutral
+    /// value of [`Effect::parameter`], or where that depends on the pipe, the material's own
+    /// loss factor (`pipe_loss`) and the exponent with the same loss factor, tan(nπ/2) = η_p
+    /// (`viscoelastic_wall`, eq. P71; its storage modulus still rises by 10^n per decade, so
+    /// this wall equals the constant-loss one only at ω_ref). `None` without a parameter.
+    pub fn neutral_value(self, system: &System) -> Option<f64> {
+        let p = self.parameter()?;
+        Some(match self {
+            Effect::PipeLoss => system.pipe.loss_factor,
+            Effect::ViscoelasticWall => exponent_of_loss_factor(system.pipe.loss_factor),
+            _ => p.neutral,
+        })
     }
 
     /// Physical meaning, for reports.
@@ -193,11 +245,18 @@ impl Effect {
                 "wall material and joint damping above the material's typical value"
             }
             Effect::FullModel => "exact radial fluid loading and axial wall inertia (full model)",
+            Effect::ViscoelasticWall => {
+                "a viscoelastic wall: modulus rising with frequency, loss tied to it (power law)"
+            }
+            Effect::InventoryError => {
+                "the inventory describes another pipe (material, wall class or diameter units)"
+            }
         }
     }
 
     /// Apply the effect with parameter `value` to a system (the base is unchanged).
-    /// `full_model` ignores `value`.
+    /// `full_model` ignores `value`. `inventory_error` is not a change of the system and is an
+    /// error here (its candidates are whole records: [`crate::diagnose::inventory`]).
     pub fn apply(self, system: &System, value: f64) -> Result<System, InputError> {
         let mut s = *system;
         match self {
@@ -212,6 +271,23 @@ impl Effect {
                 s.pipe.loss_factor = check_range("pipe loss factor", value, 0.0, 0.3, "0 - 0.3")?;
             }
             Effect::FullModel => s.model = Model::Full,
+            Effect::ViscoelasticWall => {
+                s.pipe.viscoelastic_exponent = check_range(
+                    "viscoelastic exponent",
+                    value,
+                    0.0,
+                    MAX_VISCOELASTIC_EXPONENT,
+                    "0 - 0.2",
+                )?;
+            }
+            Effect::InventoryError => {
+                return Err(InputError::Unknown {
+                    what: "model change",
+                    value: "inventory_error".into(),
+                    expected:
+                        "an effect with a parameter (inventory_error refits candidate records)",
+                })
+            }
         }
         Ok(s)
     }
@@ -246,7 +322,7 @@ impl std::str::FromStr for Effect {
             .ok_or_else(|| InputError::Unknown {
                 what: "effect",
                 value: s.to_string(),
-                expected: "soil_damping, air_in_water, wall_thinning, pipe_loss, full_model",
+                expected: "soil_damping, air_in_water, wall_thinning, pipe_loss, full_model, viscoelastic_wall, inventory_error",
             })
     }
 }

@@ -6,6 +6,8 @@
 use std::fmt;
 use std::str::FromStr;
 
+use num_complex::Complex64;
+
 /// A physical input outside its valid range, with the offending value.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
@@ -204,9 +206,26 @@ pub struct Pipe {
     pub mean_radius: f64,
     /// Wall thickness h, m.
     pub wall_thickness: f64,
+    /// Exponent n of the causal power-law wall modulus of spec §8 E7 (eq. P70); 0 means the
+    /// constant-loss wall of eq. P9 (the default). When n > 0 it replaces `loss_factor`.
+    pub viscoelastic_exponent: f64,
 }
 
+/// Reference angular frequency ω_ref of the power-law wall modulus, rad/s: 2π·100 (eq. P70).
+pub const VISCOELASTIC_REFERENCE_OMEGA: f64 = 2.0 * std::f64::consts::PI * 100.0;
+
 impl Pipe {
+    /// The complex wall modulus Ê_p at angular frequency ω (rad/s): E_p(1 + iη_p) (eq. P9), or,
+    /// with a viscoelastic exponent n > 0, E_p (ω/ω_ref)^n (1 + i tan(nπ/2)) (eqs. P70–P71).
+    pub fn complex_modulus(&self, omega: f64) -> Complex64 {
+        let n = self.viscoelastic_exponent;
+        if n == 0.0 {
+            return Complex64::new(self.youngs_modulus, self.youngs_modulus * self.loss_factor);
+        }
+        let storage = self.youngs_modulus * (omega / VISCOELASTIC_REFERENCE_OMEGA).powf(n);
+        Complex64::new(storage, storage * (n * std::f64::consts::FRAC_PI_2).tan())
+    }
+
     /// A checked pipe (spec §3.1): E_p 1e8–3e11 Pa, ν_p 0–0.49, ρ_p 500–9000 kg/m³,
     /// η_p 0–0.3, a 0.005–1.5 m, h > 0 and h/a ≤ 0.25.
     pub fn new(
@@ -250,6 +269,7 @@ impl Pipe {
             loss_factor,
             mean_radius,
             wall_thickness,
+            viscoelastic_exponent: 0.0,
         })
     }
 
