@@ -50,6 +50,22 @@ mod tests {
     }
 }
 
+/// `x` in short form for messages: the shortest digits that read back to the same `f64`, in
+/// plain notation from 1e-4 up to 1e15 and in scientific notation outside (`1e308`, not 309
+/// digits; `2.5e-7`, not `0.00000025`). `0.0542` stays `0.0542`.
+pub fn short(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 || !x.is_finite() || (1e-4..1e15).contains(&a) {
+        // Display of -0.0 is "-0"; a message means 0.
+        if x == 0.0 {
+            return "0".to_string();
+        }
+        x.to_string()
+    } else {
+        format!("{x:e}")
+    }
+}
+
 /// `x` with `digits` significant digits, in plain or scientific notation as fits (for
 /// messages and reports).
 pub fn sig(x: f64, digits: usize) -> String {
@@ -70,7 +86,21 @@ pub fn sig(x: f64, digits: usize) -> String {
 
 #[cfg(test)]
 mod sig_tests {
-    use super::sig;
+    use super::{short, sig};
+
+    #[test]
+    fn short_numbers_for_messages() {
+        assert_eq!(short(1e308), "1e308");
+        assert_eq!(short(-1.5e300), "-1.5e300");
+        assert_eq!(short(0.0542), "0.0542");
+        assert_eq!(short(2.5e-7), "2.5e-7");
+        assert_eq!(short(170.0), "170");
+        assert_eq!(short(5.3), "5.3");
+        assert_eq!(short(-0.0), "0");
+        assert_eq!(short(f64::MIN_POSITIVE), "2.2250738585072014e-308");
+        assert_eq!(short(123456789012345.0), "123456789012345");
+        assert!(short(f64::MAX).len() < 30);
+    }
 
     #[test]
     fn significant_digits() {

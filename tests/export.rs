@@ -151,7 +151,7 @@ fn geopackage_meets_the_standard_and_holds_the_database_values() {
     let exp = expected(&database);
     let g = Connection::open(&out).unwrap();
 
-    // Req. 2: application id 'GPKG' and version 1.4.0.
+    // Req. 2: application id 'GPKG' and version 1.2.0 (what GDAL 3.6 reads without a warning).
     let app: i64 = g
         .query_row("PRAGMA application_id", [], |r| r.get(0))
         .unwrap();
@@ -159,7 +159,7 @@ fn geopackage_meets_the_standard_and_holds_the_database_values() {
     let ver: i64 = g
         .query_row("PRAGMA user_version", [], |r| r.get(0))
         .unwrap();
-    assert_eq!(ver, 10400);
+    assert_eq!(ver, 10200);
     let ok: String = g
         .query_row("PRAGMA integrity_check", [], |r| r.get(0))
         .unwrap();
@@ -395,19 +395,12 @@ fn geopackage_meets_the_standard_and_holds_the_database_values() {
     assert_eq!(expected(&database).len(), N);
 }
 
-/// GDAL's messages, less the one a GDAL older than GeoPackage 1.4 support (3.6 and before, as in
-/// Debian 12) prints for every 1.4 file, "This version of GeoPackage user_version=0x000028A0
-/// (10400, v1.4.0) ... may only be partially supported": a statement about GDAL, not the file.
-/// Newer GDAL prints nothing, so any other line is a real problem.
+/// GDAL's messages on stderr: every non-blank line is a warning or an error (ogrinfo prints
+/// nothing there for a file it reads cleanly; GDAL 3.6 used to print "This version of
+/// GeoPackage user_version=0x000028A0 (10400, v1.4.0) ... may only be partially supported" for
+/// a GeoPackage that declared 1.4).
 fn gdal_warnings(stderr: &str) -> Vec<&str> {
-    stderr
-        .lines()
-        .filter(|l| !l.trim().is_empty())
-        .filter(|l| {
-            !(l.contains("user_version=0x000028A0 (10400, v1.4.0)")
-                && l.contains("may only be partially supported"))
-        })
-        .collect()
+    stderr.lines().filter(|l| !l.trim().is_empty()).collect()
 }
 
 #[test]
@@ -441,6 +434,17 @@ fn geopackage_opens_in_gdal_without_warnings() {
         "{stdout}"
     );
     assert!(stdout.contains("leak_band_speed_m_per_s: Real"), "{stdout}");
+    // QGIS's style table, read by GDAL with QGIS's field types.
+    assert!(stdout.contains("Layer name: layer_styles"), "{stdout}");
+    for field in [
+        "f_table_name: String (256.0)",
+        "styleName: String (30.0)",
+        "styleQML: String (0.0)",
+        "useAsDefault: Integer(Boolean) (0.0)",
+        "update_time: DateTime (0.0)",
+    ] {
+        assert!(stdout.contains(field), "{field} missing in {stdout}");
+    }
     // The full read (every feature, geometry decoded) is also silent.
     let o = Command::new("ogrinfo")
         .args(["-ro", "-al", "-q"])
@@ -457,6 +461,156 @@ fn geopackage_opens_in_gdal_without_warnings() {
         stdout.matches("LINESTRING (").count(),
         (0..N).filter(|&i| fx::has_geometry(i)).count()
     );
+}
+
+/// The QML of a style, checked: well-formed XML whose graduated renderer colours by
+/// `leak_band_speed_m_per_s`. Returns each class as (lower, upper, label).
+fn qml_classes(qml: &str) -> Vec<(f64, f64, String)> {
+    use quick_xml::events::Event;
+    let mut r = quick_xml::Reader::from_str(qml);
+    let mut renderer = None;
+    let mut classes = Vec::new();
+    let mut depth = 0i64;
+    loop {
+        let (e, is_start) = match r.read_event() {
+            Ok(Event::Start(e)) => (e, true),
+            Ok(Event::Empty(e)) => (e, false),
+            Ok(Event::End(_)) => {
+                depth -= 1;
+                continue;
+            }
+            Ok(Event::Eof) => break,
+            Ok(_) => continue,
+            Err(e) => panic!("the QML is not well-formed at {}: {e}", r.buffer_position()),
+        };
+        depth += i64::from(is_start);
+        let attr = |name: &str| -> Option<String> {
+            e.attributes()
+                .map(|a| a.expect("attribute"))
+                .find(|a| a.key.as_ref() == name.as_bytes())
+                .map(|a| String::from_utf8(a.value.into_owned()).unwrap())
+        };
+        match e.name().as_ref() {
+            b"renderer-v2" => renderer = Some((attr("type").unwrap(), attr("attr").unwrap())),
+            b"range" => classes.push((
+                attr("lower").unwrap().parse().unwrap(),
+                attr("upper").unwrap().parse().unwrap(),
+                attr("label").unwrap(),
+            )),
+            _ => {}
+        }
+    }
+    assert_eq!(depth, 0, "unbalanced elements");
+    assert_eq!(
+        renderer,
+        Some(("graduatedSymbol".into(), "leak_band_speed_m_per_s".into()))
+    );
+    classes
+}
+
+/// The classes cover every exported leak-band speed, increase, and are labelled in m/s.
+fn check_classes(classes: &[(f64, f64, String)], database: &Database) {
+    assert!(!classes.is_empty() && classes.len() <= 5, "{classes:?}");
+    for w in classes.windows(2) {
+        assert_eq!(w[0].1, w[1].0, "contiguous classes: {classes:?}");
+    }
+    for (lo, hi, label) in classes {
+        assert!(lo < hi);
+        assert_eq!(*label, format!("{lo:.0} – {hi:.0} m/s"));
+    }
+    let speeds: Vec<f64> = expected(database)
+        .values()
+        .filter_map(|e| band_mean(&e.curve))
+        .collect();
+    assert!(speeds.len() > 5, "the fixture has fitted segments");
+    let (lo, hi) = (classes[0].0, classes[classes.len() - 1].1);
+    for v in speeds {
+        assert!(lo <= v && v <= hi, "{v} outside {lo}..{hi}");
+    }
+}
+
+#[test]
+fn geopackage_carries_a_default_qgis_style_in_qgis_layout() {
+    let (dir, database) = network(N);
+    let out = dir.path().join("net.gpkg");
+    export::write(&database, ExportFormat::Gpkg, &out).unwrap();
+    let g = Connection::open(&out).unwrap();
+    // The table as QGIS creates it (through GDAL): names, declared types, primary key.
+    let cols: Vec<(String, String, i64)> = g
+        .prepare("SELECT name, type, pk FROM pragma_table_info('layer_styles')")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let want = [
+        ("id", "INTEGER", 1),
+        ("f_table_catalog", "TEXT(256)", 0),
+        ("f_table_schema", "TEXT(256)", 0),
+        ("f_table_name", "TEXT(256)", 0),
+        ("f_geometry_column", "TEXT(256)", 0),
+        ("styleName", "TEXT(30)", 0),
+        ("styleQML", "TEXT", 0),
+        ("styleSLD", "TEXT", 0),
+        ("useAsDefault", "BOOLEAN", 0),
+        ("description", "TEXT", 0),
+        ("owner", "TEXT(30)", 0),
+        ("ui", "TEXT(30)", 0),
+        ("update_time", "DATETIME", 0),
+    ];
+    assert_eq!(
+        cols,
+        want.map(|(n, t, pk)| (n.to_string(), t.to_string(), pk))
+    );
+    let kind: String = g
+        .query_row(
+            "SELECT data_type FROM gpkg_contents WHERE table_name = 'layer_styles'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(kind, "attributes");
+    // One default style for the feature table, as QGIS looks it up (loadStyle's filter).
+    let rows: Vec<(String, i64, String, String)> = g
+        .prepare(
+            "SELECT styleName, useAsDefault, styleQML, update_time FROM layer_styles \
+             WHERE f_table_schema = '' AND f_table_name = 'pipe_segments' \
+             AND f_geometry_column = 'geom'",
+        )
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(rows.len(), 1);
+    let (name, default, qml, time) = &rows[0];
+    assert!(!name.is_empty() && name.len() <= 30, "{name}");
+    assert_eq!(*default, 1);
+    assert!(time.ends_with('Z') && time.len() == 24, "{time}");
+    check_classes(&qml_classes(qml), &database);
+}
+
+#[test]
+fn geojson_and_csv_exports_get_the_style_as_a_qml_file_beside_them() {
+    let (dir, database) = network(N);
+    let g = dir.path().join("net.gpkg");
+    export::write(&database, ExportFormat::Gpkg, &g).unwrap();
+    let stored: String = Connection::open(&g)
+        .unwrap()
+        .query_row("SELECT styleQML FROM layer_styles", [], |r| r.get(0))
+        .unwrap();
+    for (format, file, qml) in [
+        (ExportFormat::GeoJson, "net.geojson", "net.qml"),
+        (ExportFormat::Csv, "join.csv", "join.qml"),
+    ] {
+        export::write(&database, format, &dir.path().join(file)).unwrap();
+        let text = std::fs::read_to_string(dir.path().join(qml)).unwrap();
+        check_classes(&qml_classes(&text), &database);
+        assert_eq!(
+            text, stored,
+            "{format}: the same style as in the GeoPackage"
+        );
+    }
 }
 
 /// One segment at a given geometry in a new database.

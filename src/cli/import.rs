@@ -1,4 +1,5 @@
-//! `pipewave import --db DB [--segments FILE] [--measurements FILE] [--skip-invalid]`.
+//! `pipewave import --db DB [--segments FILE] [--layer NAME] [--map COLUMN=FIELD]...
+//! [--measurements FILE] [--skip-invalid] [--strict]`.
 
 use std::path::PathBuf;
 
@@ -15,9 +16,20 @@ pub struct ImportArgs {
     /// The database (created if it does not exist).
     #[arg(long, value_name = "DB")]
     db: PathBuf,
-    /// Inventory of pipe segments (segments.csv).
+    /// Inventory of pipe segments: segments.csv, or a GIS layer (GeoPackage .gpkg, GeoJSON
+    /// .geojson, ESRI Shapefile .shp with its .dbf and .prj).
     #[arg(long, value_name = "FILE")]
     segments: Option<PathBuf>,
+    /// The layer of a GeoPackage that holds several.
+    #[arg(long, value_name = "NAME")]
+    layer: Option<String>,
+    /// The file's field for one of pipewave's columns, e.g. --map segment_id=ASSET_ID
+    /// (repeatable).
+    #[arg(long = "map", value_name = "COLUMN=FIELD", value_parser = parse_map)]
+    map: Vec<(String, String)>,
+    /// Reject columns pipewave does not know, instead of ignoring them with a note.
+    #[arg(long)]
+    strict: bool,
     /// Field wavenumbers (measurements.csv); their segments must be in the database or in
     /// --segments.
     #[arg(long, value_name = "FILE")]
@@ -47,6 +59,9 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         measurements.as_ref(),
         ImportOptions {
             skip_invalid: args.skip_invalid,
+            strict: args.strict,
+            layer: args.layer.clone(),
+            map: args.map.clone(),
         },
     )
     .with_context(|| {
@@ -55,6 +70,9 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
             args.db.display()
         )
     })?;
+    for n in &report.notes {
+        eprintln!("note: {n}");
+    }
     for e in &report.errors {
         eprintln!("{e}");
     }
@@ -78,6 +96,25 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         );
     }
     Ok(Outcome::Done)
+}
+
+/// `COLUMN=FIELD`, COLUMN one of pipewave's columns.
+fn parse_map(s: &str) -> Result<(String, String), String> {
+    let (c, f) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}' is not COLUMN=FIELD (such as segment_id=ASSET_ID)"))?;
+    let (c, f) = (c.trim(), f.trim());
+    let known = db::known_columns();
+    if !known.iter().any(|k| k.eq_ignore_ascii_case(c)) {
+        return Err(format!(
+            "'{c}' is not a pipewave column; the columns are: {}",
+            known.join(", ")
+        ));
+    }
+    if f.is_empty() {
+        return Err(format!("--map {c}=: the field name is missing"));
+    }
+    Ok((c.to_ascii_lowercase(), f.to_string()))
 }
 
 fn plural(n: usize) -> &'static str {

@@ -48,6 +48,9 @@ pub struct SegmentRecord {
     pub soil_type: Option<String>,
     /// Year laid (informational).
     pub install_year: Option<i64>,
+    /// The soil unit the segment lies in, from a geotechnical map or survey (informational for
+    /// the segment's own fit; segments of one zone are also estimated together, physics §7.11).
+    pub soil_zone: Option<String>,
     /// `LINESTRING (x y, ...)` in EPSG:`srid`, canonical form.
     pub geometry_wkt: Option<String>,
     /// EPSG code of the geometry.
@@ -183,6 +186,7 @@ impl SegmentRecord {
             && self.length_m == other.length_m
             && self.soil_type == other.soil_type
             && self.install_year == other.install_year
+            && self.soil_zone == other.soil_zone
             && self.geometry_wkt == other.geometry_wkt
             && self.srid == other.srid
     }
@@ -191,7 +195,7 @@ impl SegmentRecord {
 const SEGMENT_COLUMNS: &str = "segment_id, material, outer_diameter_mm, wall_thickness_mm, \
     soil_density_kg_m3, pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, \
     pipe_loss_factor, fluid_density_kg_m3, fluid_bulk_modulus_pa, length_m, soil_type, \
-    install_year, geometry_wkt, srid, inputs_hash, imported_at";
+    install_year, geometry_wkt, srid, inputs_hash, imported_at, soil_zone";
 
 const MEASUREMENT_COLUMNS: &str = "omega_rad_s, frequency_hz, k_re_rad_per_m, \
     attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign";
@@ -220,6 +224,7 @@ fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, String)> {
             srid: r.get(15)?,
             inputs_hash: r.get(16)?,
             imported_at: r.get(17)?,
+            soil_zone: r.get(18)?,
             measurements: Vec::new(),
         },
         material,
@@ -326,8 +331,8 @@ pub(crate) fn insert_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
         "INSERT INTO segments (segment_id, material, outer_diameter_mm, wall_thickness_mm, \
          soil_density_kg_m3, pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, \
          pipe_loss_factor, fluid_density_kg_m3, fluid_bulk_modulus_pa, length_m, soil_type, \
-         install_year, geometry_wkt, srid, inputs_hash) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17)",
+         install_year, geometry_wkt, srid, inputs_hash, soil_zone) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18)",
     )?
     .execute(params![
         s.segment_id,
@@ -347,6 +352,7 @@ pub(crate) fn insert_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
         s.geometry_wkt,
         s.srid,
         s.inputs_hash,
+        s.soil_zone,
     ])?;
     Ok(())
 }
@@ -358,7 +364,7 @@ pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
          soil_density_kg_m3 = ?5, pipe_youngs_modulus_pa = ?6, pipe_poisson = ?7, \
          pipe_density_kg_m3 = ?8, pipe_loss_factor = ?9, fluid_density_kg_m3 = ?10, \
          fluid_bulk_modulus_pa = ?11, length_m = ?12, soil_type = ?13, install_year = ?14, \
-         geometry_wkt = ?15, srid = ?16, \
+         geometry_wkt = ?15, srid = ?16, soil_zone = ?17, \
          imported_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
          WHERE segment_id = ?1",
     )?
@@ -379,6 +385,7 @@ pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
         s.install_year,
         s.geometry_wkt,
         s.srid,
+        s.soil_zone,
     ])?;
     Ok(())
 }
@@ -447,6 +454,7 @@ mod tests {
             length_m: Some(120.0),
             soil_type: Some("clay".into()),
             install_year: Some(1975),
+            soil_zone: Some("Z1".into()),
             geometry_wkt: None,
             srid: None,
             inputs_hash: String::new(),

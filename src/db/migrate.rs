@@ -42,6 +42,16 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0004_determined.sql",
         sql: include_str!("../../migrations/0004_determined.sql"),
     },
+    Migration {
+        version: 5,
+        name: "0005_zone_fits.sql",
+        sql: include_str!("../../migrations/0005_zone_fits.sql"),
+    },
+    Migration {
+        version: 7,
+        name: "0007_soil_zone.sql",
+        sql: include_str!("../../migrations/0007_soil_zone.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

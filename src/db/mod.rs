@@ -26,7 +26,10 @@ use std::time::Duration;
 pub use rusqlite::Connection;
 
 pub use effects::{effects_of, fit_states, segment_effects, set_segment_effects, FitState};
-pub use import::{import, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError};
+pub use import::{
+    import, known_columns, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError,
+    SourceKind,
+};
 pub use inventory::{load_segment, load_segments, MeasurementRecord, SegmentRecord};
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{

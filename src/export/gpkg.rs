@@ -1,9 +1,14 @@
-//! OGC GeoPackage 1.4 writer (OGC 12-128r18), with rusqlite into a new file.
+//! OGC GeoPackage writer, with rusqlite into a new file. The file declares GeoPackage 1.2
+//! (`user_version` 10200): it uses nothing newer, and GDAL up to 3.6 (Debian 12, QGIS 3.28 LTR)
+//! warns on every file that declares 1.4 ("may only be partially supported"). The requirement
+//! numbers below are those of OGC 12-128r18 (1.4), which 1.2 (12-128r15) shares.
 //!
 //! The file holds the required metadata tables (`gpkg_spatial_ref_sys` with the three mandatory
 //! rows and the segments' system, `gpkg_contents`, `gpkg_geometry_columns`), one feature table
 //! [`TABLE`] of LINESTRINGs in GeoPackage binary encoding, one row per segment (NULL geometry
-//! when the segment has none), and an R-tree spatial index (extension `gpkg_rtree_index`).
+//! when the segment has none), an R-tree spatial index (extension `gpkg_rtree_index`), and
+//! QGIS's `layer_styles` table (an attributes table) holding the default style of
+//! [`super::style`].
 //!
 //! The table has one coordinate system: the one most segments' geometries are in
 //! ([`crs::dominant_srid`]); geometries in another system are reprojected into it, and the few
@@ -15,6 +20,7 @@ use rusqlite::{params, params_from_iter, Connection};
 
 use super::crs::{self, ToCommonCrs};
 use super::record::{Value, PROPERTIES};
+use super::style;
 use super::{commit_temp, temp_path, ExportError, ExportSummary, SegmentExport};
 use crate::db::wkt::LineString;
 
@@ -25,8 +31,9 @@ pub const GEOMETRY_COLUMN: &str = "geom";
 
 /// `PRAGMA application_id` of a GeoPackage: ASCII "GPKG" (12-128r18 Req. 2).
 pub const APPLICATION_ID: i32 = 0x4750_4B47;
-/// `PRAGMA user_version` of GeoPackage 1.4.0 (Req. 2).
-pub const USER_VERSION: i32 = 10400;
+/// `PRAGMA user_version` of GeoPackage 1.2.0 (Req. 2): the newest version GDAL 3.6 reads
+/// without a warning, and enough for everything this file holds.
+pub const USER_VERSION: i32 = 10200;
 
 /// GeoPackage binary header flags (12-128r18 §2.1.3.1.1): bit 0 byte order (1 = little
 /// endian), bits 1–3 envelope contents indicator (1 = [minx, maxx, miny, maxy]), bit 4 empty
@@ -226,9 +233,9 @@ CREATE TABLE gpkg_extensions (
 ";
 
 /// The R-tree index and the triggers that keep it in step with the feature table
-/// (12-128r18 Annex F.3, version 1.4 trigger set). The triggers call the GeoPackage SQL
-/// functions (ST_IsEmpty, ST_MinX, ...) that GIS software provides; pipewave fills the index
-/// itself and never edits the table afterwards.
+/// (GeoPackage 1.2, 12-128r15 Annex F.3: triggers `insert`, `update1`–`update4`, `delete`). The
+/// triggers call the GeoPackage SQL functions (ST_IsEmpty, ST_MinX, ...) that GIS software
+/// provides; pipewave fills the index itself and never edits the table afterwards.
 fn rtree_sql(t: &str, c: &str) -> String {
     format!(
         "CREATE VIRTUAL TABLE rtree_{t}_{c} USING rtree(id, minx, maxx, miny, maxy);
@@ -238,18 +245,18 @@ BEGIN
   INSERT OR REPLACE INTO rtree_{t}_{c} VALUES (
     NEW.fid, ST_MinX(NEW.{c}), ST_MaxX(NEW.{c}), ST_MinY(NEW.{c}), ST_MaxY(NEW.{c}));
 END;
-CREATE TRIGGER rtree_{t}_{c}_update5 AFTER UPDATE ON {t}
+CREATE TRIGGER rtree_{t}_{c}_update1 AFTER UPDATE OF {c} ON {t}
   WHEN OLD.fid = NEW.fid AND (NEW.{c} NOTNULL AND NOT ST_IsEmpty(NEW.{c}))
 BEGIN
   INSERT OR REPLACE INTO rtree_{t}_{c} VALUES (
     NEW.fid, ST_MinX(NEW.{c}), ST_MaxX(NEW.{c}), ST_MinY(NEW.{c}), ST_MaxY(NEW.{c}));
 END;
-CREATE TRIGGER rtree_{t}_{c}_update6 AFTER UPDATE OF {c} ON {t}
+CREATE TRIGGER rtree_{t}_{c}_update2 AFTER UPDATE OF {c} ON {t}
   WHEN OLD.fid = NEW.fid AND (NEW.{c} ISNULL OR ST_IsEmpty(NEW.{c}))
 BEGIN
   DELETE FROM rtree_{t}_{c} WHERE id = OLD.fid;
 END;
-CREATE TRIGGER rtree_{t}_{c}_update7 AFTER UPDATE OF fid ON {t}
+CREATE TRIGGER rtree_{t}_{c}_update3 AFTER UPDATE ON {t}
   WHEN OLD.fid != NEW.fid AND (NEW.{c} NOTNULL AND NOT ST_IsEmpty(NEW.{c}))
 BEGIN
   DELETE FROM rtree_{t}_{c} WHERE id = OLD.fid;
@@ -268,6 +275,30 @@ BEGIN
 END;
 "
     )
+}
+
+/// Add QGIS's `layer_styles` table with the default style of the feature table, and register it
+/// as an attributes table (as GDAL does when QGIS creates it).
+fn write_style(tx: &rusqlite::Transaction<'_>, qml: &str) -> rusqlite::Result<()> {
+    tx.execute_batch(style::LAYER_STYLES_SQL)?;
+    tx.execute(
+        "INSERT INTO layer_styles (f_table_catalog, f_table_schema, f_table_name, \
+         f_geometry_column, styleName, styleQML, styleSLD, useAsDefault, description, owner) \
+         VALUES ('', '', ?1, ?2, ?3, ?4, '', 1, ?5, '')",
+        params![
+            TABLE,
+            GEOMETRY_COLUMN,
+            style::STYLE_NAME,
+            qml,
+            "segments coloured by leak-band speed (m/s), classes from the data"
+        ],
+    )?;
+    tx.execute(
+        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description) \
+         VALUES ('layer_styles', 'attributes', 'layer_styles', '')",
+        [],
+    )?;
+    Ok(())
 }
 
 /// Write the GeoPackage of `records` to `out` (through a temporary file).
@@ -434,6 +465,7 @@ fn write_to(
         params![TABLE, GEOMETRY_COLUMN],
     )
     .map_err(sql)?;
+    write_style(&tx, &style::qml(records)).map_err(sql)?;
     tx.commit().map_err(sql)?;
     conn.close().map_err(|(_, e)| sql(e))?;
     Ok(ExportSummary {

@@ -15,6 +15,7 @@ pub mod csv;
 pub mod geojson;
 pub mod gpkg;
 pub mod record;
+pub mod style;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -27,7 +28,8 @@ pub use record::{load_records, SegmentExport, PROPERTIES};
 /// The output formats of `pipewave export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ExportFormat {
-    /// OGC GeoPackage 1.4 (`.gpkg`), in the segments' own coordinate system.
+    /// OGC GeoPackage 1.2 (`.gpkg`), in the segments' own coordinate system, with a default
+    /// QGIS style.
     Gpkg,
     /// RFC 7946 GeoJSON, WGS 84 longitude/latitude.
     GeoJson,
@@ -170,6 +172,10 @@ pub fn write(
         ExportFormat::GeoJson => geojson::write(&records, out_path)?,
         ExportFormat::Csv => csv::write(&records, out_path)?,
     };
+    if format != ExportFormat::Gpkg {
+        // The default QGIS style beside the file (the GeoPackage holds its own).
+        write_file_atomically(&style::qml_path(out_path), style::qml(&records).as_bytes())?;
+    }
     warnings.append(&mut summary.warnings);
     summary.warnings = warnings;
     Ok(summary)

@@ -10,7 +10,7 @@ use std::str::FromStr;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
     /// A value outside its valid range.
-    #[error("{name} = {value} is outside the valid range {range}")]
+    #[error("{name} = {} is outside the valid range {range}", crate::units::short(*.value))]
     OutOfRange {
         /// Name of the quantity, with its unit.
         name: &'static str,
@@ -20,7 +20,7 @@ pub enum InputError {
         range: &'static str,
     },
     /// A value that is not a finite number.
-    #[error("{name} is not a finite number ({value})")]
+    #[error("{name} is not a finite number ({})", crate::units::short(*.value))]
     NotFinite {
         /// Name of the quantity.
         name: &'static str,
@@ -38,7 +38,7 @@ pub enum InputError {
         expected: &'static str,
     },
     /// The wall is too thick for the thin-shell model.
-    #[error("wall thickness {h} m is more than a quarter of the mean radius {a} m (h/a = {ratio:.3} > 0.25): the thin-shell model does not apply")]
+    #[error("wall thickness {} m is more than a quarter of the mean radius {} m (h/a = {ratio:.3} > 0.25): the thin-shell model does not apply", crate::units::short(*.h), crate::units::short(*.a))]
     WallTooThick {
         /// Wall thickness, m.
         h: f64,

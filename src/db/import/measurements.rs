@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
 use super::table::{ColumnSpec, RowCheck, Table};
-use super::{ImportSource, RowError};
+use super::{ImportOptions, ImportSource, RowError};
 use crate::db::inventory::MeasurementRecord;
 
 /// The columns of `measurements.csv`. Exactly one of `frequency_hz` / `omega_rad_s` per row; the
@@ -73,11 +73,13 @@ pub(super) struct ParsedMeasurements {
     pub fatal: bool,
     /// Field index of `segment_id`, for errors raised later.
     pub segment_id_column: usize,
+    /// Things to tell the user that reject nothing (ignored columns).
+    pub notes: Vec<String>,
 }
 
 /// Read and check `measurements.csv`.
-pub(super) fn parse(source: &ImportSource) -> ParsedMeasurements {
-    let read = Table::read(source, COLUMNS);
+pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedMeasurements {
+    let read = Table::read(source, COLUMNS, options);
     let mut errors = read.errors;
     let mut out = ParsedMeasurements {
         file: source.name.clone(),
@@ -85,6 +87,7 @@ pub(super) fn parse(source: &ImportSource) -> ParsedMeasurements {
         errors: Vec::new(),
         fatal: read.fatal,
         segment_id_column: 0,
+        notes: read.notes,
     };
     let Some(table) = read.table else {
         out.errors = errors;
@@ -221,7 +224,10 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
         Some(a) if a < 0.0 => {
             c.err(
                 "attenuation_np_per_m",
-                format!("must be 0 or more (the decay rate is written positive), got {a}"),
+                format!(
+                    "must be 0 or more (the decay rate is written positive), got {}",
+                    crate::units::short(a)
+                ),
             );
             None
         }

@@ -16,13 +16,15 @@
 //!   segment whose hash changed.
 //! - With `skip_invalid`, a measurement row whose segment row was skipped is skipped too.
 
+pub mod aliases;
+mod layer;
 mod measurements;
 mod segments;
 mod table;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rusqlite::{Connection, TransactionBehavior};
 
@@ -31,42 +33,131 @@ pub use measurements::SAME_FREQUENCY_REL_TOL;
 use super::inventory::{self, MeasurementRecord};
 use super::DbError;
 
-/// The text of one import file and the name to show in messages (usually its path).
+/// One import file: its name for messages, its kind, and its bytes.
 #[derive(Debug, Clone)]
 pub struct ImportSource {
     /// Name used in messages, e.g. `data/segments.csv`.
     pub name: String,
     /// The raw bytes (checked for UTF-8 cell by cell, so a bad byte names its line and column).
+    /// Empty for a GeoPackage, which is read from [`SourceKind::GeoPackage`]'s path.
     pub data: Vec<u8>,
+    /// CSV or which GIS layer format.
+    pub kind: SourceKind,
 }
 
+/// What an import file is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SourceKind {
+    /// `segments.csv` / `measurements.csv` (docs/interface.md).
+    Csv,
+    /// An OGC GeoPackage, read with SQLite from this path.
+    GeoPackage(PathBuf),
+    /// An RFC 7946 GeoJSON FeatureCollection (the bytes).
+    GeoJson,
+    /// An ESRI Shapefile: the bytes are the `.shp`; its `.dbf` (attributes) and `.prj`
+    /// (coordinate system) beside it.
+    Shapefile {
+        /// The `.dbf`, if there is one.
+        dbf: Option<Vec<u8>>,
+        /// The `.prj` text, if there is one.
+        prj: Option<Vec<u8>>,
+    },
+}
+
+/// The SQLite file header, which every GeoPackage starts with.
+const SQLITE_MAGIC: &[u8] = b"SQLite format 3\0";
+
 impl ImportSource {
-    /// Read a file.
+    /// Read a file; its kind comes from the extension (`.gpkg`, `.geojson`/`.json`, `.shp`,
+    /// anything else CSV) or, for a SQLite file, from its header.
     pub fn from_path(path: &Path) -> Result<ImportSource, DbError> {
-        let data = std::fs::read(path).map_err(|source| DbError::ReadFile {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Ok(ImportSource {
-            name: path.display().to_string(),
-            data,
-        })
+        let read = |p: &Path| {
+            std::fs::read(p).map_err(|source| DbError::ReadFile {
+                path: p.to_path_buf(),
+                source,
+            })
+        };
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let name = path.display().to_string();
+        let kind = match ext.as_str() {
+            "gpkg" => SourceKind::GeoPackage(path.to_path_buf()),
+            "geojson" | "json" => SourceKind::GeoJson,
+            "shp" => {
+                let sidecar = |e: &str| -> Result<Option<Vec<u8>>, DbError> {
+                    // Upper- or lower-case extension, as the .shp has.
+                    for cand in [e.to_string(), e.to_ascii_uppercase()] {
+                        let p = path.with_extension(&cand);
+                        if p.exists() {
+                            return read(&p).map(Some);
+                        }
+                    }
+                    Ok(None)
+                };
+                SourceKind::Shapefile {
+                    dbf: sidecar("dbf")?,
+                    prj: sidecar("prj")?,
+                }
+            }
+            _ => SourceKind::Csv,
+        };
+        if let SourceKind::GeoPackage(_) = kind {
+            // Check it can be read now (a mistyped path must not create a database).
+            std::fs::metadata(path).map_err(|source| DbError::ReadFile {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            return Ok(ImportSource {
+                name,
+                data: Vec::new(),
+                kind,
+            });
+        }
+        let data = read(path)?;
+        let kind = if kind == SourceKind::Csv && data.starts_with(SQLITE_MAGIC) {
+            SourceKind::GeoPackage(path.to_path_buf())
+        } else {
+            kind
+        };
+        Ok(ImportSource { name, data, kind })
     }
 
-    /// In-memory text, for tests and for generated networks.
+    /// In-memory CSV text, for tests and for generated networks.
     pub fn from_bytes(name: impl Into<String>, data: impl Into<Vec<u8>>) -> ImportSource {
         ImportSource {
             name: name.into(),
             data: data.into(),
+            kind: SourceKind::Csv,
         }
     }
 }
 
+/// Every column name an import file may have (segments and measurements), for checking
+/// `--map COLUMN=FIELD`.
+pub fn known_columns() -> Vec<&'static str> {
+    let mut v: Vec<&'static str> = segments::COLUMNS.iter().map(|c| c.name).collect();
+    for c in measurements::COLUMNS {
+        if !v.contains(&c.name) {
+            v.push(c.name);
+        }
+    }
+    v
+}
+
 /// How to import.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct ImportOptions {
     /// Import the valid rows and report the invalid ones, instead of rejecting the import.
     pub skip_invalid: bool,
+    /// Reject columns pipewave does not know, instead of ignoring them with a note.
+    pub strict: bool,
+    /// The layer of a GeoPackage holding several (`--layer`).
+    pub layer: Option<String>,
+    /// `(pipewave column, the file's field)` pairs (`--map COLUMN=FIELD`), matched
+    /// case-insensitively.
+    pub map: Vec<(String, String)>,
 }
 
 /// A column of an import file: 1-based position and name.
@@ -89,12 +180,16 @@ impl ColumnRef {
 }
 
 /// One problem in an import file. Displays as `FILE:LINE:COL: column NAME: reason`, or
-/// `FILE:LINE: reason` for a problem with the whole line or file.
+/// `FILE:LINE: reason` for a problem with the whole line or file; in a GIS layer as
+/// `FILE: layer L: feature FID: field NAME: reason` (or without the feature or field).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RowError {
     /// The file, as named in the [`ImportSource`].
     pub file: String,
-    /// 1-based line (where the record starts).
+    /// The layer, for a GIS layer.
+    pub layer: Option<String>,
+    /// 1-based line (where the record starts); in a layer, the feature id (0: the layer as a
+    /// whole).
     pub line: u64,
     /// The column, when the problem is in one cell or header name.
     pub column: Option<ColumnRef>,
@@ -111,6 +206,7 @@ impl RowError {
     ) -> RowError {
         RowError {
             file: file.to_string(),
+            layer: None,
             line,
             column,
             message: message.into(),
@@ -120,6 +216,16 @@ impl RowError {
 
 impl fmt::Display for RowError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(layer) = &self.layer {
+            write!(f, "{}: layer {layer}: ", self.file)?;
+            if self.line > 0 {
+                write!(f, "feature {}: ", self.line)?;
+            }
+            if let Some(c) = &self.column {
+                write!(f, "field {}: ", c.name)?;
+            }
+            return f.write_str(&self.message);
+        }
         match &self.column {
             Some(c) => write!(
                 f,
@@ -156,6 +262,8 @@ pub struct ImportReport {
     pub segments_with_changed_inputs: usize,
     /// Every invalid row, in file and line order.
     pub errors: Vec<RowError>,
+    /// Things to tell the user that reject nothing: the columns ignored, one note per file.
+    pub notes: Vec<String>,
 }
 
 /// Import the given files into the database (see the module docs for the semantics). At least
@@ -167,8 +275,8 @@ pub fn import(
     measurements: Option<&ImportSource>,
     options: ImportOptions,
 ) -> Result<ImportReport, DbError> {
-    let segs = segments.map(segments::parse);
-    let meas = measurements.map(measurements::parse);
+    let segs = segments.map(|s| segments::parse(s, &options));
+    let meas = measurements.map(|m| measurements::parse(m, &options));
 
     // IMMEDIATE: take the write lock now, so the segments we check against cannot change.
     let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
@@ -181,7 +289,8 @@ pub fn import(
     let mut valid_segments = Vec::new();
     let mut invalid_segment_lines: BTreeMap<String, u64> = BTreeMap::new();
     let mut segments_file_unusable = false;
-    if let Some(p) = segs {
+    if let Some(mut p) = segs {
+        report.notes.append(&mut p.notes);
         fatal |= p.fatal;
         segments_file_unusable = p.fatal;
         seg_errors = p.errors;
@@ -198,7 +307,8 @@ pub fn import(
 
     // Measurements: their segment must be in the database or among the valid file rows.
     let mut new_sets: BTreeMap<String, Vec<MeasurementRecord>> = BTreeMap::new();
-    if let Some(p) = meas {
+    if let Some(mut p) = meas {
+        report.notes.append(&mut p.notes);
         fatal |= p.fatal;
         meas_errors = p.errors;
         let known_db = inventory::segment_ids(&tx)?;
@@ -304,7 +414,10 @@ mod tests {
             conn,
             s.as_ref(),
             m.as_ref(),
-            ImportOptions { skip_invalid: skip },
+            ImportOptions {
+                skip_invalid: skip,
+                ..ImportOptions::default()
+            },
         )
         .unwrap()
     }

@@ -2,11 +2,13 @@
 
 use std::collections::BTreeMap;
 
+use super::aliases;
 use super::table::{ColumnSpec, RowCheck, Table};
-use super::{ImportSource, RowError};
+use super::{ImportOptions, ImportSource, RowError};
 use crate::db::inventory::{SegmentRecord, SOIL_DENSITY_RANGE};
 use crate::db::wkt::LineString;
-use crate::physics::{InputError, Material};
+use crate::physics::InputError;
+use crate::units::short;
 
 /// The columns of `segments.csv`.
 pub(super) const COLUMNS: &[ColumnSpec] = &[
@@ -67,6 +69,10 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
         required: false,
     },
     ColumnSpec {
+        name: "soil_zone",
+        required: false,
+    },
+    ColumnSpec {
         name: "geometry_wkt",
         required: false,
     },
@@ -111,17 +117,21 @@ pub(super) struct ParsedSegments {
     pub rows: Vec<SegmentRow>,
     pub errors: Vec<RowError>,
     pub fatal: bool,
+    /// Things to tell the user that reject nothing (ignored columns).
+    pub notes: Vec<String>,
 }
 
 /// Read and check `segments.csv`.
-pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
-    let read = Table::read(source, COLUMNS);
+pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedSegments {
+    let read = Table::read(source, COLUMNS, options);
     let mut errors = read.errors;
+    let notes = read.notes;
     let Some(table) = read.table else {
         return ParsedSegments {
             rows: Vec::new(),
             errors,
             fatal: read.fatal,
+            notes,
         };
     };
     let mut rows: Vec<SegmentRow> = table
@@ -177,6 +187,7 @@ pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
         rows,
         errors,
         fatal: false,
+        notes,
     }
 }
 
@@ -184,7 +195,7 @@ pub(super) fn parse(source: &ImportSource) -> ParsedSegments {
 fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
     let segment_id = c.required_text("segment_id").map(str::to_string);
     let material = c.required_text("material").and_then(|t| {
-        t.parse::<Material>()
+        aliases::material(t)
             .map_err(|e| c.err("material", e.to_string()))
             .ok()
     });
@@ -196,7 +207,11 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         (Some(h), Some(d)) if h >= d / 2.0 => {
             c.err(
                 "wall_thickness_mm",
-                format!("must be less than half the outer diameter ({d} mm / 2), got {h} mm"),
+                format!(
+                    "must be less than half the outer diameter ({} mm / 2), got {} mm",
+                    short(d),
+                    short(h)
+                ),
             );
             None
         }
@@ -222,6 +237,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
     let length_m = c.positive("length_m", v, " m");
     let soil_type = c.owned_text("soil_type");
     let install_year = c.integer("install_year");
+    let soil_zone = c.owned_text("soil_zone");
 
     let geometry_wkt = c.text("geometry_wkt").and_then(|t| {
         LineString::parse_wkt(t)
@@ -270,6 +286,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         length_m,
         soil_type,
         install_year,
+        soil_zone,
         geometry_wkt,
         srid,
         inputs_hash: String::new(),

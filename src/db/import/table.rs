@@ -3,8 +3,9 @@
 
 use std::collections::HashMap;
 
-use super::{ColumnRef, ImportSource, RowError};
+use super::{ColumnRef, ImportOptions, ImportSource, RowError, SourceKind};
 use crate::physics::inputs::check_range;
+use crate::units::short;
 
 /// A column an import file may have.
 #[derive(Debug, Clone, Copy)]
@@ -15,203 +16,276 @@ pub(super) struct ColumnSpec {
     pub required: bool,
 }
 
-/// One data row: its line (where the record starts) and its trimmed cells, one per header column.
-#[derive(Debug)]
+/// One data row: its line (where the record starts; for a layer, the feature id) and its
+/// trimmed cells, one per header column. `errors` holds problems the reader already found in
+/// the row (a layer's geometry): the row is invalid whatever its cells say.
+#[derive(Debug, Default)]
 pub(super) struct RawRow {
     pub line: u64,
     pub cells: Vec<String>,
+    pub errors: Vec<RowError>,
+}
+
+/// A file as read, before its header is checked: a CSV, or a GIS layer whose attributes and
+/// geometry (as `geometry_wkt` and `srid` cells) were turned into text cells.
+#[derive(Debug, Default)]
+pub(super) struct RawTable {
+    pub file: String,
+    /// The layer, for a GIS layer: messages then name the layer, feature and field.
+    pub layer: Option<String>,
+    /// Line of the header (0 for a layer: its problems are the layer's).
+    pub header_line: u64,
+    /// The column or field names, as written.
+    pub header: Vec<String>,
+    pub rows: Vec<RawRow>,
+}
+
+/// How to match a header against the known columns.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct HeaderOptions<'a> {
+    /// `(pipewave column, the file's field)` pairs of `--map COLUMN=FIELD`.
+    pub map: &'a [(String, String)],
+    /// Reject unknown columns instead of ignoring them with a note.
+    pub strict: bool,
 }
 
 /// A file whose header is good: known columns, each once, all required ones present.
 #[derive(Debug)]
 pub(super) struct Table {
     pub file: String,
+    /// The layer, for a GIS layer.
+    pub layer: Option<String>,
     /// Canonical name of each known column -> its 0-based field index.
     index: HashMap<&'static str, usize>,
+    /// Canonical name -> the name to show in messages (`DIAM_MM (outer_diameter_mm)` when the
+    /// file's field is mapped or named otherwise).
+    labels: HashMap<&'static str, String>,
     pub rows: Vec<RawRow>,
 }
 
 /// The outcome of reading a file: the table if its header was usable, and every problem found.
 /// `fatal` is set when the file as a whole is unusable (empty, bad header): then no row of it
-/// may be imported, even with `skip_invalid`.
-#[derive(Debug)]
+/// may be imported, even with `skip_invalid`. `notes` are things to tell the user that reject
+/// nothing (ignored columns).
+#[derive(Debug, Default)]
 pub(super) struct ReadOutcome {
     pub table: Option<Table>,
     pub errors: Vec<RowError>,
     pub fatal: bool,
+    pub notes: Vec<String>,
 }
 
 const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
 
-impl Table {
-    /// Read and check `source` against `specs`.
-    pub fn read(source: &ImportSource, specs: &[ColumnSpec]) -> ReadOutcome {
-        let file = source.name.clone();
-        let mut errors = Vec::new();
-        let fail = |errors: Vec<RowError>| ReadOutcome {
-            table: None,
-            errors,
-            fatal: true,
-        };
-        let data = source.data.strip_prefix(UTF8_BOM).unwrap_or(&source.data);
-        if data.iter().all(u8::is_ascii_whitespace) {
-            errors.push(RowError::new(
-                &file,
-                1,
-                None,
-                format!(
-                    "the file is empty; expected a header line naming the columns, such as: {}",
-                    required_names(specs)
-                ),
-            ));
-            return fail(errors);
-        }
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .from_reader(data);
-        let mut records = rdr.byte_records();
+/// A RowError in `raw`'s file and layer.
+fn raw_error(
+    raw: &RawTable,
+    line: u64,
+    column: Option<ColumnRef>,
+    msg: impl Into<String>,
+) -> RowError {
+    let mut e = RowError::new(&raw.file, line, column, msg);
+    e.layer.clone_from(&raw.layer);
+    e
+}
 
-        // Header.
-        let header = match records.next() {
-            Some(Ok(h)) => h,
-            Some(Err(e)) => {
-                errors.push(csv_error(&file, &e));
-                return fail(errors);
-            }
-            None => {
-                errors.push(RowError::new(&file, 1, None, "the file has no header line"));
-                return fail(errors);
+impl Table {
+    /// Read and check `source` against `specs`: a CSV, or the GIS layer it holds.
+    pub fn read(
+        source: &ImportSource,
+        specs: &[ColumnSpec],
+        options: &ImportOptions,
+    ) -> ReadOutcome {
+        let raw = match &source.kind {
+            SourceKind::Csv => read_csv(source, specs),
+            _ => super::layer::read(source, options.layer.as_deref()),
+        };
+        let (raw, mut errors) = match raw {
+            Ok(r) => r,
+            Err(errors) => {
+                return ReadOutcome {
+                    errors,
+                    fatal: true,
+                    ..ReadOutcome::default()
+                }
             }
         };
-        let header_line = header.position().map_or(1, |p| p.line());
+        let header = HeaderOptions {
+            map: &options.map,
+            strict: options.strict,
+        };
+        let mut out = Table::from_raw(raw, specs, header);
+        errors.append(&mut out.errors);
+        out.errors = errors;
+        out
+    }
+
+    /// Check the header of `raw` against `specs` (with the `--map` pairs and strictness).
+    pub fn from_raw(
+        raw: RawTable,
+        specs: &[ColumnSpec],
+        options: HeaderOptions<'_>,
+    ) -> ReadOutcome {
+        let mut errors = Vec::new();
         let mut index: HashMap<&'static str, usize> = HashMap::new();
-        for (i, raw) in header.iter().enumerate() {
-            let Ok(name) = std::str::from_utf8(raw) else {
-                errors.push(RowError::new(
-                    &file,
-                    header_line,
-                    Some(ColumnRef::new(i, &String::from_utf8_lossy(raw))),
-                    "the column name is not valid UTF-8 text; save the file as UTF-8",
-                ));
-                continue;
-            };
+        let mut labels: HashMap<&'static str, String> = HashMap::new();
+        let mut unknown: Vec<(usize, String)> = Vec::new();
+        let what = if raw.layer.is_some() {
+            "field"
+        } else {
+            "column"
+        };
+        for (i, name) in raw.header.iter().enumerate() {
             let name = name.trim();
             let col = Some(ColumnRef::new(i, name));
             if name.is_empty() {
-                errors.push(RowError::new(
-                    &file,
-                    header_line,
-                    col,
-                    "this column has no name (a stray separator at the end of the header?)",
-                ));
-                continue;
-            }
-            match specs.iter().find(|s| s.name.eq_ignore_ascii_case(name)) {
-                None => errors.push(RowError::new(
-                    &file,
-                    header_line,
-                    col,
-                    unknown_column_message(name, specs),
-                )),
-                Some(spec) => {
-                    if let Some(&first) = index.get(spec.name) {
-                        errors.push(RowError::new(
-                            &file,
-                            header_line,
-                            Some(ColumnRef::new(i, spec.name)),
-                            format!(
-                                "duplicate column: '{}' is also column {}",
-                                spec.name,
-                                first + 1
-                            ),
-                        ));
-                    } else {
-                        index.insert(spec.name, i);
-                    }
-                }
-            }
-        }
-        for spec in specs.iter().filter(|s| s.required) {
-            if !index.contains_key(spec.name) {
-                errors.push(RowError::new(
-                    &file,
-                    header_line,
-                    None,
-                    format!("missing required column '{}'", spec.name),
-                ));
-            }
-        }
-        if !errors.is_empty() {
-            return fail(errors);
-        }
-
-        // Rows.
-        let width = header.len();
-        let mut rows = Vec::new();
-        let mut n_records = 0usize;
-        for rec in records {
-            let rec = match rec {
-                Ok(r) => r,
-                Err(e) => {
-                    errors.push(csv_error(&file, &e));
-                    n_records += 1;
-                    continue;
-                }
-            };
-            n_records += 1;
-            let line = rec.position().map_or(0, |p| p.line());
-            if rec.len() != width {
-                // Point at the first missing cell, or at the row when there are extra ones.
-                let col = (rec.len() < width).then(|| {
-                    let name = name_of(&index, rec.len()).unwrap_or("?");
-                    ColumnRef::new(rec.len(), name)
-                });
-                errors.push(RowError::new(
-                    &file,
-                    line,
+                errors.push(raw_error(
+                    &raw,
+                    raw.header_line,
                     col,
                     format!(
-                        "the row has {} values but the header has {width} columns",
-                        rec.len()
+                        "this {what} has no name (a stray separator at the end of the header?)"
                     ),
                 ));
                 continue;
             }
-            let mut cells = Vec::with_capacity(width);
-            let mut bad = false;
-            for (i, raw) in rec.iter().enumerate() {
-                match std::str::from_utf8(raw) {
-                    Ok(s) => cells.push(s.trim().to_string()),
-                    Err(_) => {
-                        errors.push(RowError::new(
-                            &file,
-                            line,
-                            Some(ColumnRef::new(i, name_of(&index, i).unwrap_or("?"))),
-                            "the value is not valid UTF-8 text; save the file as UTF-8",
-                        ));
-                        bad = true;
-                        break;
-                    }
+            // A mapped field takes the column it is mapped to; a column mapped to another field
+            // is not matched by its own name.
+            let mapped = options
+                .map
+                .iter()
+                .find(|(_, field)| field.trim().eq_ignore_ascii_case(name))
+                .and_then(|(c, _)| specs.iter().find(|s| s.name.eq_ignore_ascii_case(c.trim())));
+            let in_header = |f: &str| {
+                raw.header
+                    .iter()
+                    .any(|h| h.trim().eq_ignore_ascii_case(f.trim()))
+            };
+            let direct = specs.iter().find(|s| {
+                s.name.eq_ignore_ascii_case(name)
+                    && !options.map.iter().any(|(c, f)| {
+                        c.trim().eq_ignore_ascii_case(s.name)
+                            && !f.trim().eq_ignore_ascii_case(name)
+                            && in_header(f)
+                    })
+            });
+            let Some(spec) = mapped.or(direct) else {
+                // A field mapped to a column of the other file is not unknown there.
+                if !options
+                    .map
+                    .iter()
+                    .any(|(_, f)| f.trim().eq_ignore_ascii_case(name))
+                {
+                    unknown.push((i, name.to_string()));
                 }
-            }
-            if !bad {
-                rows.push(RawRow { line, cells });
+                continue;
+            };
+            if let Some(&first) = index.get(spec.name) {
+                errors.push(raw_error(
+                    &raw,
+                    raw.header_line,
+                    Some(ColumnRef::new(i, spec.name)),
+                    format!(
+                        "duplicate {what}: '{}' is also {what} {} ({})",
+                        spec.name,
+                        first + 1,
+                        raw.header[first].trim()
+                    ),
+                ));
+            } else {
+                index.insert(spec.name, i);
+                let label = if name == spec.name {
+                    spec.name.to_string()
+                } else if name.eq_ignore_ascii_case(spec.name) {
+                    name.to_string()
+                } else {
+                    format!("{name} ({})", spec.name)
+                };
+                labels.insert(spec.name, label);
             }
         }
-        if n_records == 0 {
-            errors.push(RowError::new(
-                &file,
-                header_line + 1,
-                None,
-                "the file has a header but no data rows",
+        let mut notes = Vec::new();
+        if options.strict {
+            for (i, name) in &unknown {
+                errors.push(raw_error(
+                    &raw,
+                    raw.header_line,
+                    Some(ColumnRef::new(*i, name)),
+                    unknown_column_message(name, specs),
+                ));
+            }
+        } else if !unknown.is_empty() {
+            let names: Vec<&str> = unknown.iter().map(|(_, n)| n.as_str()).collect();
+            let place = match &raw.layer {
+                Some(l) => format!("{}: layer {l}", raw.file),
+                None => raw.file.clone(),
+            };
+            notes.push(format!(
+                "{place}: ignored {} {what}{} pipewave does not use: {} (--map COLUMN=FIELD uses \
+                 one; --strict rejects them)",
+                names.len(),
+                if names.len() == 1 { "" } else { "s" },
+                names.join(", ")
             ));
-            return fail(errors);
+        }
+        for spec in specs.iter().filter(|s| s.required) {
+            if !index.contains_key(spec.name) {
+                let lower = spec.name.to_ascii_lowercase();
+                let near = unknown
+                    .iter()
+                    .map(|(_, n)| (edit_distance(&n.to_ascii_lowercase(), &lower), n))
+                    .filter(|(d, _)| *d <= 3)
+                    .min();
+                let hint = match near {
+                    Some((_, n)) => {
+                        format!(" (the file has '{n}': a typo? or --map {}={n})", spec.name)
+                    }
+                    None => format!(
+                        "; if the file names it otherwise, use --map {}=FIELD",
+                        spec.name
+                    ),
+                };
+                errors.push(raw_error(
+                    &raw,
+                    raw.header_line,
+                    None,
+                    format!("missing required {what} '{}'{hint}", spec.name),
+                ));
+            }
+        }
+        if !errors.is_empty() {
+            return ReadOutcome {
+                errors,
+                fatal: true,
+                notes,
+                ..ReadOutcome::default()
+            };
+        }
+        if raw.layer.is_some() && raw.rows.is_empty() {
+            errors.push(raw_error(
+                &raw,
+                raw.header_line + 1,
+                None,
+                "the layer has no features",
+            ));
+            return ReadOutcome {
+                errors,
+                fatal: true,
+                notes,
+                ..ReadOutcome::default()
+            };
         }
         ReadOutcome {
-            table: Some(Table { file, index, rows }),
+            table: Some(Table {
+                file: raw.file,
+                layer: raw.layer,
+                index,
+                labels,
+                rows: raw.rows,
+            }),
             errors,
             fatal: false,
+            notes,
         }
     }
 
@@ -230,14 +304,140 @@ impl Table {
         RowCheck {
             table: self,
             row,
-            errors: Vec::new(),
+            errors: row.errors.clone(),
         }
     }
 }
 
-/// The canonical name of the column at field index `i`.
-fn name_of(index: &HashMap<&'static str, usize>, i: usize) -> Option<&'static str> {
-    index.iter().find(|(_, &j)| j == i).map(|(n, _)| *n)
+/// Read a CSV into a [`RawTable`] and the row problems found on the way (wrong number of cells,
+/// bytes that are not UTF-8), or the errors that make the file unusable.
+#[allow(clippy::type_complexity)]
+fn read_csv(
+    source: &ImportSource,
+    specs: &[ColumnSpec],
+) -> Result<(RawTable, Vec<RowError>), Vec<RowError>> {
+    let file = source.name.clone();
+    let mut errors = Vec::new();
+    let data = source.data.strip_prefix(UTF8_BOM).unwrap_or(&source.data);
+    if data.iter().all(u8::is_ascii_whitespace) {
+        return Err(vec![RowError::new(
+            &file,
+            1,
+            None,
+            format!(
+                "the file is empty; expected a header line naming the columns, such as: {}",
+                required_names(specs)
+            ),
+        )]);
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(data);
+    let mut records = rdr.byte_records();
+    let header = match records.next() {
+        Some(Ok(h)) => h,
+        Some(Err(e)) => return Err(vec![csv_error(&file, &e)]),
+        None => {
+            return Err(vec![RowError::new(
+                &file,
+                1,
+                None,
+                "the file has no header line",
+            )])
+        }
+    };
+    let header_line = header.position().map_or(1, |p| p.line());
+    let mut names = Vec::with_capacity(header.len());
+    for (i, raw) in header.iter().enumerate() {
+        match std::str::from_utf8(raw) {
+            Ok(n) => names.push(n.trim().to_string()),
+            Err(_) => {
+                errors.push(RowError::new(
+                    &file,
+                    header_line,
+                    Some(ColumnRef::new(i, &String::from_utf8_lossy(raw))),
+                    "the column name is not valid UTF-8 text; save the file as UTF-8",
+                ));
+                names.push(String::from_utf8_lossy(raw).trim().to_string());
+            }
+        }
+    }
+    if !errors.is_empty() {
+        return Err(errors);
+    }
+    let width = names.len();
+    let name = |i: usize| names.get(i).map_or("?", String::as_str).to_string();
+    let mut rows = Vec::new();
+    let mut n_records = 0usize;
+    for rec in records {
+        n_records += 1;
+        let rec = match rec {
+            Ok(r) => r,
+            Err(e) => {
+                errors.push(csv_error(&file, &e));
+                continue;
+            }
+        };
+        let line = rec.position().map_or(0, |p| p.line());
+        if rec.len() != width {
+            // Point at the first missing cell, or at the row when there are extra ones.
+            let col = (rec.len() < width).then(|| ColumnRef::new(rec.len(), &name(rec.len())));
+            errors.push(RowError::new(
+                &file,
+                line,
+                col,
+                format!(
+                    "the row has {} values but the header has {width} columns",
+                    rec.len()
+                ),
+            ));
+            continue;
+        }
+        let mut cells = Vec::with_capacity(width);
+        let mut bad = false;
+        for (i, raw) in rec.iter().enumerate() {
+            match std::str::from_utf8(raw) {
+                Ok(s) => cells.push(s.trim().to_string()),
+                Err(_) => {
+                    errors.push(RowError::new(
+                        &file,
+                        line,
+                        Some(ColumnRef::new(i, &name(i))),
+                        "the value is not valid UTF-8 text; save the file as UTF-8",
+                    ));
+                    bad = true;
+                    break;
+                }
+            }
+        }
+        if !bad {
+            rows.push(RawRow {
+                line,
+                cells,
+                errors: Vec::new(),
+            });
+        }
+    }
+    if n_records == 0 {
+        errors.push(RowError::new(
+            &file,
+            header_line + 1,
+            None,
+            "the file has a header but no data rows",
+        ));
+        return Err(errors);
+    }
+    Ok((
+        RawTable {
+            file,
+            layer: None,
+            header_line,
+            header: names,
+            rows,
+        },
+        errors,
+    ))
 }
 
 fn required_names(specs: &[ColumnSpec]) -> String {
@@ -307,13 +507,13 @@ impl<'t> RowCheck<'t> {
 
     /// Record a problem with column `col`.
     pub fn err(&mut self, col: &'static str, message: impl Into<String>) {
-        let column = self.table.index.get(col).map(|&i| ColumnRef::new(i, col));
-        self.errors.push(RowError::new(
-            &self.table.file,
-            self.row.line,
-            column,
-            message,
-        ));
+        let column = self.table.index.get(col).map(|&i| {
+            let label = self.table.labels.get(col).map_or(col, String::as_str);
+            ColumnRef::new(i, label)
+        });
+        let mut e = RowError::new(&self.table.file, self.row.line, column, message);
+        e.layer.clone_from(&self.table.layer);
+        self.errors.push(e);
     }
 
     /// The trimmed text of a cell; `None` when the column is absent or the cell blank.
@@ -375,7 +575,10 @@ impl<'t> RowCheck<'t> {
         if v > 0.0 {
             Some(v)
         } else {
-            self.err(col, format!("must be greater than 0{unit}, got {v}"));
+            self.err(
+                col,
+                format!("must be greater than 0{unit}, got {}", short(v)),
+            );
             None
         }
     }

@@ -1,0 +1,295 @@
+//! The default QGIS style of the exports: a graduated renderer colouring each segment by its
+//! leak-band speed ([`STYLE_FIELD`]), with a legend in m/s and class breaks taken from the data.
+//!
+//! The same QML document goes into the GeoPackage's `layer_styles` table (QGIS's own layout, see
+//! [`LAYER_STYLES_SQL`]) and, for a GeoJSON or CSV export, into a `.qml` file beside it (QGIS
+//! loads `NAME.qml` as the default style of `NAME.geojson`).
+
+use std::path::{Path, PathBuf};
+
+use super::SegmentExport;
+
+/// The field the style colours by (a property of [`super::PROPERTIES`]).
+pub const STYLE_FIELD: &str = "leak_band_speed_m_per_s";
+
+/// The style's name in `layer_styles`.
+pub const STYLE_NAME: &str = "pipewave leak-band speed";
+
+/// Number of classes: five, the usual choice for a sequential map (ColorBrewer offers 3–11;
+/// five colours stay distinguishable on a line layer).
+pub const N_CLASSES: usize = 5;
+
+/// The class colours, slow to fast: ColorBrewer "Spectral" with 5 classes (Brewer, Harrower &
+/// Penn State, colorbrewer2.org), also QGIS's default "Spectral" ramp. Slow segments (plastic
+/// pipes, soft soil) are red, fast ones blue.
+pub const CLASS_COLOURS: [(u8, u8, u8); N_CLASSES] = [
+    (215, 25, 28),
+    (253, 174, 97),
+    (255, 255, 191),
+    (171, 221, 164),
+    (43, 131, 186),
+];
+
+/// Class breaks are rounded to this many m/s, so the legend reads 1040 – 1120 m/s, not
+/// 1043.27 – 1118.9 (a leak correlator takes whole m/s; the fits' own errors are larger).
+pub const BREAK_ROUNDING_M_PER_S: f64 = 10.0;
+
+/// Breaks used when no segment has a leak-band speed yet (nothing fitted): 0 – 1500 m/s in equal
+/// classes, spanning every buried water pipe (the free-water sound speed is about 1480 m/s and
+/// the pipe-fluid wave is always slower).
+pub const FALLBACK_RANGE_M_PER_S: (f64, f64) = (0.0, 1500.0);
+
+/// The QGIS table that stores layer styles in a GeoPackage, as QGIS's OGR provider creates it
+/// (`QgsOgrProviderMetadata::saveStyle`: GDAL layer `layer_styles` with FID `id` and these
+/// fields: strings of width 256/30, `useAsDefault` an integer of subtype boolean, `update_time`
+/// a date-time defaulting to the current time), in the SQL GDAL's GeoPackage driver writes for it.
+pub const LAYER_STYLES_SQL: &str = "CREATE TABLE \"layer_styles\" (\
+\"id\" INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, \
+\"f_table_catalog\" TEXT(256), \
+\"f_table_schema\" TEXT(256), \
+\"f_table_name\" TEXT(256), \
+\"f_geometry_column\" TEXT(256), \
+\"styleName\" TEXT(30), \
+\"styleQML\" TEXT, \
+\"styleSLD\" TEXT, \
+\"useAsDefault\" BOOLEAN, \
+\"description\" TEXT, \
+\"owner\" TEXT(30), \
+\"ui\" TEXT(30), \
+\"update_time\" DATETIME DEFAULT (strftime('%Y-%m-%dT%H:%M:%fZ','now')))";
+
+/// The style file beside an export: `FILE` with the extension `.qml` (QGIS loads `net.qml` as
+/// the default style of `net.geojson` or `net.csv`). An export itself named `*.qml` gets
+/// `*.qml.qml`, so the style never replaces it.
+pub fn qml_path(out: &Path) -> PathBuf {
+    let is_qml = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("qml"));
+    if is_qml {
+        let mut name = out.as_os_str().to_owned();
+        name.push(".qml");
+        PathBuf::from(name)
+    } else {
+        out.with_extension("qml")
+    }
+}
+
+/// The class breaks (N + 1 increasing values, m/s) for the leak-band speeds of `records`:
+/// quantiles of the finite speeds, rounded outward to [`BREAK_ROUNDING_M_PER_S`], repeated
+/// breaks merged (so fewer classes when the speeds are few or equal). The first break is at or
+/// below the slowest speed and the last at or above the fastest, so every speed is in a class.
+pub fn class_breaks(records: &[SegmentExport]) -> Vec<f64> {
+    let mut speeds: Vec<f64> = records
+        .iter()
+        .filter_map(|r| r.leak_band_speed)
+        .filter(|v| v.is_finite())
+        .collect();
+    speeds.sort_by(f64::total_cmp);
+    let r = BREAK_ROUNDING_M_PER_S;
+    let (Some(&lo), Some(&hi)) = (speeds.first(), speeds.last()) else {
+        let (a, b) = FALLBACK_RANGE_M_PER_S;
+        return (0..=N_CLASSES)
+            .map(|i| a + (b - a) * i as f64 / N_CLASSES as f64)
+            .collect();
+    };
+    let mut breaks = vec![(lo / r).floor() * r];
+    for i in 1..N_CLASSES {
+        // Type-7 quantile position i/N (linear between order statistics).
+        let h = (speeds.len() - 1) as f64 * i as f64 / N_CLASSES as f64;
+        let (k, frac) = (h.floor() as usize, h - h.floor());
+        let next = speeds[(k + 1).min(speeds.len() - 1)];
+        let q = speeds[k] + frac * (next - speeds[k]);
+        breaks.push((q / r).round() * r);
+    }
+    breaks.push((hi / r).ceil() * r);
+    if breaks[N_CLASSES] <= breaks[0] {
+        // All speeds equal and on a rounding step: one class one step wide.
+        breaks[N_CLASSES] = breaks[0] + r;
+    }
+    breaks.dedup_by(|b, a| *b <= *a);
+    breaks
+}
+
+/// A colour as QGIS writes it: `r,g,b,a`.
+fn rgba((r, g, b): (u8, u8, u8)) -> String {
+    format!("{r},{g},{b},255")
+}
+
+/// One QGIS `<Option>` of a map.
+fn opt(name: &str, value: &str) -> String {
+    format!("<Option type=\"QString\" name=\"{name}\" value=\"{value}\"/>")
+}
+
+/// A line symbol of one colour (QGIS 3 symbol layer `SimpleLine`).
+fn line_symbol(name: &str, colour: (u8, u8, u8)) -> String {
+    let options = [
+        opt("capstyle", "round"),
+        opt("joinstyle", "round"),
+        opt("line_color", &rgba(colour)),
+        opt("line_style", "solid"),
+        opt("line_width", "0.8"),
+        opt("line_width_unit", "MM"),
+        opt("offset", "0"),
+        opt("offset_unit", "MM"),
+    ]
+    .concat();
+    format!(
+        "<symbol type=\"line\" name=\"{name}\" alpha=\"1\" clip_to_extent=\"1\" force_rhr=\"0\">\
+<layer class=\"SimpleLine\" enabled=\"1\" locked=\"0\" pass=\"0\"><Option type=\"Map\">{options}</Option></layer>\
+</symbol>"
+    )
+}
+
+/// A class break as written in the legend: whole m/s (breaks are rounded to 10 m/s).
+fn speed(v: f64) -> String {
+    format!("{v:.0}")
+}
+
+/// The QML document (QGIS 3.28 LTR and later): a `graduatedSymbol` renderer on [`STYLE_FIELD`]
+/// with the ranges of [`class_breaks`], labelled `LOW – HIGH m/s`, coloured by
+/// [`CLASS_COLOURS`] (interpolated down to fewer colours when there are fewer classes).
+pub fn qml(records: &[SegmentExport]) -> String {
+    let breaks = class_breaks(records);
+    let n = breaks.len().saturating_sub(1);
+    let colour = |i: usize| {
+        // Spread n classes over the 5 colours, ends kept.
+        let j = if n <= 1 {
+            N_CLASSES / 2
+        } else {
+            (i * (N_CLASSES - 1) + (n - 1) / 2) / (n - 1)
+        };
+        CLASS_COLOURS[j.min(N_CLASSES - 1)]
+    };
+    let mut ranges = String::new();
+    let mut symbols = String::new();
+    for i in 0..n {
+        let (lo, hi) = (breaks[i], breaks[i + 1]);
+        ranges.push_str(&format!(
+            "<range lower=\"{lo}\" upper=\"{hi}\" symbol=\"{i}\" label=\"{} – {} m/s\" render=\"true\"/>",
+            speed(lo),
+            speed(hi)
+        ));
+        symbols.push_str(&line_symbol(&i.to_string(), colour(i)));
+    }
+    let source = line_symbol("0", (128, 128, 128));
+    let (first, last) = (CLASS_COLOURS[0], CLASS_COLOURS[N_CLASSES - 1]);
+    let ramp = [
+        opt("color1", &rgba(first)),
+        opt("color2", &rgba(last)),
+        opt("discrete", "0"),
+        opt("rampType", "gradient"),
+        opt(
+            "stops",
+            &CLASS_COLOURS[1..N_CLASSES - 1]
+                .iter()
+                .enumerate()
+                .map(|(k, &c)| format!("{};{}", (k + 1) as f64 / 4.0, rgba(c)))
+                .collect::<Vec<_>>()
+                .join(":"),
+        ),
+    ]
+    .concat();
+    format!(
+        "<!DOCTYPE qgis PUBLIC 'http://mrcc.com/qgis.dtd' 'SYSTEM'>\n\
+<qgis version=\"3.28.0-Firenze\" styleCategories=\"Symbology\">\n\
+<renderer-v2 type=\"graduatedSymbol\" attr=\"{STYLE_FIELD}\" graduatedMethod=\"GraduatedColor\" \
+symbollevels=\"0\" enableorderby=\"0\" forceraster=\"0\" referencescale=\"-1\">\n\
+<ranges>{ranges}</ranges>\n\
+<symbols>{symbols}</symbols>\n\
+<source-symbol>{source}</source-symbol>\n\
+<colorramp type=\"gradient\" name=\"[source]\"><Option type=\"Map\">{ramp}</Option></colorramp>\n\
+<classificationMethod id=\"Quantile\">\
+<symmetricMode enabled=\"0\" symmetrypoint=\"0\" astride=\"0\"/>\
+<labelFormat format=\"%1 – %2 m/s\" labelprecision=\"0\" trimtrailingzeroes=\"1\"/>\
+<parameters><Option/></parameters><extraInformation/></classificationMethod>\n\
+<rotation/><sizescale/>\n\
+</renderer-v2>\n\
+<legend type=\"default-vector\" showLabelLegend=\"0\"/>\n\
+<layerGeometryType>1</layerGeometryType>\n\
+</qgis>\n"
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::SegmentRecord;
+    use crate::physics::Material;
+
+    fn rec(speed: Option<f64>) -> SegmentExport {
+        let seg = SegmentRecord {
+            segment_id: "S".into(),
+            material: Material::DuctileIron,
+            outer_diameter_mm: 170.0,
+            wall_thickness_mm: 6.0,
+            soil_density_kg_m3: 1900.0,
+            pipe_youngs_modulus_pa: None,
+            pipe_poisson: None,
+            pipe_density_kg_m3: None,
+            pipe_loss_factor: None,
+            fluid_density_kg_m3: None,
+            fluid_bulk_modulus_pa: None,
+            length_m: None,
+            soil_type: None,
+            soil_zone: None,
+            install_year: None,
+            geometry_wkt: None,
+            srid: None,
+            inputs_hash: String::new(),
+            imported_at: String::new(),
+            measurements: Vec::new(),
+        };
+        let mut r = SegmentExport::new(seg, None, Vec::new());
+        r.leak_band_speed = speed;
+        r
+    }
+
+    #[test]
+    fn breaks_are_rounded_quantiles_covering_every_speed() {
+        // 101 speeds 400, 410, ..., 1400: quantiles at 600, 800, 1000, 1200.
+        let recs: Vec<SegmentExport> = (0..=100)
+            .map(|i| rec(Some(400.0 + 10.0 * f64::from(i))))
+            .collect();
+        assert_eq!(
+            class_breaks(&recs),
+            [400.0, 600.0, 800.0, 1000.0, 1200.0, 1400.0]
+        );
+        // Ends rounded outward: 433 -> 430, 1417 -> 1420.
+        let recs = [rec(Some(433.0)), rec(Some(1417.0)), rec(None)];
+        let b = class_breaks(&recs);
+        assert_eq!((b[0], *b.last().unwrap()), (430.0, 1420.0));
+        assert!(b.windows(2).all(|w| w[0] < w[1]), "{b:?}");
+    }
+
+    #[test]
+    fn equal_or_missing_speeds_still_give_increasing_breaks() {
+        let b = class_breaks(&[rec(Some(1000.0)), rec(Some(1000.0))]);
+        assert_eq!(b, [1000.0, 1010.0]);
+        let b = class_breaks(&[rec(None)]);
+        assert_eq!(b, [0.0, 300.0, 600.0, 900.0, 1200.0, 1500.0]);
+    }
+
+    #[test]
+    fn the_style_file_is_beside_the_export() {
+        assert_eq!(
+            qml_path(Path::new("out/net.geojson")),
+            Path::new("out/net.qml")
+        );
+        assert_eq!(qml_path(Path::new("net.csv")), Path::new("net.qml"));
+        assert_eq!(qml_path(Path::new("net")), Path::new("net.qml"));
+        assert_eq!(qml_path(Path::new("a.QML")), Path::new("a.QML.qml"));
+    }
+
+    #[test]
+    fn qml_names_the_field_and_labels_in_m_per_s() {
+        let recs: Vec<SegmentExport> = (0..=100)
+            .map(|i| rec(Some(400.0 + 10.0 * f64::from(i))))
+            .collect();
+        let q = qml(&recs);
+        assert!(q.contains("attr=\"leak_band_speed_m_per_s\""));
+        assert!(q.contains("label=\"400 – 600 m/s\""), "{q}");
+        assert!(q.contains("label=\"1200 – 1400 m/s\""));
+        assert_eq!(q.matches("<range ").count(), 5);
+        assert!(q.contains("215,25,28,255") && q.contains("43,131,186,255"));
+    }
+}
