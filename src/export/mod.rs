@@ -16,6 +16,7 @@ pub mod geojson;
 pub mod gpkg;
 pub mod record;
 pub mod style;
+pub mod zones;
 
 use std::fmt;
 use std::path::{Path, PathBuf};
