@@ -99,3 +99,114 @@ fn zones_of_a_fresh_synthetic_network_are_recovered_with_honest_intervals() {
         "metal-only coverage {mcov_e} {mcov_nu}"
     );
 }
+
+fn pipewave(args: &[&str]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_pipewave"))
+        .args(args)
+        .output()
+        .expect("run pipewave");
+    assert!(
+        out.status.success(),
+        "pipewave {args:?}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// `synth --zones`, `import`, `calibrate`: the zones are estimated and stored after the fits,
+/// not again while their members' fits are unchanged; the exports carry the zone values and
+/// the GeoPackage a zone layer.
+#[test]
+fn calibrate_estimates_stores_and_exports_zones() {
+    let dir = tempfile::tempdir().unwrap();
+    let net = dir.path().join("net");
+    let db = dir.path().join("z.sqlite");
+    let p = |x: &std::path::Path| x.to_str().unwrap().to_string();
+    pipewave(&[
+        "synth",
+        "--out",
+        &p(&net),
+        "--segments",
+        "8",
+        "--zones",
+        "2",
+        "--seed",
+        "5",
+        "--defects",
+        "0",
+        "--no-real-cases",
+    ]);
+    let truth = std::fs::read_to_string(net.join("truth.csv")).unwrap();
+    assert!(truth
+        .lines()
+        .next()
+        .unwrap()
+        .ends_with("soil_zone,zone_soil_youngs_modulus_pa,zone_soil_poisson"));
+    pipewave(&[
+        "import",
+        "--db",
+        &p(&db),
+        "--segments",
+        &p(&net.join("segments.csv")),
+        "--measurements",
+        &p(&net.join("measurements.csv")),
+    ]);
+    let out = pipewave(&["calibrate", "--db", &p(&db)]);
+    assert!(out.contains("zones: 2 estimated"), "{out}");
+    let conn = rusqlite::Connection::open(&db).unwrap();
+    let n: i64 = conn
+        .query_row("SELECT COUNT(*) FROM zone_fits WHERE soil_youngs_modulus_lo_pa < soil_youngs_modulus_pa AND soil_youngs_modulus_pa < soil_youngs_modulus_hi_pa AND scatter_source = 'fixed'", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(n, 2);
+    let members: i64 = conn
+        .query_row("SELECT COUNT(*) FROM zone_members", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(members, 8);
+    let again = pipewave(&["calibrate", "--db", &p(&db)]);
+    assert!(
+        again.contains("zones: 0 estimated, 2 up to date"),
+        "{again}"
+    );
+    let csv = dir.path().join("out.csv");
+    pipewave(&[
+        "export",
+        "--db",
+        &p(&db),
+        "--format",
+        "csv",
+        "--out",
+        &p(&csv),
+    ]);
+    let mut rdr = csv::Reader::from_path(&csv).unwrap();
+    let col = rdr
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "zone_soil_youngs_modulus_pa")
+        .expect("zone column");
+    let filled = rdr
+        .records()
+        .filter(|r| !r.as_ref().unwrap().get(col).unwrap_or("").is_empty())
+        .count();
+    assert_eq!(filled, 8);
+    let gpkg = dir.path().join("out.gpkg");
+    pipewave(&[
+        "export",
+        "--db",
+        &p(&db),
+        "--format",
+        "gpkg",
+        "--out",
+        &p(&gpkg),
+    ]);
+    let g = rusqlite::Connection::open(&gpkg).unwrap();
+    let polys: i64 = g
+        .query_row(
+            "SELECT COUNT(*) FROM soil_zones WHERE geom IS NOT NULL",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(polys, 2);
+}
