@@ -104,6 +104,9 @@ pub fn polygon_blob(srs_id: i32, ring: &[(f64, f64)]) -> Vec<u8> {
     b
 }
 
+/// A zone's estimate and the vertices of its segments.
+type ZonePoints<'a> = (&'a ZoneFitRow, Vec<(f64, f64)>);
+
 /// Write the zone layer into an open GeoPackage transaction: `lines` are the records' lines in
 /// the table's system `table_srs` (`srs_id` as in the blobs). Zones without any geometry get a
 /// NULL polygon. Returns the number of zones written.
@@ -114,7 +117,7 @@ pub fn write_zone_layer(
     srs_id: i32,
     table_srs: i64,
 ) -> rusqlite::Result<usize> {
-    let mut zones: BTreeMap<&str, (&ZoneFitRow, Vec<(f64, f64)>)> = BTreeMap::new();
+    let mut zones: BTreeMap<&str, ZonePoints<'_>> = BTreeMap::new();
     for (rec, line) in records.iter().zip(lines) {
         if let Some((z, _)) = &rec.zone {
             let entry = zones.entry(z.soil_zone.as_str()).or_insert((z, Vec::new()));
