@@ -17,3 +17,4 @@ pub mod special;
 pub mod stats;
 pub mod synth;
 pub mod units;
+pub mod zones;

@@ -18,6 +18,14 @@ pub const NOISE_K_RE: f64 = 0.01;
 /// Relative noise (one sigma) on the attenuation (issue 3: 5 %).
 pub const NOISE_ATTENUATION: f64 = 0.05;
 
+/// Default scatter of log10 E_m within a synthetic soil zone, decades: 0.04 decade is about
+/// 10 % in E (physics §7.11, typical of one soil unit).
+pub const ZONE_SCATTER_E_DECADES: f64 = 0.04;
+/// Default scatter of ν_m within a synthetic soil zone (physics §7.11).
+pub const ZONE_SCATTER_NU: f64 = 0.01;
+/// Stream of [`crate::seed::derive`] for the zones' soils (independent of the segments').
+const ZONE_SEED_STREAM: u64 = 12;
+
 /// A pipe size from a standard: nominal size, outside diameter and wall thickness (mm).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PipeSize {
@@ -242,6 +250,10 @@ pub struct SynthSegment {
     pub length_m: f64,
     /// Installation year.
     pub install_year: u32,
+    /// Soil zone (`synth --zones`), if any.
+    pub soil_zone: Option<String>,
+    /// The zone's true soil (E_m Pa, ν_m), about which this segment's soil scatters.
+    pub zone_soil: Option<(f64, f64)>,
 }
 
 /// Options of a synthetic network.
@@ -265,6 +277,11 @@ pub struct SynthOptions {
     pub origin: (f64, f64),
     /// EPSG code of the coordinates.
     pub srid: u32,
+    /// Soil zones (0: none): the segments are split into this many contiguous zones, each one
+    /// soil unit (physics §7.11).
+    pub zones: usize,
+    /// Scatter of the segments' soil about their zone's: (log10 E_m decades, ν_m), one sigma.
+    pub zone_scatter: (f64, f64),
 }
 
 impl Default for SynthOptions {
@@ -280,6 +297,8 @@ impl Default for SynthOptions {
             // A street grid in central Southampton, British National Grid.
             origin: (441_800.0, 111_900.0),
             srid: 27700,
+            zones: 0,
+            zone_scatter: (ZONE_SCATTER_E_DECADES, ZONE_SCATTER_NU),
         }
     }
 }
@@ -382,22 +401,50 @@ pub fn measure<R: Rng + ?Sized>(
     )
 }
 
+/// Largest ν_m a scattered zone soil is given (below the fit's bound 0.499).
+const ZONE_NU_MAX: f64 = 0.49;
+
+/// Name of synthetic zone `z` in `segments.csv`: `Z01`, `Z02`, …
+pub fn zone_name(z: usize) -> String {
+    format!("Z{:02}", z + 1)
+}
+
 /// Generate a network. Deterministic for given options.
 pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
     let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     let mut out = Vec::with_capacity(opts.segments);
     // Streets: a grid of blocks 120 m × 90 m; segment i runs along a block edge.
     let cols = ((opts.segments as f64).sqrt().ceil() as usize).max(2);
+    // Zones: a soil class and a soil per zone, and the per-segment scatter, from their own
+    // stream, so that networks without zones are unchanged.
+    let mut zone_rng = ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, ZONE_SEED_STREAM));
+    let zone_soils: Vec<(SoilClass, f64, f64)> = (0..opts.zones)
+        .map(|_| {
+            let class = SOILS[zone_rng.gen_range(0..SOILS.len())];
+            let e = log_uniform(&mut zone_rng, class.1 .0, class.1 .1);
+            let nu = zone_rng.gen_range(class.2 .0..class.2 .1);
+            (class, e, nu)
+        })
+        .collect();
     let mut i = 0usize;
     let mut attempts = 0usize;
     while out.len() < opts.segments && attempts < opts.segments * 20 {
         attempts += 1;
         let material = pick_material(&mut rng);
         let sz = sizes(material)[rng.gen_range(0..sizes(material).len())];
-        let (soil_type, e_r, nu_r, rho_r) = SOILS[rng.gen_range(0..SOILS.len())];
-        let e = log_uniform(&mut rng, e_r.0, e_r.1);
-        let nu = rng.gen_range(nu_r.0..nu_r.1);
-        let rho = rng.gen_range(rho_r.0..rho_r.1).round();
+        let (mut soil_type, e_r, nu_r, rho_r) = SOILS[rng.gen_range(0..SOILS.len())];
+        let mut e = log_uniform(&mut rng, e_r.0, e_r.1);
+        let mut nu = rng.gen_range(nu_r.0..nu_r.1);
+        let mut rho = rng.gen_range(rho_r.0..rho_r.1).round();
+        // Zone of segment i: contiguous blocks of the street grid (eq. P67 for its soil).
+        let zone = (!zone_soils.is_empty()).then(|| i * zone_soils.len() / opts.segments.max(1));
+        if let Some(z) = zone {
+            let (class, ez, nuz) = zone_soils[z];
+            soil_type = class.0;
+            e = ez * 10f64.powf(opts.zone_scatter.0 * normal(&mut zone_rng));
+            nu = (nuz + opts.zone_scatter.1 * normal(&mut zone_rng)).clamp(0.0, ZONE_NU_MAX);
+            rho = zone_rng.gen_range(class.3 .0..class.3 .1).round();
+        }
         let xi = rng.gen::<f64>();
         let pipe = pipe_of(material, &sz);
         let soil = Soil::new(e, nu, rho, 0.0).expect("soil classes are valid");
@@ -514,6 +561,8 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             } else {
                 rng.gen_range(1890..1985)
             },
+            soil_zone: zone.map(zone_name),
+            zone_soil: zone.map(|z| (zone_soils[z].1, zone_soils[z].2)),
         });
         i += 1;
     }

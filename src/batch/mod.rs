@@ -228,6 +228,8 @@ pub struct CalibrateSummary {
     pub elapsed_s: f64,
     /// Sum of the workers' time over the stored fits, ms.
     pub worker_ms: f64,
+    /// The soil zones estimated after the fits (issue 12), if the run finished.
+    pub zones: Option<crate::zones::ZoneUpdate>,
 }
 
 impl CalibrateSummary {
@@ -390,6 +392,7 @@ pub fn calibrate(
         interrupted: false,
         elapsed_s: 0.0,
         worker_ms: 0.0,
+        zones: None,
     };
     let Some(lock) = acquire_lock(conn, opts.wait_for_lock, observer, stop)? else {
         return Ok(CalibrateSummary {
@@ -572,6 +575,9 @@ fn locked_run(
     let finished = db::finish_run(conn, run_id, &counts, status);
     written?;
     finished?;
+    if status == RunStatus::Finished {
+        summary.zones = Some(crate::zones::update_zones(conn, Some(run_id))?);
+    }
     Ok(summary)
 }
 
@@ -802,6 +808,7 @@ mod tests {
             interrupted: true,
             elapsed_s: 2.0,
             worker_ms: 0.0,
+            zones: None,
         };
         assert_eq!(
             s.line(),

@@ -154,6 +154,13 @@ fn report(s: &CalibrateSummary) {
         return;
     }
     println!("{}", s.line());
+    if let Some(z) = s
+        .zones
+        .as_ref()
+        .filter(|z| z.estimated + z.up_to_date + z.too_few > 0)
+    {
+        println!("{}", z.line());
+    }
 }
 
 /// Progress on stderr: a bar on a terminal, nothing otherwise (the summary line comes at the

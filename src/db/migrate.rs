@@ -47,6 +47,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0005_soil_zone.sql",
         sql: include_str!("../../migrations/0005_soil_zone.sql"),
     },
+    Migration {
+        version: 6,
+        name: "0006_zone_fits.sql",
+        sql: include_str!("../../migrations/0006_zone_fits.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

@@ -19,6 +19,7 @@ pub mod lock;
 pub mod migrate;
 pub mod results;
 pub mod wkt;
+pub mod zones;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -466,6 +466,7 @@ fn write_to(
     )
     .map_err(sql)?;
     write_style(&tx, &style::qml(records)).map_err(sql)?;
+    super::zones::write_zone_layer(&tx, records, &lines, srs_id, table_srs).map_err(sql)?;
     tx.commit().map_err(sql)?;
     conn.close().map_err(|(_, e)| sql(e))?;
     Ok(ExportSummary {

@@ -18,6 +18,7 @@ pub mod gpkg;
 pub mod record;
 pub mod spreadsheet;
 pub mod style;
+pub mod zones;
 
 use std::fmt;
 use std::path::{Path, PathBuf};

@@ -44,6 +44,8 @@ pub struct SegmentExport {
     pub attenuation_at: [Option<f64>; 4],
     /// Mean phase speed over [`LEAK_BAND_HZ`], m/s ([`band_mean_speed`]).
     pub leak_band_speed: Option<f64>,
+    /// Its zone's newest estimate and its place in it (physics §7.11), if any.
+    pub zone: Option<(db::zones::ZoneFitRow, db::zones::ZoneMemberRow)>,
 }
 
 impl SegmentExport {
@@ -70,6 +72,7 @@ impl SegmentExport {
             speed_at,
             attenuation_at,
             leak_band_speed,
+            zone: None,
         }
     }
 
@@ -125,6 +128,7 @@ pub fn load_records(
         .into_iter()
         .map(|f| (f.segment_id.clone(), f))
         .collect();
+    let mut zones = db::zones::latest_zone_memberships(conn).map_err(&err)?;
     let mut out = Vec::with_capacity(segments.len());
     for seg in segments {
         let fit = fits.remove(&seg.segment_id);
@@ -132,7 +136,9 @@ pub fn load_records(
             Some(f) => db::curves_for(conn, &f.segment_id, f.run_id).map_err(&err)?,
             None => Vec::new(),
         };
-        let rec = SegmentExport::new(seg, fit, curve);
+        let zone = zones.remove(&seg.segment_id);
+        let mut rec = SegmentExport::new(seg, fit, curve);
+        rec.zone = zone;
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
             let why = LineString::parse_wkt(w).err().unwrap_or_default();
             warnings.push(format!(
@@ -215,6 +221,21 @@ impl std::fmt::Debug for Property {
             .field("kind", &self.kind)
             .finish()
     }
+}
+
+fn zone_real(r: &SegmentExport, get: fn(&db::zones::ZoneFitRow) -> Option<f64>) -> Value<'_> {
+    Value::real(r.zone.as_ref().and_then(|z| get(&z.0)))
+}
+
+macro_rules! zone_real {
+    ($name:literal, $field:ident, $doc:literal) => {
+        Property {
+            name: $name,
+            kind: Kind::Real,
+            doc: $doc,
+            get: |r| zone_real(r, |z| z.$field),
+        }
+    };
 }
 
 fn fit_real(r: &SegmentExport, get: fn(&FitRow) -> Option<f64>) -> Value<'_> {
@@ -484,6 +505,72 @@ pub const PROPERTIES: &[Property] = &[
         leak_band_speed_std_m_per_s,
         "one-sigma error of the leak-band speed, m/s (physics P65)"
     ),
+    Property {
+        name: "soil_zone",
+        kind: Kind::Text,
+        doc: "the soil unit of the inventory (physics §7.11)",
+        get: |r| Value::text(r.segment.soil_zone.as_deref()),
+    },
+    zone_real!(
+        "zone_soil_youngs_modulus_pa",
+        soil_youngs_modulus_pa,
+        "the zone's E_m, Pa (hierarchical estimate, physics P67-P68)"
+    ),
+    zone_real!(
+        "zone_soil_youngs_modulus_lo_pa",
+        soil_youngs_modulus_lo_pa,
+        "95 % interval of the zone's E_m: lower end, Pa"
+    ),
+    zone_real!(
+        "zone_soil_youngs_modulus_hi_pa",
+        soil_youngs_modulus_hi_pa,
+        "95 % interval of the zone's E_m: upper end, Pa"
+    ),
+    zone_real!("zone_soil_poisson", soil_poisson, "the zone's nu_m"),
+    zone_real!(
+        "zone_soil_poisson_lo",
+        soil_poisson_lo,
+        "95 % interval of the zone's nu_m: lower end"
+    ),
+    zone_real!(
+        "zone_soil_poisson_hi",
+        soil_poisson_hi,
+        "95 % interval of the zone's nu_m: upper end"
+    ),
+    zone_real!(
+        "zone_soil_p_wave_speed_m_per_s",
+        soil_p_wave_speed_m_per_s,
+        "the zone's compressional speed c_P at its mean soil density, m/s (P63)"
+    ),
+    zone_real!(
+        "zone_soil_s_wave_speed_m_per_s",
+        soil_s_wave_speed_m_per_s,
+        "the zone's shear speed c_S at its mean soil density, m/s (P64)"
+    ),
+    Property {
+        name: "zone_shrunk_soil_youngs_modulus_pa",
+        kind: Kind::Real,
+        doc: "this segment's E_m shrunk toward its zone, Pa (P68)",
+        get: |r| {
+            Value::real(
+                r.zone
+                    .as_ref()
+                    .and_then(|z| z.1.shrunk_soil_youngs_modulus_pa),
+            )
+        },
+    },
+    Property {
+        name: "zone_shrunk_soil_poisson",
+        kind: Kind::Real,
+        doc: "this segment's nu_m shrunk toward its zone (P68)",
+        get: |r| Value::real(r.zone.as_ref().and_then(|z| z.1.shrunk_soil_poisson)),
+    },
+    Property {
+        name: "zone_outlier",
+        kind: Kind::Integer,
+        doc: "1 if this segment disagrees with its zone and was left out of its estimate",
+        get: |r| Value::int(r.zone.as_ref().map(|z| i64::from(z.1.zone_outlier))),
+    },
 ];
 
 #[cfg(test)]

@@ -57,6 +57,8 @@ pub struct InventoryRow {
     pub geometry: Vec<(f64, f64)>,
     /// EPSG code of the geometry.
     pub srid: Option<u32>,
+    /// Soil zone (physics §7.11); the column is written only when some segment has one.
+    pub soil_zone: Option<String>,
 }
 
 /// One row of `measurements.csv`: exactly one of `frequency_hz` / `omega_rad_s` is set.
@@ -103,6 +105,12 @@ pub struct TruthRow {
     /// Deliberate defect (`outlier`, `attenuation_in_db`, `wrong_material`,
     /// `too_few_measurements`), if any.
     pub defect: Option<String>,
+    /// Soil zone, if any.
+    pub soil_zone: Option<String>,
+    /// The zone's true E_m, Pa (the segment's soil scatters about it).
+    pub zone_soil_youngs_modulus_pa: Option<f64>,
+    /// The zone's true ν_m.
+    pub zone_soil_poisson: Option<f64>,
 }
 
 impl TruthRow {
@@ -118,6 +126,9 @@ impl TruthRow {
             hidden_effect: None,
             hidden_effect_value: None,
             defect: None,
+            soil_zone: None,
+            zone_soil_youngs_modulus_pa: None,
+            zone_soil_poisson: None,
         }
     }
 }
@@ -184,6 +195,7 @@ impl NetworkTables {
                     .map(|&(x, y)| (round_to(x, 2), round_to(y, 2)))
                     .collect(),
                 srid: (!s.geometry.is_empty()).then_some(srid),
+                soil_zone: s.soil_zone.clone(),
             });
             for m in &s.measurements {
                 t.measurements.push(MeasurementRow {
@@ -209,6 +221,9 @@ impl NetworkTables {
                 defect: Some(s.defect.as_str())
                     .filter(|d| !d.is_empty())
                     .map(str::to_string),
+                soil_zone: s.soil_zone.clone(),
+                zone_soil_youngs_modulus_pa: s.zone_soil.map(|z| z.0),
+                zone_soil_poisson: s.zone_soil.map(|z| z.1),
             });
         }
         t
@@ -226,8 +241,10 @@ impl NetworkTables {
         let mut out = String::from(
             "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,\
              pipe_youngs_modulus_pa,pipe_poisson,pipe_density_kg_m3,pipe_loss_factor,length_m,\
-             soil_type,install_year,geometry_wkt,srid\n",
+             soil_type,install_year,geometry_wkt,srid",
         );
+        let zoned = self.segments.iter().any(|s| s.soil_zone.is_some());
+        out.push_str(if zoned { ",soil_zone\n" } else { "\n" });
         for s in &self.segments {
             let geometry = if s.geometry.is_empty() {
                 String::new()
@@ -236,7 +253,7 @@ impl NetworkTables {
                 // Quoted: the WKT contains commas.
                 format!("\"LINESTRING ({})\"", pts.join(", "))
             };
-            let _ = writeln!(
+            let _ = write!(
                 out,
                 "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 text(&s.segment_id),
@@ -254,6 +271,11 @@ impl NetworkTables {
                 geometry,
                 s.srid.map(|v| v.to_string()).unwrap_or_default(),
             );
+            if zoned {
+                out.push(',');
+                out.push_str(&s.soil_zone.as_deref().map(text).unwrap_or_default());
+            }
+            out.push('\n');
         }
         out
     }
@@ -285,10 +307,16 @@ impl NetworkTables {
     pub fn truth_csv(&self) -> String {
         let mut out = String::from(
             "segment_id,source,soil_type,soil_youngs_modulus_pa,soil_poisson,contact,\
-             hidden_effect,hidden_effect_value,defect\n",
+             hidden_effect,hidden_effect_value,defect",
         );
+        let zoned = self.truth.iter().any(|t| t.soil_zone.is_some());
+        out.push_str(if zoned {
+            ",soil_zone,zone_soil_youngs_modulus_pa,zone_soil_poisson\n"
+        } else {
+            "\n"
+        });
         for t in &self.truth {
-            let _ = writeln!(
+            let _ = write!(
                 out,
                 "{},{},{},{},{},{},{},{},{}",
                 text(&t.segment_id),
@@ -301,6 +329,16 @@ impl NetworkTables {
                 opt(t.hidden_effect_value),
                 t.defect.as_deref().map(text).unwrap_or_default(),
             );
+            if zoned {
+                let _ = write!(
+                    out,
+                    ",{},{},{}",
+                    t.soil_zone.as_deref().map(text).unwrap_or_default(),
+                    opt(t.zone_soil_youngs_modulus_pa),
+                    opt(t.zone_soil_poisson),
+                );
+            }
+            out.push('\n');
         }
         out
     }
@@ -406,6 +444,9 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, NetworkError> {
             hidden_effect: cell("hidden_effect"),
             hidden_effect_value: num("hidden_effect_value")?,
             defect: cell("defect"),
+            soil_zone: cell("soil_zone"),
+            zone_soil_youngs_modulus_pa: num("zone_soil_youngs_modulus_pa")?,
+            zone_soil_poisson: num("zone_soil_poisson")?,
         });
     }
     Ok(out)

@@ -199,6 +199,7 @@ pub fn lu2022() -> Result<PublishedCase, PublishedDataError> {
             install_year: None,
             geometry: Vec::new(),
             srid: None,
+            soil_zone: None,
         },
         measurements,
         truth: TruthRow::unknown(LU2022_ID, "published: Lu et al. 2022, Sensors 22(10) 3942"),
@@ -318,6 +319,7 @@ pub fn muggleton2004() -> Result<PublishedCase, PublishedDataError> {
             install_year: None,
             geometry: Vec::new(),
             srid: None,
+            soil_zone: None,
         },
         measurements,
         truth: TruthRow::unknown(

@@ -163,6 +163,7 @@ pub fn render(
     summary(&mut h, records, &non_failed, runs);
     misfit(&mut h, records, &non_failed)?;
     speed_diameter(&mut h, &non_failed)?;
+    h.push_str(&super::zones::section(records));
     worst_fits(&mut h, records)?;
     failed(&mut h, records);
     if !warnings.is_empty() {

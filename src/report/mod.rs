@@ -8,6 +8,7 @@
 pub mod audit;
 pub mod charts;
 pub mod svg;
+pub mod zones;
 
 /// Linear-interpolated quantile `q` in [0, 1] of sorted finite values (type 7, as R's default
 /// and numpy's `linear`). `None` for an empty slice.

@@ -1,0 +1,127 @@
+//! Issue 12's acceptance figures on a zoned synthetic network: zone E_m and ν_m errors, the
+//! coverage of their 95 % intervals, the same for the median of the single fits, an all-metal
+//! version of every zone, and the time of the zone estimation against the segment fits.
+//!
+//! `cargo run --release --example zones_acceptance -- [SEED] [ZONES] [PER_ZONE]`
+//! (default 20261122 16 10).
+
+use pipewave::zones::synthetic::{estimate, run, ZoneCheck};
+
+fn quantile(v: &[f64], p: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn report(label: &str, zones: &[ZoneCheck]) {
+    let e: Vec<f64> = zones.iter().map(|z| z.modulus_error()).collect();
+    let n: Vec<f64> = zones.iter().map(|z| z.poisson_error()).collect();
+    let se: Vec<f64> = zones
+        .iter()
+        .map(|z| (z.single_median.0 / z.truth.0 - 1.0).abs())
+        .collect();
+    let sn: Vec<f64> = zones
+        .iter()
+        .map(|z| (z.single_median.1 - z.truth.1).abs())
+        .collect();
+    let cov_e = zones
+        .iter()
+        .filter(|z| z.estimate.modulus_interval.contains(z.truth.0))
+        .count();
+    let cov_n = zones
+        .iter()
+        .filter(|z| z.estimate.poisson_interval.contains(z.truth.1))
+        .count();
+    println!("{label}: {} zones", zones.len());
+    println!(
+        "  zone E_m error median {:.1} % p90 {:.1} %; nu_m error median {:.4} p90 {:.4}",
+        100.0 * quantile(&e, 0.5),
+        100.0 * quantile(&e, 0.9),
+        quantile(&n, 0.5),
+        quantile(&n, 0.9)
+    );
+    println!(
+        "  single-fit median: E_m error median {:.1} % p90 {:.1} %; nu_m error median {:.4}",
+        100.0 * quantile(&se, 0.5),
+        100.0 * quantile(&se, 0.9),
+        quantile(&sn, 0.5)
+    );
+    println!(
+        "  95 % intervals cover the truth: E_m {}/{}, nu_m {}/{}",
+        cov_e,
+        zones.len(),
+        cov_n,
+        zones.len()
+    );
+    for z in zones {
+        let est = &z.estimate;
+        println!(
+            "  {} ({} metal, {} plastic, {} outliers): E {:.3e} [{:.3e}, {:.3e}] truth {:.3e}; \
+             nu {:.3} [{:.3}, {:.3}] truth {:.3}; chi2/dof {:.2}",
+            z.zone,
+            z.metal,
+            z.plastic,
+            est.members.iter().filter(|m| m.outlier).count(),
+            est.modulus(),
+            est.modulus_interval.lo,
+            est.modulus_interval.hi,
+            z.truth.0,
+            est.poisson,
+            est.poisson_interval.lo,
+            est.poisson_interval.hi,
+            z.truth.1,
+            est.chi2_per_dof
+        );
+    }
+}
+
+fn main() {
+    let args: Vec<u64> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse().expect("SEED ZONES PER_ZONE are integers"))
+        .collect();
+    let seed = args.first().copied().unwrap_or(20_261_122);
+    let zones = args.get(1).copied().unwrap_or(16) as usize;
+    let per_zone = args.get(2).copied().unwrap_or(10) as usize;
+    let r = run(seed, zones, per_zone);
+    report(&format!("seed {seed}, mixed pipes"), &r.zones);
+    println!(
+        "time: segment fits {:.2} s, zone estimation {:.3} s ({:.1} %)",
+        r.fit_seconds,
+        r.zone_seconds,
+        100.0 * r.zone_seconds / r.fit_seconds
+    );
+    if std::env::var("ZONES_DEBUG").is_ok() {
+        debug(&r);
+    }
+    let (metal, _) = estimate(&r.network, &r.fits, |s| !s.material.is_plastic());
+    report(&format!("seed {seed}, metal pipes only"), &metal);
+}
+
+/// Members of the zones whose E_m is off by more than 20 % (set ZONES_DEBUG=1).
+pub fn debug(r: &pipewave::zones::synthetic::ZonedRun) {
+    use pipewave::invert::uncertainty::soil_speeds;
+    for z in r.zones.iter().filter(|z| z.modulus_error() > 0.2) {
+        println!("zone {}:", z.zone);
+        for m in &z.estimate.members {
+            let i = r.network.iter().position(|s| s.id == m.segment_id).unwrap();
+            let (s, f) = (&r.network[i], &r.fits[i]);
+            let d = s.segment_data();
+            let setup = pipewave::zones::FitSetup {
+                model: f.model,
+                contact_mode: f.contact_mode,
+                effects: f.effects.clone(),
+            };
+            let x = pipewave::zones::synthetic::optimum(f);
+            let mem = pipewave::zones::member_from_fit(&s.id, &d, &setup, &x).unwrap();
+            let (cp, cs) = soil_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
+            let det = mem.info[0] * mem.info[3] - mem.info[1] * mem.info[2];
+            let (vp, vs) = (mem.info[3] / det, mem.info[0] / det);
+            println!(
+                "  {} {:?} fit E {:.3e} nu {:.3} xi {:.2} | truth E {:.3e} nu {:.3} xi {:.2} | dlncP {:+.3} (sd {:.3}) dlncS {:+.3} (sd {:.3}) stat {:.2} {:?}",
+                s.id, s.material, 10f64.powf(x[0]), x[1], x[2], s.soil_modulus, s.soil_poisson, s.contact,
+                mem.u_hat[0] - cp.ln(), vp.sqrt(), mem.u_hat[1] - cs.ln(), vs.sqrt(), m.statistic, f.status
+            );
+        }
+    }
+}

@@ -1,0 +1,209 @@
+//! A member segment's quadratic misfit model in the soil speeds, from its single fit and the
+//! real misfit (`invert::Problem`): the Gauss–Newton information JᵀJ of the weighted residuals
+//! at the fit's optimum (central differences, 2n forward evaluations), ξ and any effect
+//! parameters profiled out (Schur complement, with the single fit's weak prior one search
+//! range wide on them), carried to (ln c_P, ln c_S) by the exact Jacobian of P63–P64 (P65).
+
+use crate::invert::problem::{Param, Problem, Weighting};
+use crate::invert::uncertainty::{coordinates_from_speeds, dln_cp_dnu, dln_cs_dnu, soil_speeds};
+use crate::invert::{Method, SegmentData};
+use crate::optimize::lm::{jacobian_fd, FiniteDifference};
+use crate::physics::effects::Effect;
+use crate::physics::{ContactMode, Model};
+
+use super::model::Member;
+
+/// The settings a member's fit was made with (from its `fits` row).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitSetup {
+    /// Model variant.
+    pub model: Model,
+    /// Contact reading.
+    pub contact_mode: ContactMode,
+    /// Effects switched on.
+    pub effects: Vec<Effect>,
+}
+
+/// The member of a zone from its data and its single fit's optimum `x` in the default
+/// method's coordinates (log10 E_m, ν_m, ξ, effect coordinates…). `None` if the model cannot
+/// be evaluated there or the information is not positive definite.
+pub fn member_from_fit(
+    segment_id: &str,
+    data: &SegmentData,
+    setup: &FitSetup,
+    x: &[f64],
+) -> Option<Member> {
+    let problem = Problem::new(
+        data,
+        Method::Default,
+        setup.model,
+        setup.contact_mode,
+        &setup.effects,
+    );
+    let n = problem.specs.len();
+    if x.len() != n {
+        return None;
+    }
+    let ie = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilModulus)?;
+    let inu = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilPoisson)?;
+    let bounds = problem.bounds().ok()?;
+    let m = problem.n_residuals();
+    let k = problem.predict(x)?;
+    let mut r0 = vec![0.0; m];
+    problem.residuals_of(&k, &mut r0);
+    let ss: f64 = r0.iter().map(|v| v * v).sum();
+    if !ss.is_finite() {
+        return None;
+    }
+    let mut jac = vec![0.0; m * n];
+    jacobian_fd(
+        &problem,
+        x,
+        &r0,
+        Some(&bounds),
+        FiniteDifference::Central,
+        FiniteDifference::Central.default_rel_step(),
+        &mut jac,
+    )
+    .ok()?;
+    // Residual variance as in the single fit: at least 1 when the model does not explain the
+    // data (chi-square), σ̂² for relative residuals.
+    let dof = m.saturating_sub(n).max(1) as f64;
+    let scale = match problem.weighting {
+        Weighting::ChiSquare => (ss / dof).max(1.0),
+        Weighting::Relative => ss / dof,
+    };
+    let mut info = crate::optimize::linalg::jtj(&jac, m, n);
+    for v in info.iter_mut() {
+        *v /= scale;
+    }
+    let rest: Vec<usize> = (0..n).filter(|&i| i != ie && i != inu).collect();
+    for &i in &rest {
+        let w = problem.specs[i].upper - problem.specs[i].lower;
+        info[i * n + i] += 1.0 / (w * w);
+    }
+    // Schur complement: information of (log10 E, ν) with the rest profiled out.
+    let soil = [ie, inu];
+    let mut h = [0.0; 4];
+    for (a, &i) in soil.iter().enumerate() {
+        for (b, &j) in soil.iter().enumerate() {
+            h[2 * a + b] = info[i * n + j];
+        }
+    }
+    if !rest.is_empty() {
+        let r = rest.len();
+        let mut d = vec![0.0; r * r];
+        for (a, &i) in rest.iter().enumerate() {
+            for (b, &j) in rest.iter().enumerate() {
+                d[a * r + b] = info[i * n + j];
+            }
+        }
+        let l = crate::optimize::linalg::cholesky(&d, r)?;
+        for (a, &i) in soil.iter().enumerate() {
+            let bi: Vec<f64> = rest.iter().map(|&q| info[i * n + q]).collect();
+            let di_bi = crate::optimize::linalg::cholesky_solve(&l, r, &bi);
+            for (b, &j) in soil.iter().enumerate() {
+                let bj: f64 = rest
+                    .iter()
+                    .zip(&di_bi)
+                    .map(|(&q, v)| info[j * n + q] * v)
+                    .sum();
+                h[2 * a + b] -= bj;
+            }
+        }
+    }
+    // To (ln c_P, ln c_S): u = T x locally, H_u = T⁻ᵀ H_x T⁻¹ (P65).
+    let (le, nu) = (x[ie], x[inu]);
+    let half_ln10 = 0.5 * std::f64::consts::LN_10;
+    let t = [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)];
+    let det = t[0] * t[3] - t[1] * t[2];
+    let ti = [t[3] / det, -t[1] / det, -t[2] / det, t[0] / det];
+    let tit = [ti[0], ti[2], ti[1], ti[3]];
+    let hu = mul(&mul(&tit, &h), &ti);
+    let hu = [hu[0], 0.5 * (hu[1] + hu[2]), 0.5 * (hu[1] + hu[2]), hu[3]];
+    if !(hu.iter().all(|v| v.is_finite()) && hu[0] >= 0.0 && hu[3] >= 0.0) {
+        return None;
+    }
+    let (cp, cs) = soil_speeds(10f64.powf(le), nu, data.soil_density);
+    // Widen along the principal axes where the real misfit rises less than the quadratic
+    // model says (the valley flattens, e.g. toward a soft soil's small c_S), as the single
+    // fit's uncertainty does (physics §7.10): probe at two model sigmas on both sides.
+    let hu = widen(hu, |du| {
+        let mut u = x.to_vec();
+        u[ie] = cp.ln() + du[0];
+        u[inu] = cs.ln() + du[1];
+        let q = coordinates_from_speeds(&problem.specs, &u, data.soil_density, &bounds)?;
+        let k = problem.predict(&q)?;
+        Some((problem.sum_of_squares(&k) - ss) / scale)
+    });
+    Some(Member {
+        segment_id: segment_id.to_string(),
+        soil_density: data.soil_density,
+        single: (le, nu),
+        u_hat: [cp.ln(), cs.ln()],
+        info: hu,
+    })
+}
+
+/// Model sigmas at which the quadratic model is checked against the real misfit.
+const PROBE_SIGMAS: f64 = 2.0;
+/// Largest probe step in ln c_P or ln c_S (a factor e): beyond it the model is not checked.
+const PROBE_MAX_LN: f64 = 1.0;
+/// Smallest factor an eigenvalue is reduced by (keeps the information positive).
+const MIN_WIDENING: f64 = 0.02;
+
+/// The information `h` with each principal direction's eigenvalue reduced by the ratio of the
+/// real rise to the modelled one (PROBE_SIGMAS² at ± PROBE_SIGMAS model sigmas), where the real
+/// misfit (`rise`, above the minimum, in units of the residual variance) rises less.
+fn widen(h: [f64; 4], mut rise: impl FnMut([f64; 2]) -> Option<f64>) -> [f64; 4] {
+    let (a, b, d) = (h[0], h[1], h[3]);
+    let tr = 0.5 * (a + d);
+    let disc = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    let lambdas = [tr + disc, tr - disc];
+    let mut out = [0.0; 4];
+    for &l in &lambdas {
+        // Unit eigenvector of l.
+        let v = if b.abs() > 1e-300 {
+            let (x, y) = (l - d, b);
+            let n = (x * x + y * y).sqrt();
+            [x / n, y / n]
+        } else if (l - a).abs() <= (l - d).abs() {
+            [1.0, 0.0]
+        } else {
+            [0.0, 1.0]
+        };
+        let mut lw = l.max(0.0);
+        if lw > 0.0 {
+            let step = (PROBE_SIGMAS / lw.sqrt()).min(PROBE_MAX_LN);
+            let modelled = lw * step * step;
+            let real = [1.0, -1.0]
+                .iter()
+                .filter_map(|sgn| rise([sgn * step * v[0], sgn * step * v[1]]))
+                .filter(|r| r.is_finite())
+                .fold(f64::INFINITY, f64::min);
+            if real.is_finite() && real < modelled {
+                lw *= (real / modelled).max(MIN_WIDENING);
+            }
+        }
+        out[0] += lw * v[0] * v[0];
+        out[1] += lw * v[0] * v[1];
+        out[2] += lw * v[1] * v[0];
+        out[3] += lw * v[1] * v[1];
+    }
+    out
+}
+
+fn mul(a: &[f64; 4], b: &[f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] + a[1] * b[2],
+        a[0] * b[1] + a[1] * b[3],
+        a[2] * b[0] + a[3] * b[2],
+        a[2] * b[1] + a[3] * b[3],
+    ]
+}

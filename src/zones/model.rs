@@ -1,0 +1,526 @@
+//! The hierarchical model of one soil zone (physics §7.11, P67–P68), on per-segment quadratic
+//! models of the misfit in the soil speeds u = (ln c_P, ln c_S) (P63–P64).
+//!
+//! Each member s brings its single fit's speeds û_s and the information H_s (2 × 2, the
+//! inverse covariance of û_s with ξ and any effect parameters profiled out), so that
+//! χ²_s(E_s, ν_s) ≈ χ²_s,min + (u_s(E_s, ν_s) − û_s)ᵀ H_s (u_s(E_s, ν_s) − û_s): a quadratic in
+//! the speeds (where the misfit valley is nearly straight), mapped exactly from (log10 E, ν)
+//! with the segment's own ρ_m. The zone's profile misfit
+//! Φ(E_z, ν_z) = Σ_s min over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²] (P68) is evaluated on
+//! a grid over the whole search box and then on a fine grid over its 95 % region; the 95 %
+//! intervals are the profile intervals {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84}
+//! (as P66). A member whose own misfit at the zone, allowing for the scatter, exceeds the
+//! χ²₂ 0.999 quantile is an outlier: reported and left out of the zone estimate.
+
+use crate::invert::problem::E_BOUNDS;
+use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_speeds, DCHI2_95};
+use crate::physics::inputs::MAX_SOIL_POISSON;
+
+/// Typical scatter of log10 E_m between segments of one soil unit, decades (physics §7.11:
+/// "about 0.04 decade", i.e. about 10 % in E).
+pub const TAU_E_DECADES: f64 = 0.04;
+/// Typical scatter of ν_m between segments of one soil unit (physics §7.11: about 0.01).
+pub const TAU_NU: f64 = 0.01;
+/// Members with a fit a zone needs before it is estimated (issue 12).
+pub const MIN_MEMBERS: usize = 3;
+/// χ²₂ quantile at 0.999: a member whose misfit at the zone (measurement error and scatter
+/// allowed for) exceeds it is a `zone_outlier` (false-alarm rate 0.1 % per segment).
+pub const OUTLIER_CHI2: f64 = 13.815_510_557_964_274;
+/// Largest ν the inner minimisation visits: ν = 0.5 is singular (c_P infinite).
+const NU_CAP: f64 = 0.4995;
+/// Coarse grid: steps in log10 E (decades) and ν.
+const COARSE_STEP_E: f64 = 0.1;
+const COARSE_STEP_NU: f64 = 0.02;
+/// Fine grid: points per side over the coarse 95 % region.
+const FINE_POINTS: usize = 41;
+/// Gauss–Newton iterations of the inner (per-member) minimisation.
+const INNER_ITERATIONS: usize = 12;
+
+/// What one member segment brings to its zone: the quadratic model of its misfit in the soil
+/// speeds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Member {
+    /// Segment.
+    pub segment_id: String,
+    /// Soil density ρ_m from the inventory, kg/m³.
+    pub soil_density: f64,
+    /// The single fit's log10 E_m (Pa) and ν_m.
+    pub single: (f64, f64),
+    /// The single fit's (ln c_P, ln c_S).
+    pub u_hat: [f64; 2],
+    /// Information of (ln c_P, ln c_S), row-major 2 × 2 (other coordinates profiled out).
+    pub info: [f64; 4],
+}
+
+impl Member {
+    /// (ln c_P, ln c_S) of this member's soil at (log10 E, ν) (P63–P64).
+    fn u(&self, le: f64, nu: f64) -> [f64; 2] {
+        let (cp, cs) = soil_speeds(10f64.powf(le), nu, self.soil_density);
+        [cp.ln(), cs.ln()]
+    }
+
+    /// The quadratic misfit above the single fit's minimum at (log10 E, ν).
+    pub fn misfit(&self, le: f64, nu: f64) -> f64 {
+        let u = self.u(le, nu);
+        let d = [u[0] - self.u_hat[0], u[1] - self.u_hat[1]];
+        quad(&self.info, d)
+    }
+
+    /// min over (E_s, ν_s) of misfit + δ²/τ_E² + ε²/τ_ν² with the zone at `z` (P68); returns
+    /// the minimum and the minimiser (the member's values shrunk toward the zone).
+    pub fn profile(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, (f64, f64)) {
+        let p = [1.0 / (tau.0 * tau.0), 1.0 / (tau.1 * tau.1)];
+        let objective = |t: (f64, f64)| {
+            self.misfit(t.0, t.1) + p[0] * (t.0 - z.0).powi(2) + p[1] * (t.1 - z.1).powi(2)
+        };
+        let mut t = (z.0, z.1.min(NU_CAP));
+        let mut f = objective(t);
+        for _ in 0..INNER_ITERATIONS {
+            let u = self.u(t.0, t.1);
+            let d = [u[0] - self.u_hat[0], u[1] - self.u_hat[1]];
+            // ∂u/∂(log10 E, ν) (P65).
+            let half_ln10 = 0.5 * std::f64::consts::LN_10;
+            let j = [half_ln10, dln_cp_dnu(t.1), half_ln10, dln_cs_dnu(t.1)];
+            // Gauss–Newton: (JᵀHJ + P) Δ = −(JᵀH d + P (t − z)).
+            let hj = mat2_mul(&self.info, &j);
+            let jt = [j[0], j[2], j[1], j[3]];
+            let mut a = mat2_mul(&jt, &hj);
+            a[0] += p[0];
+            a[3] += p[1];
+            let hd = [
+                self.info[0] * d[0] + self.info[1] * d[1],
+                self.info[2] * d[0] + self.info[3] * d[1],
+            ];
+            let g = [
+                jt[0] * hd[0] + jt[1] * hd[1] + p[0] * (t.0 - z.0),
+                jt[2] * hd[0] + jt[3] * hd[1] + p[1] * (t.1 - z.1),
+            ];
+            let det = a[0] * a[3] - a[1] * a[2];
+            if !(det.is_finite() && det > 0.0) {
+                break;
+            }
+            let step = [
+                -(a[3] * g[0] - a[1] * g[1]) / det,
+                -(-a[2] * g[0] + a[0] * g[1]) / det,
+            ];
+            // Halve the step until the objective does not rise (the map is nonlinear).
+            let mut lambda = 1.0;
+            let mut accepted = false;
+            for _ in 0..6 {
+                let cand = (
+                    t.0 + lambda * step[0],
+                    (t.1 + lambda * step[1]).clamp(0.0, NU_CAP),
+                );
+                let fc = objective(cand);
+                if fc.is_finite() && fc <= f {
+                    let moved = (cand.0 - t.0).abs() + (cand.1 - t.1).abs();
+                    t = cand;
+                    f = fc;
+                    accepted = moved > 1e-10;
+                    break;
+                }
+                lambda *= 0.5;
+            }
+            if !accepted {
+                break;
+            }
+        }
+        (f, t)
+    }
+}
+
+fn quad(h: &[f64; 4], d: [f64; 2]) -> f64 {
+    d[0] * (h[0] * d[0] + h[1] * d[1]) + d[1] * (h[2] * d[0] + h[3] * d[1])
+}
+
+fn mat2_mul(a: &[f64; 4], b: &[f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] + a[1] * b[2],
+        a[0] * b[1] + a[1] * b[3],
+        a[2] * b[0] + a[3] * b[2],
+        a[2] * b[1] + a[3] * b[3],
+    ]
+}
+
+/// How the zone's scatter was chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScatterSource {
+    /// Fixed at the typical values of one soil unit ([`TAU_E_DECADES`], [`TAU_NU`]).
+    Fixed,
+}
+
+impl ScatterSource {
+    /// Text stored in `zone_fits.scatter_source`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ScatterSource::Fixed => "fixed",
+        }
+    }
+}
+
+/// A 95 % profile interval of a zone coordinate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ZoneInterval {
+    /// Lower end.
+    pub lo: f64,
+    /// Upper end.
+    pub hi: f64,
+    /// The interval reaches the lower end of the search range.
+    pub reaches_lower_bound: bool,
+    /// The interval reaches the upper end of the search range.
+    pub reaches_upper_bound: bool,
+}
+
+impl ZoneInterval {
+    /// True if `v` lies inside.
+    pub fn contains(&self, v: f64) -> bool {
+        self.lo <= v && v <= self.hi
+    }
+}
+
+/// A member's place in its zone's estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MemberResult {
+    /// Segment.
+    pub segment_id: String,
+    /// E_m (Pa) shrunk toward the zone (the minimiser of P68 at the zone estimate).
+    pub shrunk_modulus: f64,
+    /// ν_m shrunk toward the zone.
+    pub shrunk_poisson: f64,
+    /// The member's misfit at the zone estimate with the scatter allowed for (the inner
+    /// minimum of P68); compared with [`OUTLIER_CHI2`].
+    pub statistic: f64,
+    /// Its quadratic misfit at the zone's own values, above its single fit's minimum.
+    pub misfit_at_zone: f64,
+    /// Left out of the zone estimate as inconsistent with it.
+    pub outlier: bool,
+}
+
+/// The estimate of one zone.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZoneEstimate {
+    /// log10 E_z (Pa) at the minimum of the profile misfit.
+    pub log10_modulus: f64,
+    /// ν_z.
+    pub poisson: f64,
+    /// 95 % interval of E_z, Pa.
+    pub modulus_interval: ZoneInterval,
+    /// 95 % interval of ν_z.
+    pub poisson_interval: ZoneInterval,
+    /// The soil density the zone's speeds are given at (the members' mean ρ_m), kg/m³.
+    pub soil_density: f64,
+    /// 95 % interval of the zone's c_P at that density, m/s (over the same region, P63).
+    pub p_wave_speed_interval: (f64, f64),
+    /// 95 % interval of the zone's c_S, m/s (P64).
+    pub s_wave_speed_interval: (f64, f64),
+    /// Scatter used: (τ_E decades, τ_ν).
+    pub scatter: (f64, f64),
+    /// How it was chosen.
+    pub scatter_source: ScatterSource,
+    /// Φ_min / (2 n − 2) over the members kept (two speed coordinates each, two zone
+    /// parameters).
+    pub chi2_per_dof: f64,
+    /// Every member, in input order.
+    pub members: Vec<MemberResult>,
+}
+
+impl ZoneEstimate {
+    /// The zone's (c_P, c_S) at its estimate and [`Self::soil_density`], m/s (P63–P64).
+    pub fn speeds(&self) -> (f64, f64) {
+        soil_speeds(self.modulus(), self.poisson, self.soil_density)
+    }
+    /// E_z, Pa.
+    pub fn modulus(&self) -> f64 {
+        10f64.powf(self.log10_modulus)
+    }
+    /// Members kept in the estimate.
+    pub fn n_kept(&self) -> usize {
+        self.members.iter().filter(|m| !m.outlier).count()
+    }
+}
+
+/// Φ(z) over the members in `keep`.
+fn phi(members: &[Member], keep: &[bool], z: (f64, f64), tau: (f64, f64)) -> f64 {
+    members
+        .iter()
+        .zip(keep)
+        .filter(|(_, &k)| k)
+        .map(|(m, _)| m.profile(z, tau).0)
+        .sum()
+}
+
+/// A grid evaluation of Φ: points (log10 E, ν, Φ).
+fn grid(
+    members: &[Member],
+    keep: &[bool],
+    tau: (f64, f64),
+    e_range: (f64, f64),
+    nu_range: (f64, f64),
+    ne: usize,
+    nn: usize,
+) -> Vec<(f64, f64, f64)> {
+    let mut out = Vec::with_capacity(ne * nn);
+    for i in 0..ne {
+        let le = e_range.0 + (e_range.1 - e_range.0) * i as f64 / (ne - 1).max(1) as f64;
+        for j in 0..nn {
+            let nu = nu_range.0 + (nu_range.1 - nu_range.0) * j as f64 / (nn - 1).max(1) as f64;
+            out.push((le, nu, phi(members, keep, (le, nu), tau)));
+        }
+    }
+    out
+}
+
+fn minimum(points: &[(f64, f64, f64)]) -> (f64, f64, f64) {
+    points.iter().copied().filter(|p| p.2.is_finite()).fold(
+        (f64::NAN, f64::NAN, f64::INFINITY),
+        |a, p| {
+            if p.2 < a.2 {
+                p
+            } else {
+                a
+            }
+        },
+    )
+}
+
+/// Search box of the zone coordinates: the single-segment fit's (physics §7.1).
+fn search_box() -> ((f64, f64), (f64, f64)) {
+    (
+        (E_BOUNDS.0.log10(), E_BOUNDS.1.log10()),
+        (0.0, MAX_SOIL_POISSON),
+    )
+}
+
+/// The minimum of Φ, the 95 % intervals of E_z and ν_z, and the 95 % region's points.
+type Solution = ((f64, f64, f64), ZoneInterval, ZoneInterval, Vec<(f64, f64)>);
+
+/// Minimum and 95 % region of Φ: coarse grid over the box, then a fine grid over the region.
+fn solve(members: &[Member], keep: &[bool], tau: (f64, f64)) -> Option<Solution> {
+    let (eb, nb) = search_box();
+    let ne = ((eb.1 - eb.0) / COARSE_STEP_E).round() as usize + 1;
+    let nn = ((nb.1 - nb.0) / COARSE_STEP_NU).round() as usize + 1;
+    let coarse = grid(members, keep, tau, eb, nb, ne, nn);
+    let best = minimum(&coarse);
+    if !best.2.is_finite() {
+        return None;
+    }
+    // The coarse region (with a margin for the grid's coarseness), one step wider each side.
+    let (de, dn) = (
+        (eb.1 - eb.0) / (ne - 1) as f64,
+        (nb.1 - nb.0) / (nn - 1) as f64,
+    );
+    let inside: Vec<_> = coarse
+        .iter()
+        .filter(|p| p.2 <= best.2 + 2.0 * DCHI2_95)
+        .collect();
+    let lo_e = inside.iter().map(|p| p.0).fold(f64::INFINITY, f64::min) - de;
+    let hi_e = inside.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max) + de;
+    let lo_n = inside.iter().map(|p| p.1).fold(f64::INFINITY, f64::min) - dn;
+    let hi_n = inside.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max) + dn;
+    let e_range = (lo_e.max(eb.0), hi_e.min(eb.1));
+    let nu_range = (lo_n.max(nb.0), hi_n.min(nb.1));
+    let fine = grid(
+        members,
+        keep,
+        tau,
+        e_range,
+        nu_range,
+        FINE_POINTS,
+        FINE_POINTS,
+    );
+    let fbest = minimum(&fine);
+    let best = if fbest.2 <= best.2 { fbest } else { best };
+    let region: Vec<_> = fine.iter().filter(|p| p.2 <= best.2 + DCHI2_95).collect();
+    // Half a fine step beyond the outermost point inside: the region's edge lies between it
+    // and the next point.
+    let half_e = 0.5 * (e_range.1 - e_range.0) / (FINE_POINTS - 1) as f64;
+    let half_n = 0.5 * (nu_range.1 - nu_range.0) / (FINE_POINTS - 1) as f64;
+    let interval = |vals: Vec<f64>, half: f64, b: (f64, f64)| {
+        let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let reach = 1e-3 * (b.1 - b.0);
+        let (lo, hi) = ((lo - half).max(b.0), (hi + half).min(b.1));
+        ZoneInterval {
+            lo,
+            hi,
+            reaches_lower_bound: lo <= b.0 + reach,
+            reaches_upper_bound: hi >= b.1 - reach,
+        }
+    };
+    let mut e_int = interval(region.iter().map(|p| p.0).collect(), half_e, eb);
+    e_int.lo = 10f64.powf(e_int.lo);
+    e_int.hi = 10f64.powf(e_int.hi);
+    let nu_int = interval(region.iter().map(|p| p.1).collect(), half_n, nb);
+    let points = region.iter().map(|p| (p.0, p.1)).collect();
+    Some((best, e_int, nu_int, points))
+}
+
+/// Estimate one zone from its members (at least [`MIN_MEMBERS`]); `None` if too few or the
+/// misfit is nowhere finite. Outliers are removed one at a time, worst first, while at least
+/// [`MIN_MEMBERS`] remain.
+pub fn estimate_zone(members: &[Member]) -> Option<ZoneEstimate> {
+    if members.len() < MIN_MEMBERS {
+        return None;
+    }
+    let tau = (TAU_E_DECADES, TAU_NU);
+    let mut keep = vec![true; members.len()];
+    loop {
+        let (best, e_int, nu_int, region) = solve(members, &keep, tau)?;
+        let z = (best.0, best.1);
+        let results: Vec<MemberResult> = members
+            .iter()
+            .zip(&keep)
+            .map(|(m, &k)| {
+                let (stat, t) = m.profile(z, tau);
+                MemberResult {
+                    segment_id: m.segment_id.clone(),
+                    shrunk_modulus: 10f64.powf(t.0),
+                    shrunk_poisson: t.1,
+                    statistic: stat,
+                    misfit_at_zone: m.misfit(z.0, z.1),
+                    outlier: !k,
+                }
+            })
+            .collect();
+        let worst = results
+            .iter()
+            .enumerate()
+            .filter(|(i, r)| keep[*i] && r.statistic > OUTLIER_CHI2)
+            .max_by(|a, b| a.1.statistic.total_cmp(&b.1.statistic))
+            .map(|(i, _)| i);
+        let n_kept = keep.iter().filter(|&&k| k).count();
+        match worst {
+            Some(i) if n_kept > MIN_MEMBERS => keep[i] = false,
+            _ => {
+                let dof = (2 * n_kept).saturating_sub(2).max(1) as f64;
+                let rho = members
+                    .iter()
+                    .zip(&keep)
+                    .filter(|(_, &k)| k)
+                    .map(|(m, _)| m.soil_density)
+                    .sum::<f64>()
+                    / n_kept as f64;
+                let speeds: Vec<(f64, f64)> = region
+                    .iter()
+                    .map(|&(le, nu)| soil_speeds(10f64.powf(le), nu, rho))
+                    .collect();
+                let range = |f: fn(&(f64, f64)) -> f64| {
+                    speeds
+                        .iter()
+                        .map(f)
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, v| {
+                            (a.0.min(v), a.1.max(v))
+                        })
+                };
+                return Some(ZoneEstimate {
+                    log10_modulus: z.0,
+                    poisson: z.1,
+                    modulus_interval: e_int,
+                    poisson_interval: nu_int,
+                    soil_density: rho,
+                    p_wave_speed_interval: range(|s| s.0),
+                    s_wave_speed_interval: range(|s| s.1),
+                    scatter: tau,
+                    scatter_source: ScatterSource::Fixed,
+                    chi2_per_dof: best.2 / dof,
+                    members: results,
+                });
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A member whose single fit sees its soil's speeds with relative errors (σ_P, σ_S).
+    fn member(id: &str, le: f64, nu: f64, rho: f64, sp: f64, ss: f64) -> Member {
+        let (cp, cs) = soil_speeds(10f64.powf(le), nu, rho);
+        Member {
+            segment_id: id.into(),
+            soil_density: rho,
+            single: (le, nu),
+            u_hat: [cp.ln(), cs.ln()],
+            info: [1.0 / (sp * sp), 0.0, 0.0, 1.0 / (ss * ss)],
+        }
+    }
+
+    #[test]
+    fn metal_and_plastic_members_determine_the_zone_and_metal_alone_does_not() {
+        // Metal pipes see c_P to 2 %, c_S hardly (100 %); plastic pipes c_S to 2 %.
+        let (le, nu) = (7.7, 0.33);
+        let mixed: Vec<Member> = (0..6)
+            .map(|i| {
+                let (sp, ss) = if i % 2 == 0 { (0.02, 1.0) } else { (1.0, 0.02) };
+                member(&format!("S{i}"), le, nu, 1900.0, sp, ss)
+            })
+            .collect();
+        let z = estimate_zone(&mixed).unwrap();
+        assert!((z.log10_modulus - le).abs() < 0.02, "{z:?}");
+        assert!((z.poisson - nu).abs() < 0.01, "{z:?}");
+        assert!(z.modulus_interval.contains(10f64.powf(le)));
+        assert!(z.poisson_interval.contains(nu));
+        assert!(z.modulus_interval.hi / z.modulus_interval.lo < 1.3, "{z:?}");
+        assert!(z.members.iter().all(|m| !m.outlier));
+
+        let metal: Vec<Member> = (0..6)
+            .map(|i| member(&format!("M{i}"), le, nu, 1900.0, 0.02, 1.0))
+            .collect();
+        let zm = estimate_zone(&metal).unwrap();
+        // c_P alone: E and ν trade along c_P = const, so both intervals are wide.
+        assert!(
+            zm.poisson_interval.hi - zm.poisson_interval.lo > 0.15,
+            "{zm:?}"
+        );
+        assert!(
+            zm.modulus_interval.hi / zm.modulus_interval.lo > 2.0,
+            "{zm:?}"
+        );
+        assert!(zm.modulus_interval.contains(10f64.powf(le)));
+        assert!(zm.poisson_interval.contains(nu));
+    }
+
+    #[test]
+    fn a_member_in_another_soil_is_an_outlier_and_left_out() {
+        let (le, nu) = (7.7, 0.33);
+        let mut ms: Vec<Member> = (0..6)
+            .map(|i| {
+                let (sp, ss) = if i % 2 == 0 { (0.02, 1.0) } else { (1.0, 0.02) };
+                member(&format!("S{i}"), le, nu, 1900.0, sp, ss)
+            })
+            .collect();
+        ms.push(member("BAD", 8.5, 0.25, 1900.0, 0.02, 0.02));
+        let z = estimate_zone(&ms).unwrap();
+        let bad = z.members.iter().find(|m| m.segment_id == "BAD").unwrap();
+        assert!(bad.outlier && bad.statistic > OUTLIER_CHI2, "{bad:?}");
+        assert_eq!(z.n_kept(), 6);
+        assert!((z.log10_modulus - le).abs() < 0.02, "{z:?}");
+    }
+
+    #[test]
+    fn shrinkage_pulls_an_undetermined_coordinate_to_the_zone() {
+        let (le, nu) = (7.7, 0.33);
+        let mut ms: Vec<Member> = (0..5)
+            .map(|i| {
+                let (sp, ss) = if i % 2 == 0 { (0.02, 1.0) } else { (1.0, 0.02) };
+                member(&format!("S{i}"), le, nu, 1900.0, sp, ss)
+            })
+            .collect();
+        // A metal pipe whose single fit went far along its c_P valley (ν = 0.05).
+        let (cp, _) = soil_speeds(10f64.powf(le), nu, 1900.0);
+        let mut far = member("FAR", le, nu, 1900.0, 0.02, 1.0);
+        // Same c_P, different (E, ν): move along c_P = const to ν = 0.05.
+        let m_mod = 1900.0 * cp * cp;
+        let nu_far: f64 = 0.05;
+        let e_far = m_mod * (1.0 + nu_far) * (1.0 - 2.0 * nu_far) / (1.0 - nu_far);
+        far.single = (e_far.log10(), nu_far);
+        let (_, cs_far) = soil_speeds(e_far, nu_far, 1900.0);
+        far.u_hat[1] = cs_far.ln();
+        ms.push(far);
+        let z = estimate_zone(&ms).unwrap();
+        let f = z.members.iter().find(|m| m.segment_id == "FAR").unwrap();
+        assert!(!f.outlier, "{f:?}");
+        assert!((f.shrunk_poisson - nu).abs() < 0.03, "{f:?}");
+    }
+}

@@ -1,0 +1,283 @@
+//! The zones of a database: after the segment fits of a `calibrate` run, every zone with at
+//! least [`MIN_MEMBERS`] fitted segments whose member fits changed since its last estimate is
+//! estimated again (physics §7.11) and stored in `zone_fits` / `zone_members`.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use rusqlite::Connection;
+
+use crate::batch::segment_data;
+use crate::db::zones::{insert_zone_fit, latest_zone_fit, ZoneFitRow, ZoneMemberRow};
+use crate::db::{latest_fits, load_segments, DbError, FitRow, FitStatus, SegmentRecord};
+use crate::invert::problem::{parameter_space, Param};
+use crate::invert::Method;
+use crate::physics::effects::parse_effects;
+
+use super::model::{estimate_zone, ZoneEstimate, MIN_MEMBERS, OUTLIER_CHI2};
+use super::{members_by_zone, FitSetup, FittedSegment};
+
+/// Zone flag: the zone holds only metal or only plastic pipes, so its data fix c_P or c_S but
+/// not both (physics §7.10): E_m and ν_m are known only along a valley.
+pub const FLAG_SINGLE_PIPE_KIND: &str = "single_pipe_kind";
+/// Zone flag: some members disagree with the zone (named in `outliers`).
+pub const FLAG_HAS_OUTLIERS: &str = "zone_outlier";
+/// Zone flag: the zone's χ²/dof exceeds [`POOR_FIT_CHI2_PER_DOF`]: the scatter between its
+/// segments is larger than assumed, or it is more than one soil.
+pub const FLAG_POOR_FIT: &str = "zone_poor_fit";
+/// χ²/dof above which a zone is flagged [`FLAG_POOR_FIT`].
+pub const POOR_FIT_CHI2_PER_DOF: f64 = 3.0;
+
+/// What [`update_zones`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ZoneUpdate {
+    /// Zones estimated (stored).
+    pub estimated: usize,
+    /// Zones whose estimate was current.
+    pub up_to_date: usize,
+    /// Zones with fewer than [`MIN_MEMBERS`] fitted segments (not estimated).
+    pub too_few: usize,
+    /// Segments reported as zone outliers in the stored estimates.
+    pub outliers: usize,
+    /// Wall-clock time, s.
+    pub elapsed_s: f64,
+}
+
+impl ZoneUpdate {
+    /// The summary line, e.g. `zones: 16 estimated, 0 up to date, 1 with too few fits, 2
+    /// outliers, in 0.4 s`.
+    pub fn line(&self) -> String {
+        format!(
+            "zones: {} estimated, {} up to date, {} with fewer than {} fitted segments, {} \
+             zone outliers, in {:.2} s",
+            self.estimated,
+            self.up_to_date,
+            self.too_few,
+            MIN_MEMBERS,
+            self.outliers,
+            self.elapsed_s
+        )
+    }
+}
+
+/// The single fit's optimum in the default coordinates, from its stored values.
+fn coordinates(fit: &FitRow, setup: &FitSetup) -> Option<Vec<f64>> {
+    parameter_space(Method::Default, &setup.effects)
+        .iter()
+        .map(|s| {
+            let v = match s.param {
+                Param::SoilModulus => fit.soil_youngs_modulus_pa,
+                Param::SoilPoisson => fit.soil_poisson,
+                Param::Contact => fit.contact,
+                Param::Effect(e) => match e.parameter().map(|p| p.name) {
+                    Some("soil_loss_factor") => fit.soil_loss_factor,
+                    Some("air_fraction") => fit.air_fraction,
+                    Some("wall_thickness_ratio") => fit.wall_thickness_ratio,
+                    Some("pipe_loss_factor") => fit.pipe_loss_factor,
+                    _ => None,
+                },
+            }?;
+            let c = s.coordinate(v);
+            c.is_finite().then_some(c.clamp(s.lower, s.upper))
+        })
+        .collect()
+}
+
+/// The hash of a zone's member fits: `segment_id:fit_id` lines, sorted.
+fn members_hash(fits: &[&FitRow]) -> String {
+    let mut lines: Vec<String> = fits
+        .iter()
+        .map(|f| format!("{}:{}", f.segment_id, f.id.unwrap_or(-1)))
+        .collect();
+    lines.sort();
+    crate::db::hash::fnv1a64_hex(&lines.join("\n"))
+}
+
+/// Estimate every zone whose member fits changed since its last estimate, and store it under
+/// `run_id`.
+pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUpdate, DbError> {
+    let started = Instant::now();
+    let mut update = ZoneUpdate::default();
+    let records: Vec<SegmentRecord> = load_segments(conn, None)?
+        .into_iter()
+        .filter(|r| r.soil_zone.as_deref().is_some_and(|z| !z.trim().is_empty()))
+        .collect();
+    if records.is_empty() {
+        return Ok(update);
+    }
+    let fits: BTreeMap<String, FitRow> = latest_fits(conn, None)?
+        .into_iter()
+        .map(|f| (f.segment_id.clone(), f))
+        .collect();
+    // Members by zone: segments with a usable latest fit.
+    let mut zones: BTreeMap<String, Vec<(&SegmentRecord, &FitRow)>> = BTreeMap::new();
+    let mut all_zones = std::collections::BTreeSet::new();
+    for r in &records {
+        let zone = r
+            .soil_zone
+            .as_deref()
+            .unwrap_or_default()
+            .trim()
+            .to_string();
+        all_zones.insert(zone.clone());
+        if let Some(f) = fits.get(&r.segment_id) {
+            if f.status != FitStatus::Failed
+                && f.soil_youngs_modulus_pa.is_some()
+                && f.soil_poisson.is_some()
+            {
+                zones.entry(zone).or_default().push((r, f));
+            }
+        }
+    }
+    update.too_few = all_zones
+        .iter()
+        .filter(|z| zones.get(*z).map_or(0, Vec::len) < MIN_MEMBERS)
+        .count();
+    for (zone, members) in zones.iter().filter(|(_, m)| m.len() >= MIN_MEMBERS) {
+        let t0 = Instant::now();
+        let fit_refs: Vec<&FitRow> = members.iter().map(|(_, f)| *f).collect();
+        let hash = members_hash(&fit_refs);
+        if latest_zone_fit(conn, zone)?.is_some_and(|z| z.members_hash == hash) {
+            update.up_to_date += 1;
+            continue;
+        }
+        let data: Vec<Option<crate::invert::SegmentData>> =
+            members.iter().map(|(r, _)| segment_data(r).ok()).collect();
+        let mut fitted = Vec::new();
+        let mut plastic = 0usize;
+        let mut metal = 0usize;
+        for ((r, f), d) in members.iter().zip(&data) {
+            let Some(d) = d else { continue };
+            let Ok(effects) = parse_effects(&f.effects) else {
+                continue;
+            };
+            let setup = FitSetup {
+                model: f.model,
+                contact_mode: f.contact_mode,
+                effects,
+            };
+            let Some(x) = coordinates(f, &setup) else {
+                continue;
+            };
+            if r.material.is_plastic() {
+                plastic += 1;
+            } else {
+                metal += 1;
+            }
+            fitted.push(FittedSegment {
+                segment_id: r.segment_id.clone(),
+                soil_zone: zone.clone(),
+                data: d,
+                setup,
+                x,
+            });
+        }
+        let by_zone = members_by_zone(&fitted);
+        let Some(est) = by_zone.get(zone).and_then(|ms| estimate_zone(ms)) else {
+            update.too_few += 1;
+            continue;
+        };
+        let fit_ids: BTreeMap<&str, i64> = fit_refs
+            .iter()
+            .map(|f| (f.segment_id.as_str(), f.id.unwrap_or(-1)))
+            .collect();
+        let mut row = zone_row(zone, run_id, &est, &hash, plastic == 0 || metal == 0);
+        row.elapsed_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
+        let member_rows: Vec<ZoneMemberRow> = est
+            .members
+            .iter()
+            .map(|m| ZoneMemberRow {
+                segment_id: m.segment_id.clone(),
+                fit_id: fit_ids.get(m.segment_id.as_str()).copied().unwrap_or(-1),
+                shrunk_soil_youngs_modulus_pa: Some(m.shrunk_modulus),
+                shrunk_soil_poisson: Some(m.shrunk_poisson),
+                statistic: Some(m.statistic),
+                zone_outlier: m.outlier,
+            })
+            .collect();
+        update.outliers += est.members.iter().filter(|m| m.outlier).count();
+        insert_zone_fit(conn, &row, &member_rows)?;
+        update.estimated += 1;
+    }
+    update.elapsed_s = started.elapsed().as_secs_f64();
+    Ok(update)
+}
+
+/// The `zone_fits` row of an estimate.
+pub fn zone_row(
+    zone: &str,
+    run_id: Option<i64>,
+    est: &ZoneEstimate,
+    members_hash: &str,
+    single_pipe_kind: bool,
+) -> ZoneFitRow {
+    let (cp, cs) = est.speeds();
+    let outliers: Vec<&super::MemberResult> = est.members.iter().filter(|m| m.outlier).collect();
+    let mut flags = Vec::new();
+    if single_pipe_kind {
+        flags.push(FLAG_SINGLE_PIPE_KIND);
+    }
+    if !outliers.is_empty() {
+        flags.push(FLAG_HAS_OUTLIERS);
+    }
+    if est.chi2_per_dof > POOR_FIT_CHI2_PER_DOF {
+        flags.push(FLAG_POOR_FIT);
+    }
+    let reasons: Vec<String> = outliers
+        .iter()
+        .map(|m| {
+            format!(
+                "{}: misfit at the zone {} with the scatter allowed for (above {} is \
+                 p < 0.001); its own misfit rises by {} at the zone's E_m and nu_m",
+                m.segment_id,
+                short(m.statistic),
+                short(OUTLIER_CHI2),
+                short(m.misfit_at_zone)
+            )
+        })
+        .collect();
+    ZoneFitRow {
+        id: None,
+        soil_zone: zone.to_string(),
+        run_id,
+        n_segments: est.members.len() as i64,
+        n_outliers: outliers.len() as i64,
+        soil_youngs_modulus_pa: Some(est.modulus()),
+        soil_youngs_modulus_lo_pa: Some(est.modulus_interval.lo),
+        soil_youngs_modulus_hi_pa: Some(est.modulus_interval.hi),
+        soil_poisson: Some(est.poisson),
+        soil_poisson_lo: Some(est.poisson_interval.lo),
+        soil_poisson_hi: Some(est.poisson_interval.hi),
+        soil_density_kg_m3: Some(est.soil_density),
+        soil_p_wave_speed_m_per_s: Some(cp),
+        soil_p_wave_speed_lo_m_per_s: Some(est.p_wave_speed_interval.0),
+        soil_p_wave_speed_hi_m_per_s: Some(est.p_wave_speed_interval.1),
+        soil_s_wave_speed_m_per_s: Some(cs),
+        soil_s_wave_speed_lo_m_per_s: Some(est.s_wave_speed_interval.0),
+        soil_s_wave_speed_hi_m_per_s: Some(est.s_wave_speed_interval.1),
+        scatter_youngs_modulus_decades: est.scatter.0,
+        scatter_poisson: est.scatter.1,
+        scatter_source: est.scatter_source.as_str().to_string(),
+        chi2_per_dof: Some(est.chi2_per_dof),
+        flags: flags.join(","),
+        outliers: outliers
+            .iter()
+            .map(|m| m.segment_id.as_str())
+            .collect::<Vec<_>>()
+            .join(","),
+        outlier_reasons: reasons.join("\n"),
+        members_hash: members_hash.to_string(),
+        elapsed_ms: None,
+        created_at: None,
+    }
+}
+
+/// A number in short form for messages (4 significant digits).
+fn short(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-3) {
+        format!("{v:.3e}")
+    } else {
+        let s = format!("{v:.4}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}

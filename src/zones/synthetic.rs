@@ -1,0 +1,167 @@
+//! Zone estimation on a zoned synthetic network with known truth (issue 12's acceptance): fit
+//! every segment, estimate every zone, and compare with the zones' true soils. Used by the
+//! `zones` test and the `zones_acceptance` example (which prints the figures and the timing).
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::invert::{fit_segment, FitResult, FitSettings, FitStatus, Param};
+use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
+
+use super::{estimate_zones, FitSetup, FittedSegment, ZoneEstimate};
+
+/// One zone's estimate against its truth.
+#[derive(Debug, Clone)]
+pub struct ZoneCheck {
+    /// Zone.
+    pub zone: String,
+    /// True E_z, Pa, and ν_z.
+    pub truth: (f64, f64),
+    /// The estimate.
+    pub estimate: ZoneEstimate,
+    /// The median of the members' single fits: E (Pa), ν.
+    pub single_median: (f64, f64),
+    /// Members that are metal / plastic pipes.
+    pub metal: usize,
+    /// Plastic members.
+    pub plastic: usize,
+}
+
+impl ZoneCheck {
+    /// |E_est / E_true − 1|.
+    pub fn modulus_error(&self) -> f64 {
+        (self.estimate.modulus() / self.truth.0 - 1.0).abs()
+    }
+    /// |ν_est − ν_true|.
+    pub fn poisson_error(&self) -> f64 {
+        (self.estimate.poisson - self.truth.1).abs()
+    }
+}
+
+/// A zoned network's fits and zone estimates.
+#[derive(Debug, Clone)]
+pub struct ZonedRun {
+    /// The network.
+    pub network: Vec<SynthSegment>,
+    /// Every segment's fit.
+    pub fits: Vec<FitResult>,
+    /// Every zone.
+    pub zones: Vec<ZoneCheck>,
+    /// Wall-clock time of the segment fits, s.
+    pub fit_seconds: f64,
+    /// Wall-clock time of the zone estimation (members' models and zones), s.
+    pub zone_seconds: f64,
+}
+
+/// The default coordinates (log10 E_m, ν_m, ξ, effects…) of a fit's optimum.
+pub fn optimum(r: &FitResult) -> Vec<f64> {
+    r.estimates.iter().map(|e| e.coordinate).collect()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Generate `zones × per_zone` segments with `seed` (no defects, the default mix, noise and
+/// scatter), fit them with the default settings and estimate the zones.
+pub fn run(seed: u64, zones: usize, per_zone: usize) -> ZonedRun {
+    let network = generate(&SynthOptions {
+        segments: zones * per_zone,
+        seed,
+        defect_fraction: 0.0,
+        zones,
+        ..SynthOptions::default()
+    });
+    let settings = FitSettings::default();
+    let t0 = Instant::now();
+    let fits: Vec<FitResult> = network
+        .par_iter()
+        .map(|s| fit_segment(&s.segment_data(), &settings, crate::seed::derive(seed, 1)))
+        .collect();
+    let fit_seconds = t0.elapsed().as_secs_f64();
+    let (zones, zone_seconds) = estimate(&network, &fits, |_| true);
+    ZonedRun {
+        network,
+        fits,
+        zones,
+        fit_seconds,
+        zone_seconds,
+    }
+}
+
+/// Estimate the zones of a fitted network from the segments `members` accepts (e.g. metal
+/// pipes only); returns the zones and the time taken, s.
+pub fn estimate(
+    network: &[SynthSegment],
+    fits: &[FitResult],
+    members: impl Fn(&SynthSegment) -> bool,
+) -> (Vec<ZoneCheck>, f64) {
+    let data: Vec<_> = network.iter().map(SynthSegment::segment_data).collect();
+    let t1 = Instant::now();
+    let fitted: Vec<FittedSegment<'_>> = network
+        .iter()
+        .zip(fits)
+        .zip(&data)
+        .filter(|((s, r), _)| {
+            r.status != FitStatus::Failed && s.defect == Defect::None && members(s)
+        })
+        .filter_map(|((s, r), d)| {
+            Some(FittedSegment {
+                segment_id: s.id.clone(),
+                soil_zone: s.soil_zone.clone()?,
+                data: d,
+                setup: FitSetup {
+                    model: r.model,
+                    contact_mode: r.contact_mode,
+                    effects: r.effects.clone(),
+                },
+                x: optimum(r),
+            })
+        })
+        .collect();
+    let estimates = estimate_zones(&fitted);
+    let zone_seconds = t1.elapsed().as_secs_f64();
+    let zones = estimates
+        .into_iter()
+        .map(|(zone, estimate)| {
+            let in_zone: Vec<(&SynthSegment, &FitResult)> = network
+                .iter()
+                .zip(fits)
+                .filter(|(s, _)| estimate.members.iter().any(|m| m.segment_id == s.id))
+                .collect();
+            let truth = in_zone[0].0.zone_soil.expect("zoned network");
+            let single = |p: Param| {
+                median(
+                    in_zone
+                        .iter()
+                        .filter_map(|(_, r)| r.get(p).map(|e| e.value))
+                        .collect(),
+                )
+            };
+            ZoneCheck {
+                zone,
+                truth,
+                single_median: (single(Param::SoilModulus), single(Param::SoilPoisson)),
+                metal: in_zone
+                    .iter()
+                    .filter(|(s, _)| !s.material.is_plastic())
+                    .count(),
+                plastic: in_zone
+                    .iter()
+                    .filter(|(s, _)| s.material.is_plastic())
+                    .count(),
+                estimate,
+            }
+        })
+        .collect();
+    (zones, zone_seconds)
+}

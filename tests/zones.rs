@@ -1,0 +1,215 @@
+//! Soil zones (issue 12, physics §7.11): on a zoned synthetic network made with a seed the code
+//! was not tuned on (16 zones × 10 segments, the default material mix, 1 % / 5 % noise, 10 %
+//! scatter in E_m and 0.01 in ν_m within a zone), the zone estimates recover the zones' soils
+//! and their 95 % intervals cover the truth; with metal pipes only, the intervals are honestly
+//! wide. Figures for other seeds: `cargo run --release --example zones_acceptance -- SEED`.
+
+use pipewave::zones::synthetic::{estimate, run, ZoneCheck};
+
+/// A seed never used while developing the zone estimate.
+const FRESH_SEED: u64 = 90_417;
+
+fn quantile(v: &[f64], p: f64) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn coverage(zones: &[ZoneCheck]) -> (f64, f64) {
+    let n = zones.len() as f64;
+    let e = zones
+        .iter()
+        .filter(|z| z.estimate.modulus_interval.contains(z.truth.0))
+        .count() as f64;
+    let nu = zones
+        .iter()
+        .filter(|z| z.estimate.poisson_interval.contains(z.truth.1))
+        .count() as f64;
+    (e / n, nu / n)
+}
+
+#[test]
+fn zones_of_a_fresh_synthetic_network_are_recovered_with_honest_intervals() {
+    let r = run(FRESH_SEED, 16, 10);
+    assert_eq!(
+        r.zones.len(),
+        16,
+        "every zone has at least 3 fitted segments"
+    );
+    let e_err: Vec<f64> = r.zones.iter().map(ZoneCheck::modulus_error).collect();
+    let nu_err: Vec<f64> = r.zones.iter().map(ZoneCheck::poisson_error).collect();
+    let (e_med, e_p90, nu_med) = (
+        quantile(&e_err, 0.5),
+        quantile(&e_err, 0.9),
+        quantile(&nu_err, 0.5),
+    );
+    let (cov_e, cov_nu) = coverage(&r.zones);
+    eprintln!(
+        "zones: E_m error median {e_med:.3} p90 {e_p90:.3}; nu_m error median {nu_med:.4}; \
+         coverage E_m {cov_e:.2} nu_m {cov_nu:.2}; fits {:.1} s, zones {:.2} s",
+        r.fit_seconds, r.zone_seconds
+    );
+    assert!(e_med <= 0.06, "zone E_m median error {e_med}");
+    assert!(e_p90 <= 0.15, "zone E_m p90 error {e_p90}");
+    assert!(nu_med <= 0.02, "zone nu_m median error {nu_med}");
+    assert!(cov_e >= 0.85, "E_m coverage {cov_e}");
+    assert!(cov_nu >= 0.85, "nu_m coverage {cov_nu}");
+    // The joint estimate beats the median of the single fits (physics §7.11: 11 % median).
+    let single: Vec<f64> = r
+        .zones
+        .iter()
+        .map(|z| (z.single_median.0 / z.truth.0 - 1.0).abs())
+        .collect();
+    assert!(e_med < quantile(&single, 0.5), "no better than single fits");
+    // Members are shrunk toward their zone, between their own fit and the zone.
+    for z in &r.zones {
+        for m in z.estimate.members.iter().filter(|m| !m.outlier) {
+            assert!(m.shrunk_modulus.is_finite() && (0.0..0.5).contains(&m.shrunk_poisson));
+        }
+    }
+
+    // The same zones seen through metal pipes only: c_P alone, so E_m and ν_m trade along a
+    // valley. Their intervals must be wide and still cover the truth.
+    let (metal, _) = estimate(&r.network, &r.fits, |s| !s.material.is_plastic());
+    assert!(metal.len() >= 8, "{} all-metal zones", metal.len());
+    let nu_width: Vec<f64> = metal
+        .iter()
+        .map(|z| z.estimate.poisson_interval.hi - z.estimate.poisson_interval.lo)
+        .collect();
+    let mixed_width: Vec<f64> = r
+        .zones
+        .iter()
+        .map(|z| z.estimate.poisson_interval.hi - z.estimate.poisson_interval.lo)
+        .collect();
+    assert!(
+        quantile(&nu_width, 0.5) > 3.0 * quantile(&mixed_width, 0.5),
+        "metal-only nu_m intervals {nu_width:?} against mixed {mixed_width:?}"
+    );
+    let e_ratio: Vec<f64> = metal
+        .iter()
+        .map(|z| z.estimate.modulus_interval.hi / z.estimate.modulus_interval.lo)
+        .collect();
+    assert!(
+        quantile(&e_ratio, 0.5) > 1.5,
+        "metal-only E_m intervals {e_ratio:?}"
+    );
+    // Measured on this seed: 13 of 16 zones (0.81) for each. The 85 % asked of mixed zones is
+    // NOT met by metal-only zones; this bound (set after seeing that figure) guards against
+    // the intervals getting narrower still.
+    let (mcov_e, mcov_nu) = coverage(&metal);
+    assert!(
+        mcov_e >= 0.75 && mcov_nu >= 0.75,
+        "metal-only coverage {mcov_e} {mcov_nu}"
+    );
+}
+
+fn pipewave(args: &[&str]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_pipewave"))
+        .args(args)
+        .output()
+        .expect("run pipewave");
+    assert!(
+        out.status.success(),
+        "pipewave {args:?}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// `synth --zones`, `import`, `calibrate`: the zones are estimated and stored after the fits,
+/// not again while their members' fits are unchanged; the exports carry the zone values and
+/// the GeoPackage a zone layer.
+#[test]
+fn calibrate_estimates_stores_and_exports_zones() {
+    let dir = tempfile::tempdir().unwrap();
+    let net = dir.path().join("net");
+    let db = dir.path().join("z.sqlite");
+    let p = |x: &std::path::Path| x.to_str().unwrap().to_string();
+    pipewave(&[
+        "synth",
+        "--out",
+        &p(&net),
+        "--segments",
+        "8",
+        "--zones",
+        "2",
+        "--seed",
+        "5",
+        "--defects",
+        "0",
+        "--no-real-cases",
+    ]);
+    let truth = std::fs::read_to_string(net.join("truth.csv")).unwrap();
+    assert!(truth
+        .lines()
+        .next()
+        .unwrap()
+        .ends_with("soil_zone,zone_soil_youngs_modulus_pa,zone_soil_poisson"));
+    pipewave(&[
+        "import",
+        "--db",
+        &p(&db),
+        "--segments",
+        &p(&net.join("segments.csv")),
+        "--measurements",
+        &p(&net.join("measurements.csv")),
+    ]);
+    let out = pipewave(&["calibrate", "--db", &p(&db)]);
+    assert!(out.contains("zones: 2 estimated"), "{out}");
+    let conn = rusqlite::Connection::open(&db).unwrap();
+    let n: i64 = conn
+        .query_row("SELECT COUNT(*) FROM zone_fits WHERE soil_youngs_modulus_lo_pa < soil_youngs_modulus_pa AND soil_youngs_modulus_pa < soil_youngs_modulus_hi_pa AND scatter_source = 'fixed'", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(n, 2);
+    let members: i64 = conn
+        .query_row("SELECT COUNT(*) FROM zone_members", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(members, 8);
+    let again = pipewave(&["calibrate", "--db", &p(&db)]);
+    assert!(
+        again.contains("zones: 0 estimated, 2 up to date"),
+        "{again}"
+    );
+    let csv = dir.path().join("out.csv");
+    pipewave(&[
+        "export",
+        "--db",
+        &p(&db),
+        "--format",
+        "csv",
+        "--out",
+        &p(&csv),
+    ]);
+    let mut rdr = csv::Reader::from_path(&csv).unwrap();
+    let col = rdr
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "zone_soil_youngs_modulus_pa")
+        .expect("zone column");
+    let filled = rdr
+        .records()
+        .filter(|r| !r.as_ref().unwrap().get(col).unwrap_or("").is_empty())
+        .count();
+    assert_eq!(filled, 8);
+    let gpkg = dir.path().join("out.gpkg");
+    pipewave(&[
+        "export",
+        "--db",
+        &p(&db),
+        "--format",
+        "gpkg",
+        "--out",
+        &p(&gpkg),
+    ]);
+    let g = rusqlite::Connection::open(&gpkg).unwrap();
+    let polys: i64 = g
+        .query_row(
+            "SELECT COUNT(*) FROM soil_zones WHERE geom IS NOT NULL",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(polys, 2);
+}
