@@ -457,20 +457,20 @@ pub struct TimedFit {
     pub misfit: f64,
     /// The fit failed.
     pub failed: bool,
+    /// Wall time of building the result after the search (what the data determine: soil
+    /// speeds, intervals, the curve with its errors, findings), ms.
+    pub result_ms: f64,
 }
 
-/// Fit one segment and compute its stored curve (what a `calibrate` worker does), timed.
+/// Fit one segment with its stored curve (what a `calibrate` worker does: the fit result
+/// carries the curve with its errors), timed.
 pub fn timed_fit(seg: &BenchSegment, settings: &crate::invert::FitSettings) -> TimedFit {
     let t = Instant::now();
     let cpu = thread_cpu_ms();
     let r = crate::invert::fit_segment(&seg.data, settings, seg.seed);
-    let curve = r
-        .system
-        .as_ref()
-        .map(|s| crate::physics::curves::curve(s, &crate::physics::curves::STANDARD_GRID_HZ).len())
-        .unwrap_or(0);
-    black_box(curve);
+    black_box(r.curve.len());
     TimedFit {
+        result_ms: r.result_seconds * 1e3,
         cpu_ms: thread_cpu_ms() - cpu,
         ms: t.elapsed().as_secs_f64() * 1e3,
         evaluations: r.evaluations,
@@ -658,6 +658,15 @@ pub fn print_network_figures(label: &str, cur: &NetworkRun, old: &NetworkRun) {
         .filter(|d| d.is_finite())
         .fold(f64::NEG_INFINITY, f64::max);
     println!("  largest misfit increase of current over v0.1 on one segment: {worse:.3e}");
+    let (res, all): (f64, f64) = cur
+        .fits
+        .iter()
+        .fold((0.0, 0.0), |(a, b), f| (a + f.result_ms, b + f.ms));
+    println!(
+        "  of the current fits' wall time, {:.1} % builds the result after the search (soil \
+         speeds, intervals, curve with errors, findings; issue 9)",
+        100.0 * res / all.max(f64::MIN_POSITIVE)
+    );
 }
 
 /// Budget multiple and restarts of the exhaustive search of `bench --verify`.

@@ -315,6 +315,10 @@ fn every_csv_is_safe_in_a_spreadsheet_and_reports_stay_escaped() {
                 ],
                 &[("segment_id", &ids)],
             );
+        } else if read(p).1.is_empty() {
+            // No group large enough to test: the header alone, still safe.
+            let (header, _) = read(p);
+            assert!(header.iter().any(|h| h == "group"), "{}", p.display());
         } else {
             check_csv(p, &[], &[]);
         }

@@ -289,6 +289,7 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
         if let (Some(i), Some(j), false) = (i_cp, i_cps, p.material.is_plastic()) {
             let (cp, s): (f64, f64) = (rec[i].parse().unwrap(), rec[j].parse().unwrap());
             metal += 1;
+            eprintln!("  {}: c_P {cp:.0} ± {s:.1} m/s (true {cp_true:.0})", p.id);
             cp_in += usize::from((cp - cp_true).abs() <= 2.0 * s);
         }
     }
