@@ -491,7 +491,14 @@ fn run(
             (r, roots, problem.path == SolvePath::Safe || agree)
         }
         (None, Some(f)) if problem.path == SolvePath::Fast => (f, Vec::new(), false),
-        _ => return Err("forward solve failed at the optimum".to_string()),
+        _ => {
+            return Err(format!(
+                "forward solve failed at the optimum: {}",
+                problem
+                    .reference_failure(&sys)
+                    .unwrap_or_else(|| "no root on the search path".to_string())
+            ))
+        }
     };
     if !path_checked {
         // Only the status matters: the caller searches again on the safe path.

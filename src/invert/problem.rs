@@ -404,6 +404,26 @@ impl<'a> Problem<'a> {
         res.into_iter().collect::<Result<Vec<_>, _>>().ok()
     }
 
+    /// Why the reference path finds no acceptable root for `sys` (the first solver error, or a
+    /// growing wave), or `None` when it does.
+    pub fn reference_failure(&self, sys: &System) -> Option<String> {
+        let res = solve_curve(sys, &self.omegas, Continuation::default());
+        if let Some(e) = res.iter().find_map(|r| r.as_ref().err()) {
+            return Some(e.to_string());
+        }
+        let growing = res
+            .iter()
+            .filter_map(|r| r.as_ref().ok())
+            .find(|r| r.flags.growing_wave && sys.contact_mode != ContactMode::Printed);
+        growing.map(|r| {
+            format!(
+                "a growing wave at {:.0} Hz (k1 = {:.4})",
+                r.omega / std::f64::consts::TAU,
+                r.k1
+            )
+        })
+    }
+
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.
     pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
         self.evaluations.set(self.evaluations.get() + 1);
