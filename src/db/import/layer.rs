@@ -140,7 +140,7 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
                 .map(|&i| f.values.get(i).map_or("", |v| v.trim()).to_string())
                 .collect();
             let mut errors = Vec::new();
-            let wkt = match f.geometry.and_then(|g| line_of(g)) {
+            let wkt = match f.geometry.and_then(line_of) {
                 Ok(Some(line)) => line.to_wkt(),
                 Ok(None) => String::new(),
                 Err(msg) => {
@@ -913,7 +913,7 @@ pub(super) fn prj_epsg(wkt: &str) -> Option<i64> {
         let tail = &upper[at..];
         let end = tail.find(']').unwrap_or(tail.len());
         let parts: Vec<&str> = tail[..end]
-            .split(|c| c == '"' || c == ',' || c == '[')
+            .split(['"', ',', '['])
             .map(str::trim)
             .filter(|s| !s.is_empty())
             .collect();
