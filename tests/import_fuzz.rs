@@ -58,7 +58,8 @@ fn check_report(r: &ImportReport, names: &[&str], layer: bool, digits_in_input: 
             assert!(e.line >= 1 || layer, "no line in {text}");
         }
         if let Some(c) = &e.column {
-            assert!(c.index >= 1 && !c.name.is_empty(), "{text}");
+            // The name may be blank (a header cell with no name): the index places it.
+            assert!(c.index >= 1, "{text}");
         }
         assert!(
             longest_digit_run(&e.message) <= digits_in_input.max(20),
