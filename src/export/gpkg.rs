@@ -279,6 +279,32 @@ END;
 
 /// Add QGIS's `layer_styles` table with the default style of the feature table, and register it
 /// as an attributes table (as GDAL does when QGIS creates it).
+/// Register a feature table: its row in `gpkg_contents` (with its extent `[min_x, max_x,
+/// min_y, max_y]`, NULL when it has no geometry) and in `gpkg_geometry_columns` (OGC 12-128r18
+/// §1.1.3, §2.1.5).
+pub(crate) fn register_feature_table(
+    tx: &rusqlite::Transaction<'_>,
+    table: &str,
+    description: &str,
+    extent: Option<[f64; 4]>,
+    geometry_column: &str,
+    geometry_type: &str,
+    srs_id: i64,
+) -> rusqlite::Result<()> {
+    let e = |i: usize| extent.map(|b| b[i]);
+    tx.execute(
+        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, \
+         max_x, max_y, srs_id) VALUES (?1, 'features', ?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        params![table, description, e(0), e(2), e(1), e(3), srs_id],
+    )?;
+    tx.execute(
+        "INSERT INTO gpkg_geometry_columns (table_name, column_name, geometry_type_name, srs_id, \
+         z, m) VALUES (?1, ?2, ?3, ?4, 0, 0)",
+        params![table, geometry_column, geometry_type, srs_id],
+    )?;
+    Ok(())
+}
+
 fn write_style(tx: &rusqlite::Transaction<'_>, qml: &str) -> rusqlite::Result<()> {
     tx.execute_batch(style::LAYER_STYLES_SQL)?;
     tx.execute(
@@ -437,25 +463,14 @@ fn write_to(
                 .map_err(sql)?;
         }
     }
-    let has_bbox = with_geometry > 0;
-    tx.execute(
-        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, \
-         max_x, max_y, srs_id) VALUES (?1, 'features', ?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-        params![
-            TABLE,
-            "pipe segments with fitted soil parameters, wave speed and attenuation (pipewave)",
-            has_bbox.then_some(bbox[0]),
-            has_bbox.then_some(bbox[2]),
-            has_bbox.then_some(bbox[1]),
-            has_bbox.then_some(bbox[3]),
-            table_srs,
-        ],
-    )
-    .map_err(sql)?;
-    tx.execute(
-        "INSERT INTO gpkg_geometry_columns (table_name, column_name, geometry_type_name, srs_id, \
-         z, m) VALUES (?1, ?2, 'LINESTRING', ?3, 0, 0)",
-        params![TABLE, GEOMETRY_COLUMN, table_srs],
+    register_feature_table(
+        &tx,
+        TABLE,
+        "pipe segments with fitted soil parameters, wave speed and attenuation (pipewave)",
+        (with_geometry > 0).then_some(bbox),
+        GEOMETRY_COLUMN,
+        "LINESTRING",
+        table_srs,
     )
     .map_err(sql)?;
     tx.execute(

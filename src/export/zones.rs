@@ -199,24 +199,14 @@ pub fn write_zone_layer(
             ])?;
         }
     }
-    let has_bbox = bbox[0].is_finite();
-    tx.execute(
-        "INSERT INTO gpkg_contents (table_name, data_type, identifier, description, min_x, min_y, \
-         max_x, max_y, srs_id) VALUES (?1, 'features', ?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-        params![
-            ZONE_TABLE,
-            "soil zones: buffered hull of their pipes, with the zone's soil (pipewave)",
-            has_bbox.then_some(bbox[0]),
-            has_bbox.then_some(bbox[2]),
-            has_bbox.then_some(bbox[1]),
-            has_bbox.then_some(bbox[3]),
-            table_srs,
-        ],
-    )?;
-    tx.execute(
-        "INSERT INTO gpkg_geometry_columns (table_name, column_name, geometry_type_name, srs_id, \
-         z, m) VALUES (?1, 'geom', 'POLYGON', ?2, 0, 0)",
-        params![ZONE_TABLE, table_srs],
+    super::gpkg::register_feature_table(
+        tx,
+        ZONE_TABLE,
+        "soil zones: buffered hull of their pipes, with the zone's soil (pipewave)",
+        bbox[0].is_finite().then_some(bbox),
+        "geom",
+        "POLYGON",
+        table_srs,
     )?;
     Ok(zones.len())
 }
