@@ -673,9 +673,9 @@ fn profile_misfit(
         .filter(|(_, s)| !matches!(s.param, Param::SoilModulus | Param::SoilPoisson))
         .map(|(i, _)| i)
         .collect();
-    let at_x = problem.predict(x).map(|k| problem.sum_of_squares(&k));
+    let at_x = || problem.predict(x).map(|k| problem.sum_of_squares(&k));
     if free.is_empty() {
-        return at_x;
+        return at_x();
     }
     let restricted = Restricted {
         problem,
@@ -694,15 +694,13 @@ fn profile_misfit(
         .finite_difference(FiniteDifference::Forward)
         .fd_rel_step(1e-6)
         .ok()?;
-    let best = lm
-        .minimize(&restricted, &x0, Some(&sub_bounds))
+    // Levenberg–Marquardt accepts only steps that lower the misfit, so its cost is never above
+    // the start's: the start is evaluated on its own only when the minimisation fails.
+    lm.minimize(&restricted, &x0, Some(&sub_bounds))
         .ok()
         .map(|r| r.cost)
-        .filter(|c| c.is_finite());
-    match (best, at_x) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, b) => a.or(b),
-    }
+        .filter(|c| c.is_finite())
+        .or_else(at_x)
 }
 
 /// The problem with some coordinates held fixed.
