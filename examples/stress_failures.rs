@@ -38,7 +38,10 @@ fn main() {
         net.extend(segs.into_iter().map(|s| (*e, s)));
     }
     if let Ok(only) = std::env::var("ONLY") {
-        net.retain(|(e, s)| format!("{}-{}", e.name(), s.id) == only);
+        net.retain(|(e, s)| {
+            only.split(',')
+                .any(|o| format!("{}-{}", e.name(), s.id) == o)
+        });
     }
     let t = std::time::Instant::now();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -55,7 +58,12 @@ fn main() {
                     seed: pipewave::batch::segment_seed(seed, &s.id),
                 };
                 let r = pipewave::invert::fit_segment(&seg.data, &alg.settings(), seg.seed);
-                (seg.id, r.status, r.message, s.clone())
+                let grazing = r
+                    .notes
+                    .iter()
+                    .chain(&r.flags)
+                    .any(|f| f.code.as_str() == "near_grazing");
+                (seg.id, r.status, r.message, s.clone(), grazing)
             })
             .collect()
     });
@@ -63,15 +71,19 @@ fn main() {
         .iter()
         .filter(|r| r.1 == pipewave::invert::FitStatus::Failed)
         .collect();
+    let by_status = |st: pipewave::invert::FitStatus| results.iter().filter(|r| r.1 == st).count();
     println!(
-        "{} segments, {} failed, {:.1} s on {} jobs ({:?})",
+        "{} segments, {} failed ({} ok, {} flagged; {} with a root near grazing), {:.1} s on {} jobs ({:?})",
         results.len(),
         failed.len(),
+        by_status(pipewave::invert::FitStatus::Ok),
+        by_status(pipewave::invert::FitStatus::Flagged),
+        results.iter().filter(|r| r.4).count(),
         t.elapsed().as_secs_f64(),
         jobs,
         alg
     );
-    for (id, _, msg, s) in failed {
+    for (id, _, msg, s, _) in failed {
         println!(
             "  {id} {:?} OD {} wall {} E {:.3e} nu {:.3} xi {:.3} rho {} hidden {:?} freqs {:?}: {}",
             s.material,

@@ -575,6 +575,14 @@ fn grazing_wave(system: &System, p: PathPoint) -> Option<(&'static str, f64)> {
 /// the soil's compressional speed as the frequency rises). Look for it at `target` from the
 /// in-vacuo root (P39) and from either side of the grazing wavenumber, and restart the
 /// continuation there.
+///
+/// A root clear of the grazing band, or on the other side of the soil speed from the last
+/// accepted point, is preferred: it cannot be the lost root. When every guess ends inside the
+/// band on the lost root's side, the wave is still grazing at `target` (a fit whose optimum
+/// puts the lowest frequency right at the transition from leaky to trapped). That root is a
+/// converged zero of the proper-sheet dispersion function (residual ≤ `RESIDUAL_ATOL`), so it
+/// is returned, carrying the `near_grazing` flag of P44 (spec §5.6 item 5: meaningful but
+/// fragile), rather than no answer at all.
 fn restart_past_grazing(
     system: &System,
     hist: &mut Vec<PathPoint>,
@@ -590,26 +598,41 @@ fn restart_past_grazing(
         Complex64::new(k_soil * (1.0 + GRAZING_RESTART_RTOL), last.k1.im),
         Complex64::new(k_soil * (1.0 - GRAZING_RESTART_RTOL), last.k1.im),
     ];
+    let side = |c: f64| (c / speed - 1.0).signum();
+    let mut in_band: Option<Root> = None;
     for g in guesses {
         let Ok(root) = solve_from_guess_tol(system, target, g, tol) else {
             continue;
         };
-        // Not the lost root again: clear of the branch point (the grazing band of P44).
-        let clear = ((target / root.k1.re) / speed - 1.0).abs() >= GRAZING_RTOL;
-        if clear && !root.flags.growing_wave {
-            hist.clear();
-            hist.push(PathPoint {
-                omega: target,
-                k1: root.k1,
-            });
-            return Ok(root);
+        if root.flags.growing_wave {
+            continue;
         }
+        let c = target / root.k1.re;
+        let clear = (c / speed - 1.0).abs() >= GRAZING_RTOL;
+        let crossed = side(c) != side(last.omega / last.k1.re);
+        if clear || crossed {
+            return Ok(restart_at(hist, root));
+        }
+        in_band.get_or_insert(root);
     }
-    Err(SolveError::Grazing {
-        omega: target,
-        wave,
-        speed,
-    })
+    match in_band {
+        Some(root) => Ok(restart_at(hist, root)),
+        None => Err(SolveError::Grazing {
+            omega: target,
+            wave,
+            speed,
+        }),
+    }
+}
+
+/// Restart the continuation history at `root`.
+fn restart_at(hist: &mut Vec<PathPoint>, root: Root) -> Root {
+    hist.clear();
+    hist.push(PathPoint {
+        omega: root.omega,
+        k1: root.k1,
+    });
+    root
 }
 
 /// Advance the continuation to `target`, eq. P43: accept the root when the correction ratio
@@ -736,6 +759,50 @@ mod tests {
         let r = reference[1].as_ref().unwrap();
         assert!(r.phase_speed() < cp * (1.0 - GRAZING_RTOL));
         assert!((r.k1 - Complex64::new(4.635_094_676, -0.308_124_806)).norm() < 1e-8);
+    }
+
+    /// Issue 11, the other way to lose the root: an MDPE pipe (OD 90 mm, wall 8.2 mm) at the
+    /// optimum of a stress-network fit, where the lowest measured frequency (73 Hz) lies right
+    /// at the transition from leaky to trapped (c ≈ c_P = 555.8 m/s). The continuation loses
+    /// the root there and every restart guess converges to the one root inside the grazing
+    /// band, on the lost root's side. Before, the fit failed ("no s = 1 root"); now that root is
+    /// returned, flagged near grazing, and it is the root the direct solve from the in-vacuo
+    /// start finds, on the proper sheet (not growing).
+    #[test]
+    fn a_root_still_grazing_after_the_restart_is_returned_and_flagged() {
+        let pipe = Pipe::from_outside_diameter(Material::Mdpe.typical(), 0.090, 0.0082).unwrap();
+        let soil = Soil::new(456_112_330.665_659, 0.321_992_398_981_503_3, 2127.0, 0.0).unwrap();
+        let sys = System::new(
+            Fluid::water(),
+            pipe,
+            soil,
+            0.003_050_427_123_886_769_4,
+            Model::Full,
+            ContactMode::Reciprocal,
+        )
+        .unwrap();
+        let (cp, _) = sys.soil.wave_speeds();
+        assert!((cp - 555.8).abs() < 0.1, "{cp}");
+        let w: Vec<f64> = [73.0, 212.0, 358.0, 492.0, 584.0]
+            .iter()
+            .map(|f| f * std::f64::consts::TAU)
+            .collect();
+        let reference = solve_curve(&sys, &w, Continuation::default());
+        let r = reference[0].as_ref().expect("a root at 73 Hz");
+        assert!(r.flags.near_grazing && !r.flags.growing_wave);
+        assert!(
+            (r.phase_speed() / cp - 0.9968).abs() < 1e-3,
+            "{}",
+            r.phase_speed() / cp
+        );
+        let direct = solve_from_guess(&sys, w[0], Evaluator::new(&sys, w[0]).in_vacuo_root())
+            .expect("the direct solve");
+        assert!((r.k1 - direct.k1).norm() < 1e-10 * direct.k1.norm());
+        // Above the band the curve continues clear of grazing.
+        for r in &reference[1..] {
+            let r = r.as_ref().expect("a root");
+            assert!(r.phase_speed() < cp * (1.0 - GRAZING_RTOL));
+        }
     }
 
     /// Without a soil wave speed nearby a failure is not turned into a restart: the grazing
