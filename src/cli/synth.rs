@@ -189,7 +189,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         synthetic.len(),
         n_defects,
         tables.segments.len() - synthetic.len(),
-        tables.measurements.len(),
+        tables.measurement_count(),
         100.0 * NOISE_K_RE,
         100.0 * NOISE_ATTENUATION,
         args.out.display()

@@ -10,10 +10,10 @@
 pub mod published;
 pub mod recovery;
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use crate::physics::Material;
+use crate::db::wkt::LineString;
+use crate::db::{MeasurementRecord, SegmentRecord};
 use crate::synth::SynthSegment;
 
 /// File names inside a network directory.
@@ -25,62 +25,6 @@ pub const TRUTH_CSV: &str = "truth.csv";
 
 /// The `source` of a synthetic segment in `truth.csv`.
 pub const SOURCE_SYNTHETIC: &str = "synthetic";
-
-/// One row of `segments.csv`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct InventoryRow {
-    /// Asset id.
-    pub segment_id: String,
-    /// Material.
-    pub material: Material,
-    /// Outside diameter, mm.
-    pub outer_diameter_mm: f64,
-    /// Wall thickness, mm.
-    pub wall_thickness_mm: f64,
-    /// Soil density, kg/m³.
-    pub soil_density_kg_m3: f64,
-    /// Override of the material's Young's modulus, Pa.
-    pub pipe_youngs_modulus_pa: Option<f64>,
-    /// Override of the material's Poisson's ratio.
-    pub pipe_poisson: Option<f64>,
-    /// Override of the material's density, kg/m³.
-    pub pipe_density_kg_m3: Option<f64>,
-    /// Override of the material's loss factor.
-    pub pipe_loss_factor: Option<f64>,
-    /// Length, m.
-    pub length_m: Option<f64>,
-    /// Soil description.
-    pub soil_type: Option<String>,
-    /// Year laid.
-    pub install_year: Option<u32>,
-    /// Polyline vertices in EPSG:`srid` (empty: no geometry).
-    pub geometry: Vec<(f64, f64)>,
-    /// EPSG code of the geometry.
-    pub srid: Option<u32>,
-    /// Soil zone (physics §7.11); the column is written only when some segment has one.
-    pub soil_zone: Option<String>,
-}
-
-/// One row of `measurements.csv`: exactly one of `frequency_hz` / `omega_rad_s` is set.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MeasurementRow {
-    /// Segment.
-    pub segment_id: String,
-    /// Frequency, Hz.
-    pub frequency_hz: Option<f64>,
-    /// Angular frequency, rad/s.
-    pub omega_rad_s: Option<f64>,
-    /// Re k, rad/m.
-    pub k_re_rad_per_m: f64,
-    /// Attenuation, Np/m (positive).
-    pub attenuation_np_per_m: f64,
-    /// One sigma of Re k, rad/m.
-    pub k_re_std: Option<f64>,
-    /// One sigma of the attenuation, Np/m.
-    pub attenuation_std: Option<f64>,
-    /// Campaign name.
-    pub campaign: Option<String>,
-}
 
 /// One row of `truth.csv`: what made a segment's data. Blank where unknown (the published
 /// field cases).
@@ -133,13 +77,12 @@ impl TruthRow {
     }
 }
 
-/// The three tables of a network directory.
+/// The three tables of a network directory: the inventory records (the one type the database
+/// stores, each with its measurements) and the truth.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct NetworkTables {
-    /// `segments.csv`.
-    pub segments: Vec<InventoryRow>,
-    /// `measurements.csv`.
-    pub measurements: Vec<MeasurementRow>,
+    /// `segments.csv`, and `measurements.csv` from each record's measurements.
+    pub segments: Vec<SegmentRecord>,
     /// `truth.csv`.
     pub truth: Vec<TruthRow>,
 }
@@ -176,7 +119,14 @@ impl NetworkTables {
     pub fn from_synth(segments: &[SynthSegment], srid: u32) -> NetworkTables {
         let mut t = NetworkTables::default();
         for s in segments {
-            t.segments.push(InventoryRow {
+            let geometry = (s.geometry.len() >= 2).then(|| LineString {
+                points: s
+                    .geometry
+                    .iter()
+                    .map(|&(x, y)| (round_to(x, 2), round_to(y, 2)))
+                    .collect(),
+            });
+            let mut rec = SegmentRecord {
                 segment_id: s.id.clone(),
                 material: s.material,
                 outer_diameter_mm: s.size.od_mm,
@@ -186,29 +136,33 @@ impl NetworkTables {
                 pipe_poisson: None,
                 pipe_density_kg_m3: None,
                 pipe_loss_factor: None,
+                fluid_density_kg_m3: None,
+                fluid_bulk_modulus_pa: None,
                 length_m: Some(round_to(s.length_m, 2)),
                 soil_type: Some(s.soil_type.to_string()),
-                install_year: Some(s.install_year),
-                geometry: s
-                    .geometry
-                    .iter()
-                    .map(|&(x, y)| (round_to(x, 2), round_to(y, 2)))
-                    .collect(),
-                srid: (!s.geometry.is_empty()).then_some(srid),
+                install_year: Some(i64::from(s.install_year)),
                 soil_zone: s.soil_zone.clone(),
-            });
-            for m in &s.measurements {
-                t.measurements.push(MeasurementRow {
-                    segment_id: s.id.clone(),
-                    frequency_hz: Some(m.frequency_hz),
-                    omega_rad_s: None,
-                    k_re_rad_per_m: m.k_re,
-                    attenuation_np_per_m: m.attenuation,
-                    k_re_std: Some(m.k_re_std),
-                    attenuation_std: Some(m.attenuation_std),
-                    campaign: Some("synthetic".into()),
-                });
-            }
+                srid: geometry.as_ref().map(|_| i64::from(srid)),
+                geometry_wkt: geometry.map(|g| g.to_wkt()),
+                inputs_hash: String::new(),
+                imported_at: String::new(),
+                measurements: s
+                    .measurements
+                    .iter()
+                    .map(|m| MeasurementRecord {
+                        omega_rad_s: crate::units::hz_to_omega(m.frequency_hz),
+                        frequency_hz: m.frequency_hz,
+                        k_re_rad_per_m: m.k_re,
+                        attenuation_np_per_m: m.attenuation,
+                        k_re_std: Some(m.k_re_std),
+                        attenuation_std: Some(m.attenuation_std),
+                        measured_on: None,
+                        campaign: Some("synthetic".into()),
+                    })
+                    .collect(),
+            };
+            rec.inputs_hash = rec.compute_inputs_hash();
+            t.segments.push(rec);
             t.truth.push(TruthRow {
                 segment_id: s.id.clone(),
                 source: SOURCE_SYNTHETIC.to_string(),
@@ -232,115 +186,159 @@ impl NetworkTables {
     /// Append a published case.
     pub fn push_published(&mut self, case: published::PublishedCase) {
         self.segments.push(case.segment);
-        self.measurements.extend(case.measurements);
         self.truth.push(case.truth);
     }
 
-    /// `segments.csv` as text.
-    pub fn segments_csv(&self) -> String {
-        let mut out = String::from(
-            "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,\
-             pipe_youngs_modulus_pa,pipe_poisson,pipe_density_kg_m3,pipe_loss_factor,length_m,\
-             soil_type,install_year,geometry_wkt,srid",
-        );
-        let zoned = self.segments.iter().any(|s| s.soil_zone.is_some());
-        out.push_str(if zoned { ",soil_zone\n" } else { "\n" });
-        for s in &self.segments {
-            let geometry = if s.geometry.is_empty() {
-                String::new()
-            } else {
-                let pts: Vec<String> = s.geometry.iter().map(|(x, y)| format!("{x} {y}")).collect();
-                // Quoted: the WKT contains commas.
-                format!("\"LINESTRING ({})\"", pts.join(", "))
-            };
-            let _ = write!(
-                out,
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                text(&s.segment_id),
-                s.material.code(),
-                s.outer_diameter_mm,
-                s.wall_thickness_mm,
-                s.soil_density_kg_m3,
-                opt(s.pipe_youngs_modulus_pa),
-                opt(s.pipe_poisson),
-                opt(s.pipe_density_kg_m3),
-                opt(s.pipe_loss_factor),
-                opt(s.length_m),
-                s.soil_type.as_deref().map(text).unwrap_or_default(),
-                s.install_year.map(|y| y.to_string()).unwrap_or_default(),
-                geometry,
-                s.srid.map(|v| v.to_string()).unwrap_or_default(),
-            );
-            if zoned {
-                out.push(',');
-                out.push_str(&s.soil_zone.as_deref().map(text).unwrap_or_default());
-            }
-            out.push('\n');
-        }
-        out
+    /// Number of measurement rows.
+    pub fn measurement_count(&self) -> usize {
+        self.segments.iter().map(|s| s.measurements.len()).sum()
     }
 
-    /// `measurements.csv` as text.
-    pub fn measurements_csv(&self) -> String {
-        let mut out = String::from(
-            "segment_id,frequency_hz,omega_rad_s,k_re_rad_per_m,attenuation_np_per_m,k_re_std,\
-             attenuation_std,campaign\n",
-        );
-        for m in &self.measurements {
-            let _ = writeln!(
-                out,
-                "{},{},{},{},{},{},{},{}",
-                text(&m.segment_id),
-                opt(m.frequency_hz),
-                opt(m.omega_rad_s),
-                m.k_re_rad_per_m,
-                m.attenuation_np_per_m,
-                opt(m.k_re_std),
-                opt(m.attenuation_std),
-                m.campaign.as_deref().map(text).unwrap_or_default(),
-            );
+    /// `segments.csv` as text (interface.md column order; `soil_zone` only when some segment
+    /// has one, the fluid columns only when some segment overrides the water).
+    pub fn segments_csv(&self) -> String {
+        let zoned = self.segments.iter().any(|s| s.soil_zone.is_some());
+        let fluid = self
+            .segments
+            .iter()
+            .any(|s| s.fluid_density_kg_m3.is_some() || s.fluid_bulk_modulus_pa.is_some());
+        let mut header = vec![
+            "segment_id",
+            "material",
+            "outer_diameter_mm",
+            "wall_thickness_mm",
+            "soil_density_kg_m3",
+            "pipe_youngs_modulus_pa",
+            "pipe_poisson",
+            "pipe_density_kg_m3",
+            "pipe_loss_factor",
+            "length_m",
+            "soil_type",
+            "install_year",
+            "geometry_wkt",
+            "srid",
+        ];
+        if fluid {
+            header.extend(["fluid_density_kg_m3", "fluid_bulk_modulus_pa"]);
         }
-        out
+        if zoned {
+            header.push("soil_zone");
+        }
+        csv_text(
+            header,
+            self.segments.iter().map(|s| {
+                let mut row = vec![
+                    s.segment_id.clone(),
+                    s.material.code().to_string(),
+                    s.outer_diameter_mm.to_string(),
+                    s.wall_thickness_mm.to_string(),
+                    s.soil_density_kg_m3.to_string(),
+                    opt(s.pipe_youngs_modulus_pa),
+                    opt(s.pipe_poisson),
+                    opt(s.pipe_density_kg_m3),
+                    opt(s.pipe_loss_factor),
+                    opt(s.length_m),
+                    s.soil_type.clone().unwrap_or_default(),
+                    s.install_year.map(|y| y.to_string()).unwrap_or_default(),
+                    s.geometry_wkt.clone().unwrap_or_default(),
+                    s.srid.map(|v| v.to_string()).unwrap_or_default(),
+                ];
+                if fluid {
+                    row.extend([opt(s.fluid_density_kg_m3), opt(s.fluid_bulk_modulus_pa)]);
+                }
+                if zoned {
+                    row.push(s.soil_zone.clone().unwrap_or_default());
+                }
+                row
+            }),
+        )
+    }
+
+    /// `measurements.csv` as text. The file gives the frequency once, in the unit it was given
+    /// in: a record holds both f and ω = 2πf, the given one short (`224`, `3121.958`) and the
+    /// derived one with 16–17 digits, so the shorter decimal form is written; it reads back to
+    /// the same record.
+    pub fn measurements_csv(&self) -> String {
+        let header = vec![
+            "segment_id",
+            "frequency_hz",
+            "omega_rad_s",
+            "k_re_rad_per_m",
+            "attenuation_np_per_m",
+            "k_re_std",
+            "attenuation_std",
+            "campaign",
+        ];
+        csv_text(
+            header,
+            self.segments.iter().flat_map(|s| {
+                s.measurements.iter().map(|m| {
+                    let (f, w) = (m.frequency_hz.to_string(), m.omega_rad_s.to_string());
+                    let (f, w) = if w.len() < f.len() {
+                        (String::new(), w)
+                    } else {
+                        (f, String::new())
+                    };
+                    vec![
+                        s.segment_id.clone(),
+                        f,
+                        w,
+                        m.k_re_rad_per_m.to_string(),
+                        m.attenuation_np_per_m.to_string(),
+                        opt(m.k_re_std),
+                        opt(m.attenuation_std),
+                        m.campaign.clone().unwrap_or_default(),
+                    ]
+                })
+            }),
+        )
     }
 
     /// `truth.csv` as text.
     pub fn truth_csv(&self) -> String {
-        let mut out = String::from(
-            "segment_id,source,soil_type,soil_youngs_modulus_pa,soil_poisson,contact,\
-             hidden_effect,hidden_effect_value,defect",
-        );
         let zoned = self.truth.iter().any(|t| t.soil_zone.is_some());
-        out.push_str(if zoned {
-            ",soil_zone,zone_soil_youngs_modulus_pa,zone_soil_poisson\n"
-        } else {
-            "\n"
-        });
-        for t in &self.truth {
-            let _ = write!(
-                out,
-                "{},{},{},{},{},{},{},{},{}",
-                text(&t.segment_id),
-                text(&t.source),
-                t.soil_type.as_deref().map(text).unwrap_or_default(),
-                opt(t.soil_youngs_modulus_pa),
-                opt(t.soil_poisson),
-                opt(t.contact),
-                t.hidden_effect.as_deref().map(text).unwrap_or_default(),
-                opt(t.hidden_effect_value),
-                t.defect.as_deref().map(text).unwrap_or_default(),
-            );
-            if zoned {
-                let _ = write!(
-                    out,
-                    ",{},{},{}",
-                    t.soil_zone.as_deref().map(text).unwrap_or_default(),
-                    opt(t.zone_soil_youngs_modulus_pa),
-                    opt(t.zone_soil_poisson),
-                );
-            }
-            out.push('\n');
+        let mut header = vec![
+            "segment_id",
+            "source",
+            "soil_type",
+            "soil_youngs_modulus_pa",
+            "soil_poisson",
+            "contact",
+            "hidden_effect",
+            "hidden_effect_value",
+            "defect",
+        ];
+        if zoned {
+            header.extend([
+                "soil_zone",
+                "zone_soil_youngs_modulus_pa",
+                "zone_soil_poisson",
+            ]);
         }
-        out
+        csv_text(
+            header,
+            self.truth.iter().map(|t| {
+                let mut row = vec![
+                    t.segment_id.clone(),
+                    t.source.clone(),
+                    t.soil_type.clone().unwrap_or_default(),
+                    opt(t.soil_youngs_modulus_pa),
+                    opt(t.soil_poisson),
+                    opt(t.contact),
+                    t.hidden_effect.clone().unwrap_or_default(),
+                    opt(t.hidden_effect_value),
+                    t.defect.clone().unwrap_or_default(),
+                ];
+                if zoned {
+                    row.extend([
+                        t.soil_zone.clone().unwrap_or_default(),
+                        opt(t.zone_soil_youngs_modulus_pa),
+                        opt(t.zone_soil_poisson),
+                    ]);
+                }
+                row
+            }),
+        )
     }
 
     /// Write `segments.csv`, `measurements.csv` and `truth.csv` into `dir` (created if
@@ -378,13 +376,16 @@ fn opt(v: Option<f64>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
 }
 
-/// A text cell, quoted when it holds a comma, quote or line break.
-fn text(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
+/// A CSV file as text: the header, then the rows (cells quoted by the `csv` crate where they
+/// hold a comma, quote or line break).
+fn csv_text(header: Vec<&str>, rows: impl IntoIterator<Item = Vec<String>>) -> String {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    // Writing to memory cannot fail.
+    let _ = w.write_record(&header);
+    for row in rows {
+        let _ = w.write_record(&row);
     }
+    String::from_utf8(w.into_inner().unwrap_or_default()).unwrap_or_default()
 }
 
 /// Read `truth.csv`. Blank cells are `None`.
@@ -469,7 +470,7 @@ mod tests {
         assert_eq!(t.segments.len(), 5);
         assert_eq!(t.truth.len(), 5);
         assert_eq!(
-            t.measurements.len(),
+            t.measurement_count(),
             net.iter().map(|s| s.measurements.len()).sum::<usize>()
         );
         let csv = t.segments_csv();
@@ -507,8 +508,10 @@ mod tests {
 
     #[test]
     fn text_cells_are_quoted_when_needed() {
-        assert_eq!(text("a,b"), "\"a,b\"");
-        assert_eq!(text("say \"x\""), "\"say \"\"x\"\"\"");
-        assert_eq!(text("plain"), "plain");
+        let body = csv_text(
+            vec!["a", "b", "c"],
+            [vec!["x,y".to_string(), "say \"x\"".into(), "plain".into()]],
+        );
+        assert_eq!(body, "a,b,c\n\"x,y\",\"say \"\"x\"\"\",plain\n");
     }
 }

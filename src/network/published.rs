@@ -11,7 +11,8 @@
 //!   buried MDPE pipe. Its 326 raw rows from 100 Hz up to (not including) 750 Hz are averaged in
 //!   50 Hz bands; the pipe and soil density are those identified from the group's model curves.
 
-use super::{InventoryRow, MeasurementRow, TruthRow};
+use super::TruthRow;
+use crate::db::{MeasurementRecord, SegmentRecord};
 use crate::physics::Material;
 use crate::units::db_to_np;
 
@@ -40,10 +41,8 @@ pub const MUGGLETON_BAND_WIDTH_HZ: f64 = 50.0;
 /// A published case as one segment of a network.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PublishedCase {
-    /// The inventory row.
-    pub segment: InventoryRow,
-    /// Its measurements.
-    pub measurements: Vec<MeasurementRow>,
+    /// The inventory record, with its measurements.
+    pub segment: SegmentRecord,
     /// Its truth row: the soil is not known, so only the source is filled in.
     pub truth: TruthRow,
 }
@@ -52,43 +51,45 @@ impl PublishedCase {
     /// What a fit is given about this case: water, the pipe from the material and the row's
     /// overrides (a = (D_o − h)/2, eq. P6), the soil density and the measurements.
     pub fn segment_data(&self) -> Result<crate::invert::SegmentData, crate::physics::InputError> {
-        let seg = &self.segment;
-        let typical = seg.material.typical();
-        let props = crate::physics::MaterialProps {
-            youngs_modulus: seg.pipe_youngs_modulus_pa.unwrap_or(typical.youngs_modulus),
-            poisson: seg.pipe_poisson.unwrap_or(typical.poisson),
-            density: seg.pipe_density_kg_m3.unwrap_or(typical.density),
-            loss_factor: seg.pipe_loss_factor.unwrap_or(typical.loss_factor),
-        };
-        let pipe = crate::physics::Pipe::from_outside_diameter(
-            props,
-            crate::units::mm_to_m(seg.outer_diameter_mm),
-            crate::units::mm_to_m(seg.wall_thickness_mm),
-        )?;
-        let measurements = self
-            .measurements
-            .iter()
-            .map(|m| {
-                let omega = m
-                    .omega_rad_s
-                    .unwrap_or_else(|| crate::units::hz_to_omega(m.frequency_hz.unwrap_or(0.0)));
-                crate::invert::Measurement::new(
-                    omega,
-                    m.k_re_rad_per_m,
-                    m.attenuation_np_per_m,
-                    m.k_re_std,
-                    m.attenuation_std,
-                )
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(crate::invert::SegmentData {
-            fluid: crate::physics::Fluid::water(),
-            pipe,
-            soil_density: seg.soil_density_kg_m3,
-            material: Some(seg.material),
-            measurements,
-        })
+        crate::batch::rows::segment_data(&self.segment)
     }
+}
+
+/// The inventory record of a published case: no geometry, no soil description, water.
+#[allow(clippy::too_many_arguments)]
+fn published_record(
+    segment_id: &str,
+    material: Material,
+    outer_diameter_mm: f64,
+    wall_thickness_mm: f64,
+    soil_density_kg_m3: f64,
+    pipe: crate::physics::MaterialProps,
+    measurements: Vec<MeasurementRecord>,
+) -> SegmentRecord {
+    let mut rec = SegmentRecord {
+        segment_id: segment_id.to_string(),
+        material,
+        outer_diameter_mm,
+        wall_thickness_mm,
+        soil_density_kg_m3,
+        pipe_youngs_modulus_pa: Some(pipe.youngs_modulus),
+        pipe_poisson: Some(pipe.poisson),
+        pipe_density_kg_m3: Some(pipe.density),
+        pipe_loss_factor: Some(pipe.loss_factor),
+        fluid_density_kg_m3: None,
+        fluid_bulk_modulus_pa: None,
+        length_m: None,
+        soil_type: None,
+        install_year: None,
+        soil_zone: None,
+        geometry_wkt: None,
+        srid: None,
+        inputs_hash: String::new(),
+        imported_at: String::new(),
+        measurements,
+    };
+    rec.inputs_hash = rec.compute_inputs_hash();
+    rec
 }
 
 /// A problem with an embedded data file (only possible if the files in `tests/data/published/`
@@ -172,36 +173,32 @@ pub fn lu2022() -> Result<PublishedCase, PublishedDataError> {
     );
     let measurements = rows
         .iter()
-        .map(|r| MeasurementRow {
-            segment_id: LU2022_ID.to_string(),
-            frequency_hz: None,
-            omega_rad_s: Some(r[w]),
+        .map(|r| MeasurementRecord {
+            omega_rad_s: r[w],
+            frequency_hz: r[w] / std::f64::consts::TAU,
             k_re_rad_per_m: r[k],
             attenuation_np_per_m: r[a],
             k_re_std: None,
             attenuation_std: None,
+            measured_on: None,
             campaign: Some("lu2022_table2".into()),
         })
         .collect();
     Ok(PublishedCase {
-        segment: InventoryRow {
-            segment_id: LU2022_ID.to_string(),
-            material: Material::CastIron,
-            outer_diameter_mm: 144.0,
-            wall_thickness_mm: 6.0,
-            soil_density_kg_m3: 1999.0,
-            pipe_youngs_modulus_pa: Some(1.22e11),
-            pipe_poisson: Some(0.25),
-            pipe_density_kg_m3: Some(7800.0),
-            pipe_loss_factor: Some(0.01),
-            length_m: None,
-            soil_type: None,
-            install_year: None,
-            geometry: Vec::new(),
-            srid: None,
-            soil_zone: None,
-        },
-        measurements,
+        segment: published_record(
+            LU2022_ID,
+            Material::CastIron,
+            144.0,
+            6.0,
+            1999.0,
+            crate::physics::MaterialProps {
+                youngs_modulus: 1.22e11,
+                poisson: 0.25,
+                density: 7800.0,
+                loss_factor: 0.01,
+            },
+            measurements,
+        ),
         truth: TruthRow::unknown(LU2022_ID, "published: Lu et al. 2022, Sensors 22(10) 3942"),
     })
 }
@@ -292,36 +289,32 @@ pub fn muggleton2004_bands() -> Result<Vec<Band>, PublishedDataError> {
 pub fn muggleton2004() -> Result<PublishedCase, PublishedDataError> {
     let measurements = muggleton2004_bands()?
         .iter()
-        .map(|b| MeasurementRow {
-            segment_id: MUGGLETON2004_ID.to_string(),
-            frequency_hz: Some(b.frequency_hz),
-            omega_rad_s: None,
+        .map(|b| MeasurementRecord {
+            omega_rad_s: crate::units::hz_to_omega(b.frequency_hz),
+            frequency_hz: b.frequency_hz,
             k_re_rad_per_m: b.k_re,
             attenuation_np_per_m: b.attenuation_np,
             k_re_std: Some(b.k_re_std),
             attenuation_std: Some(b.attenuation_std),
+            measured_on: None,
             campaign: Some("muggleton2004_50hz_bands".into()),
         })
         .collect();
     Ok(PublishedCase {
-        segment: InventoryRow {
-            segment_id: MUGGLETON2004_ID.to_string(),
-            material: Material::Mdpe,
-            outer_diameter_mm: 2.0 * 84.5 + 11.0,
-            wall_thickness_mm: 11.0,
-            soil_density_kg_m3: 1500.0,
-            pipe_youngs_modulus_pa: Some(2.0e9),
-            pipe_poisson: Some(0.4),
-            pipe_density_kg_m3: Some(900.0),
-            pipe_loss_factor: Some(0.06),
-            length_m: None,
-            soil_type: None,
-            install_year: None,
-            geometry: Vec::new(),
-            srid: None,
-            soil_zone: None,
-        },
-        measurements,
+        segment: published_record(
+            MUGGLETON2004_ID,
+            Material::Mdpe,
+            2.0 * 84.5 + 11.0,
+            11.0,
+            1500.0,
+            crate::physics::MaterialProps {
+                youngs_modulus: 2.0e9,
+                poisson: 0.4,
+                density: 900.0,
+                loss_factor: 0.06,
+            },
+            measurements,
+        ),
         truth: TruthRow::unknown(
             MUGGLETON2004_ID,
             "published: Muggleton et al. 2004, J. Sound Vib. 270 171-190",
@@ -336,11 +329,11 @@ mod tests {
     #[test]
     fn lu2022_has_the_four_table2_rows() {
         let c = lu2022().unwrap();
-        assert_eq!(c.measurements.len(), 4);
-        assert_eq!(c.measurements[0].omega_rad_s, Some(3121.958));
-        assert_eq!(c.measurements[3].k_re_rad_per_m, 8.16);
-        assert_eq!(c.measurements[3].attenuation_np_per_m, 0.0596);
-        assert!(c.measurements.iter().all(|m| m.k_re_std.is_none()));
+        assert_eq!(c.segment.measurements.len(), 4);
+        assert_eq!(c.segment.measurements[0].omega_rad_s, 3121.958);
+        assert_eq!(c.segment.measurements[3].k_re_rad_per_m, 8.16);
+        assert_eq!(c.segment.measurements[3].attenuation_np_per_m, 0.0596);
+        assert!(c.segment.measurements.iter().all(|m| m.k_re_std.is_none()));
         assert_eq!(c.segment.outer_diameter_mm, 144.0);
     }
 
@@ -363,7 +356,7 @@ mod tests {
         assert!(bands.windows(2).all(|w| w[1].k_re > w[0].k_re));
         let c = muggleton2004().unwrap();
         assert_eq!(c.segment.outer_diameter_mm, 180.0);
-        assert_eq!(c.measurements.len(), 13);
+        assert_eq!(c.segment.measurements.len(), 13);
     }
 
     /// Independent check of one band against a hand computation from the raw file.
