@@ -35,6 +35,8 @@ const COARSE_STEP_NU: f64 = 0.02;
 const FINE_POINTS: usize = 41;
 /// Gauss–Newton iterations of the inner (per-member) minimisation.
 const INNER_ITERATIONS: usize = 12;
+/// The inner minimisation stops when its step is below this fraction of the scatter (τ_E, τ_ν).
+const INNER_TOLERANCE: f64 = 1e-6;
 
 /// What one member segment brings to its zone: the quadratic model of its misfit in the soil
 /// speeds.
@@ -114,6 +116,10 @@ impl Member {
                 -(a[3] * g[0] - a[1] * g[1]) / det,
                 -(-a[2] * g[0] + a[0] * g[1]) / det,
             ];
+            // Converged: the step is a negligible fraction of the scatter.
+            if step[0].abs() / tau.0 + step[1].abs() / tau.1 < INNER_TOLERANCE {
+                break;
+            }
             // Halve the step until the objective does not rise (the map is nonlinear).
             let mut lambda = 1.0;
             let mut accepted = false;
