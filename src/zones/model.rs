@@ -5,12 +5,14 @@
 //! inverse covariance of û_s with ξ and any effect parameters profiled out), so that
 //! χ²_s(E_s, ν_s) ≈ χ²_s,min + (u_s(E_s, ν_s) − û_s)ᵀ H_s (u_s(E_s, ν_s) − û_s): a quadratic in
 //! the speeds (where the misfit valley is nearly straight), mapped exactly from (log10 E, ν)
-//! with the segment's own ρ_m. The zone's profile misfit
-//! Φ(E_z, ν_z) = Σ_s min over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²] (P68) is evaluated on
-//! a grid over the whole search box and then on a fine grid over its 95 % region; the 95 %
-//! intervals are the profile intervals {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84}
-//! (as P66). A member whose own misfit at the zone, allowing for the scatter, exceeds the
-//! χ²₂ 0.999 quantile is an outlier: reported and left out of the zone estimate.
+//! with the segment's own ρ_m. The zone's objective Φ(E_z, ν_z) is −2 ln of its marginal
+//! likelihood: for each member, the minimum over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²]
+//! (P68) plus the Laplace (Occam) term ln det(JᵀHJ + P) − ln det P at the minimiser, which
+//! integrates the member's own (E_s, ν_s) out ([`Member::marginal`]). Φ is evaluated on a grid
+//! over the whole search box and then on a fine grid over its 95 % region; the 95 % intervals
+//! are {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84} (as P66). A member whose own
+//! misfit at the zone, allowing for the scatter (the P68 minimum alone), exceeds the χ²₂ 0.999
+//! quantile is an outlier: reported and left out of the zone estimate.
 
 use crate::invert::problem::E_BOUNDS;
 use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_speeds, DCHI2_95};
