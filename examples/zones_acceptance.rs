@@ -86,15 +86,18 @@ fn main() {
     let r = run(seed, zones, per_zone);
     report(&format!("seed {seed}, mixed pipes"), &r.zones);
     println!(
-        "time: segment fits {:.2} s, zone estimation {:.3} s ({:.1} %)",
+        "time: segment fits {:.2} s, zone estimation {:.3} s ({:.1} % of the fits; members' \
+         misfit models {:.3} s, zone grids {:.3} s)",
         r.fit_seconds,
         r.zone_seconds,
-        100.0 * r.zone_seconds / r.fit_seconds
+        100.0 * r.zone_seconds / r.fit_seconds,
+        r.member_seconds,
+        r.zone_seconds - r.member_seconds
     );
     if std::env::var("ZONES_DEBUG").is_ok() {
         debug(&r);
     }
-    let (metal, _) = estimate(&r.network, &r.fits, |s| !s.material.is_plastic());
+    let metal = estimate(&r.network, &r.fits, |s| !s.material.is_plastic()).zones;
     report(&format!("seed {seed}, metal pipes only"), &metal);
 }
 
@@ -113,7 +116,11 @@ pub fn debug(r: &pipewave::zones::synthetic::ZonedRun) {
                 effects: f.effects.clone(),
             };
             let x = pipewave::zones::synthetic::optimum(f);
-            let mem = pipewave::zones::member_from_fit(&s.id, &d, &setup, &x).unwrap();
+            let rstd = [
+                f.p_wave_speed.map(|w| w.relative()),
+                f.s_wave_speed.map(|w| w.relative()),
+            ];
+            let mem = pipewave::zones::member_from_fit(&s.id, &d, &setup, &x, rstd).unwrap();
             let (cp, cs) = soil_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
             let det = mem.info[0] * mem.info[3] - mem.info[1] * mem.info[2];
             let (vp, vs) = (mem.info[3] / det, mem.info[0] / det);

@@ -44,8 +44,15 @@ pub struct SegmentExport {
     pub attenuation_at: [Option<f64>; 4],
     /// Mean phase speed over [`LEAK_BAND_HZ`], m/s ([`band_mean_speed`]).
     pub leak_band_speed: Option<f64>,
-    /// Its zone's newest estimate and its place in it (physics §7.11), if any.
+    /// Its zone's newest estimate and its place in it (physics §7.11), if any
+    /// ([`Self::set_zone`]).
     pub zone: Option<(db::zones::ZoneFitRow, db::zones::ZoneMemberRow)>,
+    /// The latest fit's `flags`, with its zone's verdict on that fit appended
+    /// ([`crate::zones::segment_flag`]: `zone_outlier`); `None` when never fitted. What the
+    /// exports and the audit report show as the segment's flags.
+    pub flags: Option<String>,
+    /// The reason lines of [`Self::flags`], one per flag.
+    pub flag_reasons: Option<String>,
 }
 
 impl SegmentExport {
@@ -67,12 +74,36 @@ impl SegmentExport {
         SegmentExport {
             segment,
             geometry,
-            fit,
             curve,
             speed_at,
             attenuation_at,
             leak_band_speed,
+            flags: fit.as_ref().map(|f| f.flags.clone()),
+            flag_reasons: fit.as_ref().map(|f| f.flag_reasons.clone()),
+            fit,
             zone: None,
+        }
+    }
+
+    /// Attach the segment's zone estimate and membership, and append the zone's verdict on the
+    /// latest fit to [`Self::flags`] and [`Self::flag_reasons`].
+    pub fn set_zone(&mut self, zone: Option<(db::zones::ZoneFitRow, db::zones::ZoneMemberRow)>) {
+        self.zone = zone;
+        let (Some(fit), Some((z, m))) = (&self.fit, &self.zone) else {
+            return;
+        };
+        if let Some((flag, reason)) =
+            crate::zones::segment_flag(z, m, fit, self.segment.soil_density_kg_m3)
+        {
+            let join = |list: &str, item: &str, sep: &str| {
+                if list.is_empty() {
+                    item.to_string()
+                } else {
+                    format!("{list}{sep}{item}")
+                }
+            };
+            self.flags = Some(join(&fit.flags, flag.as_str(), ","));
+            self.flag_reasons = Some(join(&fit.flag_reasons, &reason, "\n"));
         }
     }
 
@@ -86,11 +117,11 @@ impl SegmentExport {
         self.fit.as_ref().map_or(UNFITTED, |f| f.status.as_str())
     }
 
-    /// The flag codes of the latest fit (empty when none or unfitted).
+    /// The flag codes of the latest fit and its zone's verdict (empty when none or unfitted).
     pub fn flag_codes(&self) -> impl Iterator<Item = &str> {
-        self.fit
+        self.flags
             .iter()
-            .flat_map(|f| f.flags.split(','))
+            .flat_map(|f| f.split(','))
             .map(str::trim)
             .filter(|s| !s.is_empty())
     }
@@ -138,7 +169,7 @@ pub fn load_records(
         };
         let zone = zones.remove(&seg.segment_id);
         let mut rec = SegmentExport::new(seg, fit, curve);
-        rec.zone = zone;
+        rec.set_zone(zone);
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
             let why = LineString::parse_wkt(w).err().unwrap_or_default();
             warnings.push(format!(
@@ -294,14 +325,15 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "flags",
         kind: Kind::Text,
-        doc: "comma-separated flag codes of the latest fit",
-        get: |r| Value::text(r.fit.as_ref().map(|f| f.flags.as_str())),
+        doc: "comma-separated flag codes of the latest fit, and zone_outlier when its soil zone \
+              left it out",
+        get: |r| Value::text(r.flags.as_deref()),
     },
     Property {
         name: "flag_reasons",
         kind: Kind::Text,
         doc: "one line per flag: what to act on and why",
-        get: |r| Value::text(r.fit.as_ref().map(|f| f.flag_reasons.as_str())),
+        get: |r| Value::text(r.flag_reasons.as_deref()),
     },
     Property {
         name: "notes",
@@ -570,6 +602,13 @@ pub const PROPERTIES: &[Property] = &[
         kind: Kind::Integer,
         doc: "1 if this segment disagrees with its zone and was left out of its estimate",
         get: |r| Value::int(r.zone.as_ref().map(|z| i64::from(z.1.zone_outlier))),
+    },
+    Property {
+        name: "zone_statistic",
+        kind: Kind::Real,
+        doc: "this segment's misfit at its zone with the scatter allowed for (chi-square, 2 \
+              dof); above 13.82 (p < 0.001) it is a zone_outlier",
+        get: |r| Value::real(r.zone.as_ref().and_then(|z| z.1.statistic)),
     },
 ];
 

@@ -22,7 +22,7 @@ use std::path::Path;
 use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
 use super::svg::{self, escape, ColourScale, MapLine, MapStyle};
 use super::{quantile, sorted_finite};
-use crate::db::{self, Database, FitRow, FitStatus, RunRow};
+use crate::db::{self, Database, FitStatus, RunRow};
 use crate::export::gpkg::common_geometries;
 use crate::export::record::UNFITTED;
 use crate::export::{
@@ -32,6 +32,7 @@ use crate::export::{
 use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};
 use crate::invert::FlagCode;
 use crate::units::{np_to_db, sig};
+use crate::zones::ZoneFlag;
 
 /// The worst fits shown with their curves.
 pub const WORST_FITS: usize = 12;
@@ -254,20 +255,26 @@ fn codes(list: &str) -> impl Iterator<Item = &str> {
     list.split(',').map(str::trim).filter(|s| !s.is_empty())
 }
 
-/// What a flag or note code means and what to do ([`FlagCode::advice`]); codes an older
-/// pipewave stored are named as such.
+/// What a flag or note code means and what to do ([`FlagCode::advice`], or
+/// [`ZoneFlag::advice`] for a soil zone's verdict); codes an older pipewave stored are named
+/// as such.
 fn advice(code: &str) -> &'static str {
-    FlagCode::ALL.iter().find(|c| c.as_str() == code).map_or(
-        "a code of an older pipewave version: `pipewave run` refits these fits",
-        |c| c.advice(),
-    )
+    FlagCode::ALL
+        .iter()
+        .find(|c| c.as_str() == code)
+        .map(|c| c.advice())
+        .or_else(|| ZoneFlag::from_code(code).map(ZoneFlag::advice))
+        .unwrap_or("a code of an older pipewave version: `pipewave run` refits these fits")
 }
 
 /// Count each code over the records, most frequent first (then by code).
-fn count_codes(records: &[SegmentExport], list: fn(&FitRow) -> &str) -> Vec<(&str, usize)> {
+fn count_codes(
+    records: &[SegmentExport],
+    list: fn(&SegmentExport) -> Option<&str>,
+) -> Vec<(&str, usize)> {
     let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
-    for f in records.iter().filter_map(|r| r.fit.as_ref()) {
-        for c in codes(list(f)) {
+    for l in records.iter().filter_map(list) {
+        for c in codes(l) {
             *counts.entry(c).or_default() += 1;
         }
     }
@@ -334,7 +341,7 @@ fn trust(h: &mut String, records: &[SegmentExport]) {
         "</table><h3 id=\"flags\">Flags that need action</h3><table><tr><th>flag</th>\
          <th>segments</th><th>what it means and what to do</th></tr>",
     );
-    let flags = count_codes(records, |f| f.flags.as_str());
+    let flags = count_codes(records, |r| r.flags.as_deref());
     for (code, count) in &flags {
         let _ = write!(
             h,
@@ -479,7 +486,7 @@ fn least_certain(h: &mut String, non_failed: &[&SegmentExport]) {
          <th>leak-band speed (m/s)</th><th>relative error</th><th>status</th><th>flags</th></tr>",
     );
     for (r, v, e, rel) in rows.iter().take(LEAST_CERTAIN_LISTED) {
-        let flags = r.fit.as_ref().map_or("", |f| f.flags.as_str());
+        let flags = r.flags.as_deref().unwrap_or("");
         let _ = write!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"n\">{v:.0} ± {}</td>\
@@ -676,7 +683,7 @@ fn soil_speeds(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), Char
 }
 
 fn notes(h: &mut String, records: &[SegmentExport]) {
-    let notes = count_codes(records, |f| f.notes.as_str());
+    let notes = count_codes(records, |r| r.fit.as_ref().map(|f| f.notes.as_str()));
     h.push_str(
         "<section id=\"notes\"><h2>Notes</h2><p class=\"note\">What the data leave undetermined. \
          These are facts about the soil and the measurements, not defects of the fit.</p>",
@@ -835,7 +842,10 @@ fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartErro
             sig(r.segment.outer_diameter_mm, 4),
             sig(v, 3),
             fit.status.as_str(),
-            escape(if fit.flags.is_empty() { "none" } else { &fit.flags }),
+            escape(match r.flags.as_deref() {
+                Some(f) if !f.is_empty() => f,
+                _ => "none",
+            }),
             pm_opt(speed_with_std(r)),
             pm_opt(fit.soil_p_wave_speed_m_per_s.map(|v| (v, fit.soil_p_wave_speed_std_m_per_s))),
             pm_opt(fit.soil_s_wave_speed_m_per_s.map(|v| (v, fit.soil_s_wave_speed_std_m_per_s))),

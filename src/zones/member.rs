@@ -25,13 +25,15 @@ pub struct FitSetup {
 }
 
 /// The member of a zone from its data and its single fit's optimum `x` in the default
-/// method's coordinates (log10 E_m, ν_m, ξ, effect coordinates…). `None` if the model cannot
-/// be evaluated there or the information is not positive definite.
+/// method's coordinates (log10 E_m, ν_m, ξ, effect coordinates…) and the single fit's own
+/// relative one-sigma errors of c_P and c_S (`speed_rstd`, P65; `None` where not known). `None`
+/// if the model cannot be evaluated there or the information is not positive definite.
 pub fn member_from_fit(
     segment_id: &str,
     data: &SegmentData,
     setup: &FitSetup,
     x: &[f64],
+    speed_rstd: [Option<f64>; 2],
 ) -> Option<Member> {
     let problem = Problem::new(
         data,
@@ -142,6 +144,7 @@ pub fn member_from_fit(
         let k = problem.predict(&q)?;
         Some((problem.sum_of_squares(&k) - ss) / scale)
     });
+    let hu = no_tighter_than(hu, speed_rstd);
     Some(Member {
         segment_id: segment_id.to_string(),
         soil_density: data.soil_density,
@@ -149,6 +152,32 @@ pub fn member_from_fit(
         u_hat: [cp.ln(), cs.ln()],
         info: hu,
     })
+}
+
+/// The information `h` of (ln c_P, ln c_S) with each coordinate's marginal variance raised to
+/// at least the single fit's own (`rstd`, relative one-sigma errors of c_P and c_S), the
+/// correlation kept: H′ = D⁻¹ H D⁻¹ with D = diag(max(1, σ_fit / σ_model)). The quadratic model is
+/// local; where the misfit has a cusp (a root near grazing, physics §7.10) it can claim c_P or
+/// c_S to a fraction of a per cent while the single fit's own analysis finds it undetermined,
+/// and such a member would pull its whole zone.
+fn no_tighter_than(h: [f64; 4], rstd: [Option<f64>; 2]) -> [f64; 4] {
+    let det = h[0] * h[3] - h[1] * h[2];
+    if !(det.is_finite() && det > 0.0) {
+        return h;
+    }
+    let var = [h[3] / det, h[0] / det];
+    let mut k = [1.0; 2];
+    for i in 0..2 {
+        if let Some(s) = rstd[i].filter(|s| s.is_finite() && *s > 0.0) {
+            k[i] = (s / var[i].sqrt()).max(1.0);
+        }
+    }
+    [
+        h[0] / (k[0] * k[0]),
+        h[1] / (k[0] * k[1]),
+        h[2] / (k[1] * k[0]),
+        h[3] / (k[1] * k[1]),
+    ]
 }
 
 /// Model sigmas at which the quadratic model is checked against the real misfit.

@@ -5,14 +5,17 @@
 //! * [`model`]: the hierarchical model P67–P68 on per-segment quadratic misfit models in
 //!   (ln c_P, ln c_S); the zone's estimate, 95 % profile intervals, members shrunk toward it,
 //!   and outliers (reported, left out).
+//! * [`flags`]: the zone's flags and its verdict on a member (`zone_outlier`, with evidence).
 //! * [`member`]: a member's quadratic model from its data and single fit (real misfit).
 //! * [`run`]: the zones of a database after `calibrate`: estimated when a member's fit has
 //!   changed, stored in `zone_fits` / `zone_members`.
+pub mod flags;
 pub mod member;
 pub mod model;
 pub mod run;
 pub mod synthetic;
 
+pub use flags::{segment_flag, OutlierEvidence, ZoneFlag};
 pub use member::{member_from_fit, FitSetup};
 pub use model::{
     estimate_zone, Member, MemberResult, ScatterSource, ZoneEstimate, ZoneInterval, MIN_MEMBERS,
@@ -35,6 +38,8 @@ pub struct FittedSegment<'a> {
     pub setup: FitSetup,
     /// The single fit's optimum in the default coordinates (log10 E_m, ν_m, ξ, effects…).
     pub x: Vec<f64>,
+    /// The single fit's relative one-sigma errors of c_P and c_S (P65), where known.
+    pub speed_rstd: [Option<f64>; 2],
 }
 
 /// The members of every zone (in the order given), built in parallel (each is independent, so
@@ -45,7 +50,7 @@ pub fn members_by_zone(
 ) -> std::collections::BTreeMap<String, Vec<Member>> {
     let built: Vec<Option<Member>> = segments
         .par_iter()
-        .map(|s| member_from_fit(&s.segment_id, s.data, &s.setup, &s.x))
+        .map(|s| member_from_fit(&s.segment_id, s.data, &s.setup, &s.x, s.speed_rstd))
         .collect();
     let mut out: std::collections::BTreeMap<String, Vec<Member>> = Default::default();
     for (s, m) in segments.iter().zip(built) {
@@ -60,7 +65,15 @@ pub fn members_by_zone(
 pub fn estimate_zones(
     segments: &[FittedSegment<'_>],
 ) -> std::collections::BTreeMap<String, ZoneEstimate> {
-    let by_zone: Vec<(String, Vec<Member>)> = members_by_zone(segments).into_iter().collect();
+    estimate_member_zones(members_by_zone(segments))
+}
+
+/// Estimate every zone of [`members_by_zone`]'s result with at least [`MIN_MEMBERS`] members
+/// (in parallel over zones).
+pub fn estimate_member_zones(
+    by_zone: std::collections::BTreeMap<String, Vec<Member>>,
+) -> std::collections::BTreeMap<String, ZoneEstimate> {
+    let by_zone: Vec<(String, Vec<Member>)> = by_zone.into_iter().collect();
     by_zone
         .par_iter()
         .filter_map(|(z, ms)| estimate_zone(ms).map(|e| (z.clone(), e)))

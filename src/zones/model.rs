@@ -5,12 +5,14 @@
 //! inverse covariance of û_s with ξ and any effect parameters profiled out), so that
 //! χ²_s(E_s, ν_s) ≈ χ²_s,min + (u_s(E_s, ν_s) − û_s)ᵀ H_s (u_s(E_s, ν_s) − û_s): a quadratic in
 //! the speeds (where the misfit valley is nearly straight), mapped exactly from (log10 E, ν)
-//! with the segment's own ρ_m. The zone's profile misfit
-//! Φ(E_z, ν_z) = Σ_s min over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²] (P68) is evaluated on
-//! a grid over the whole search box and then on a fine grid over its 95 % region; the 95 %
-//! intervals are the profile intervals {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84}
-//! (as P66). A member whose own misfit at the zone, allowing for the scatter, exceeds the
-//! χ²₂ 0.999 quantile is an outlier: reported and left out of the zone estimate.
+//! with the segment's own ρ_m. The zone's objective Φ(E_z, ν_z) is −2 ln of its marginal
+//! likelihood: for each member, the minimum over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²]
+//! (P68) plus the Laplace (Occam) term ln det(JᵀHJ + P) − ln det P at the minimiser, which
+//! integrates the member's own (E_s, ν_s) out ([`Member::marginal`]). Φ is evaluated on a grid
+//! over the whole search box and then on a fine grid over its 95 % region; the 95 % intervals
+//! are {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84} (as P66). A member whose own
+//! misfit at the zone, allowing for the scatter (the P68 minimum alone), exceeds the χ²₂ 0.999
+//! quantile is an outlier: reported and left out of the zone estimate.
 
 use crate::invert::problem::E_BOUNDS;
 use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_speeds, DCHI2_95};
@@ -35,6 +37,8 @@ const COARSE_STEP_NU: f64 = 0.02;
 const FINE_POINTS: usize = 41;
 /// Gauss–Newton iterations of the inner (per-member) minimisation.
 const INNER_ITERATIONS: usize = 12;
+/// The inner minimisation stops when its step is below this fraction of the scatter (τ_E, τ_ν).
+const INNER_TOLERANCE: f64 = 1e-6;
 
 /// What one member segment brings to its zone: the quadratic model of its misfit in the soil
 /// speeds.
@@ -66,6 +70,23 @@ impl Member {
         quad(&self.info, d)
     }
 
+    /// ∂u/∂(log10 E, ν) at ν, row-major (P65).
+    fn jacobian(nu: f64) -> [f64; 4] {
+        let half_ln10 = 0.5 * std::f64::consts::LN_10;
+        [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)]
+    }
+
+    /// The Gauss–Newton curvature JᵀHJ + P of the inner objective at `t` (P68).
+    fn curvature(&self, t: (f64, f64), p: [f64; 2]) -> [f64; 4] {
+        let j = Self::jacobian(t.1);
+        let hj = mat2_mul(&self.info, &j);
+        let jt = [j[0], j[2], j[1], j[3]];
+        let mut a = mat2_mul(&jt, &hj);
+        a[0] += p[0];
+        a[3] += p[1];
+        a
+    }
+
     /// min over (E_s, ν_s) of misfit + δ²/τ_E² + ε²/τ_ν² with the zone at `z` (P68); returns
     /// the minimum and the minimiser (the member's values shrunk toward the zone).
     pub fn profile(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, (f64, f64)) {
@@ -78,22 +99,16 @@ impl Member {
         for _ in 0..INNER_ITERATIONS {
             let u = self.u(t.0, t.1);
             let d = [u[0] - self.u_hat[0], u[1] - self.u_hat[1]];
-            // ∂u/∂(log10 E, ν) (P65).
-            let half_ln10 = 0.5 * std::f64::consts::LN_10;
-            let j = [half_ln10, dln_cp_dnu(t.1), half_ln10, dln_cs_dnu(t.1)];
+            let j = Self::jacobian(t.1);
             // Gauss–Newton: (JᵀHJ + P) Δ = −(JᵀH d + P (t − z)).
-            let hj = mat2_mul(&self.info, &j);
-            let jt = [j[0], j[2], j[1], j[3]];
-            let mut a = mat2_mul(&jt, &hj);
-            a[0] += p[0];
-            a[3] += p[1];
+            let a = self.curvature(t, p);
             let hd = [
                 self.info[0] * d[0] + self.info[1] * d[1],
                 self.info[2] * d[0] + self.info[3] * d[1],
             ];
             let g = [
-                jt[0] * hd[0] + jt[1] * hd[1] + p[0] * (t.0 - z.0),
-                jt[2] * hd[0] + jt[3] * hd[1] + p[1] * (t.1 - z.1),
+                j[0] * hd[0] + j[2] * hd[1] + p[0] * (t.0 - z.0),
+                j[1] * hd[0] + j[3] * hd[1] + p[1] * (t.1 - z.1),
             ];
             let det = a[0] * a[3] - a[1] * a[2];
             if !(det.is_finite() && det > 0.0) {
@@ -103,6 +118,10 @@ impl Member {
                 -(a[3] * g[0] - a[1] * g[1]) / det,
                 -(-a[2] * g[0] + a[0] * g[1]) / det,
             ];
+            // Converged: the step is a negligible fraction of the scatter.
+            if step[0].abs() / tau.0 + step[1].abs() / tau.1 < INNER_TOLERANCE {
+                break;
+            }
             // Halve the step until the objective does not rise (the map is nonlinear).
             let mut lambda = 1.0;
             let mut accepted = false;
@@ -126,6 +145,27 @@ impl Member {
             }
         }
         (f, t)
+    }
+
+    /// The member's term of the zone's marginal objective at `z`: −2 ln of
+    /// ∫ exp(−χ²_s/2) N(θ_s; z, diag(τ²)) dθ_s by Laplace's method, i.e. the profile minimum
+    /// of P68 plus the Occam term ln det(JᵀHJ + P) − ln det P at the minimiser (up to a
+    /// constant). Without it the joint minimum of P68 over the zone and its members is drawn to
+    /// where the scatter maps to large changes of the speeds (ν_z toward 0.5, where
+    /// ∂ln c_P/∂ν is large): there every member can fit its own c_P at no cost, and soft
+    /// zones came out with ν_m too high and E_m too low. Returns (term, profile minimum,
+    /// minimiser).
+    pub fn marginal(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, f64, (f64, f64)) {
+        let (f, t) = self.profile(z, tau);
+        let p = [1.0 / (tau.0 * tau.0), 1.0 / (tau.1 * tau.1)];
+        let a = self.curvature(t, p);
+        let det = a[0] * a[3] - a[1] * a[2];
+        let occam = if det.is_finite() && det > 0.0 {
+            (det / (p[0] * p[1])).ln()
+        } else {
+            f64::INFINITY
+        };
+        (f + occam, f, t)
     }
 }
 
@@ -194,6 +234,10 @@ pub struct MemberResult {
     pub misfit_at_zone: f64,
     /// Left out of the zone estimate as inconsistent with it.
     pub outlier: bool,
+    /// Its single fit's log10 E_m (Pa) and ν_m ([`Member::single`]).
+    pub single: (f64, f64),
+    /// Its soil density ρ_m, kg/m³.
+    pub soil_density: f64,
 }
 
 /// The estimate of one zone.
@@ -217,7 +261,7 @@ pub struct ZoneEstimate {
     pub scatter: (f64, f64),
     /// How it was chosen.
     pub scatter_source: ScatterSource,
-    /// Φ_min / (2 n − 2) over the members kept (two speed coordinates each, two zone
+    /// The members' profile minima of P68 at the estimate, summed over the members kept, / (2 n − 2)
     /// parameters).
     pub chi2_per_dof: f64,
     /// Every member, in input order.
@@ -239,13 +283,14 @@ impl ZoneEstimate {
     }
 }
 
-/// Φ(z) over the members in `keep`.
+/// Φ(z) over the members in `keep`: the zone's marginal objective (−2 ln of its marginal
+/// likelihood up to a constant; [`Member::marginal`]).
 fn phi(members: &[Member], keep: &[bool], z: (f64, f64), tau: (f64, f64)) -> f64 {
     members
         .iter()
         .zip(keep)
         .filter(|(_, &k)| k)
-        .map(|(m, _)| m.profile(z, tau).0)
+        .map(|(m, _)| m.marginal(z, tau).0)
         .sum()
 }
 
@@ -379,6 +424,8 @@ pub fn estimate_zone(members: &[Member]) -> Option<ZoneEstimate> {
                     statistic: stat,
                     misfit_at_zone: m.misfit(z.0, z.1),
                     outlier: !k,
+                    single: m.single,
+                    soil_density: m.soil_density,
                 }
             })
             .collect();
@@ -422,7 +469,12 @@ pub fn estimate_zone(members: &[Member]) -> Option<ZoneEstimate> {
                     s_wave_speed_interval: range(|s| s.1),
                     scatter: tau,
                     scatter_source: ScatterSource::Fixed,
-                    chi2_per_dof: best.2 / dof,
+                    chi2_per_dof: results
+                        .iter()
+                        .filter(|r| !r.outlier)
+                        .map(|r| r.statistic)
+                        .sum::<f64>()
+                        / dof,
                     members: results,
                 });
             }

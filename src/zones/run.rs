@@ -14,19 +14,9 @@ use crate::invert::problem::{parameter_space, Param};
 use crate::invert::Method;
 use crate::physics::effects::parse_effects;
 
-use super::model::{estimate_zone, ZoneEstimate, MIN_MEMBERS, OUTLIER_CHI2};
+use super::flags::{OutlierEvidence, ZoneFlag, POOR_FIT_CHI2_PER_DOF};
+use super::model::{estimate_zone, ZoneEstimate, MIN_MEMBERS};
 use super::{members_by_zone, FitSetup, FittedSegment};
-
-/// Zone flag: the zone holds only metal or only plastic pipes, so its data fix c_P or c_S but
-/// not both (physics §7.10): E_m and ν_m are known only along a valley.
-pub const FLAG_SINGLE_PIPE_KIND: &str = "single_pipe_kind";
-/// Zone flag: some members disagree with the zone (named in `outliers`).
-pub const FLAG_HAS_OUTLIERS: &str = "zone_outlier";
-/// Zone flag: the zone's χ²/dof exceeds [`POOR_FIT_CHI2_PER_DOF`]: the scatter between its
-/// segments is larger than assumed, or it is more than one soil.
-pub const FLAG_POOR_FIT: &str = "zone_poor_fit";
-/// χ²/dof above which a zone is flagged [`FLAG_POOR_FIT`].
-pub const POOR_FIT_CHI2_PER_DOF: f64 = 3.0;
 
 /// What [`update_zones`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -81,6 +71,12 @@ fn coordinates(fit: &FitRow, setup: &FitSetup) -> Option<Vec<f64>> {
             c.is_finite().then_some(c.clamp(s.lower, s.upper))
         })
         .collect()
+}
+
+/// σ / |value|, where both are stored and finite.
+fn relative(std: Option<f64>, value: Option<f64>) -> Option<f64> {
+    let r = std? / value?.abs();
+    r.is_finite().then_some(r)
 }
 
 /// The hash of a zone's member fits: `segment_id:fit_id` lines, sorted.
@@ -170,6 +166,10 @@ pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUp
                 data: d,
                 setup,
                 x,
+                speed_rstd: [
+                    relative(f.soil_p_wave_speed_std_m_per_s, f.soil_p_wave_speed_m_per_s),
+                    relative(f.soil_s_wave_speed_std_m_per_s, f.soil_s_wave_speed_m_per_s),
+                ],
             });
         }
         let by_zone = members_by_zone(&fitted);
@@ -215,25 +215,24 @@ pub fn zone_row(
     let outliers: Vec<&super::MemberResult> = est.members.iter().filter(|m| m.outlier).collect();
     let mut flags = Vec::new();
     if single_pipe_kind {
-        flags.push(FLAG_SINGLE_PIPE_KIND);
+        flags.push(ZoneFlag::SinglePipeKind.as_str());
     }
     if !outliers.is_empty() {
-        flags.push(FLAG_HAS_OUTLIERS);
+        flags.push(ZoneFlag::Outlier.as_str());
     }
     if est.chi2_per_dof > POOR_FIT_CHI2_PER_DOF {
-        flags.push(FLAG_POOR_FIT);
+        flags.push(ZoneFlag::PoorFit.as_str());
     }
     let reasons: Vec<String> = outliers
         .iter()
         .map(|m| {
-            format!(
-                "{}: misfit at the zone {} with the scatter allowed for (above {} is \
-                 p < 0.001); its own misfit rises by {} at the zone's E_m and nu_m",
-                m.segment_id,
-                short(m.statistic),
-                short(OUTLIER_CHI2),
-                short(m.misfit_at_zone)
-            )
+            let ev = OutlierEvidence::new(
+                m.statistic,
+                (est.modulus(), est.poisson),
+                (10f64.powf(m.single.0), m.single.1),
+                m.soil_density,
+            );
+            format!("{}: {}", m.segment_id, ev.reason(zone))
         })
         .collect();
     ZoneFitRow {
@@ -269,15 +268,5 @@ pub fn zone_row(
         members_hash: members_hash.to_string(),
         elapsed_ms: None,
         created_at: None,
-    }
-}
-
-/// A number in short form for messages (4 significant digits).
-fn short(v: f64) -> String {
-    if v.is_finite() && v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-3) {
-        format!("{v:.3e}")
-    } else {
-        let s = format!("{v:.4}");
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
     }
 }

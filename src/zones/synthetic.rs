@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use crate::invert::{fit_segment, FitResult, FitSettings, FitStatus, Param};
 use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
 
-use super::{estimate_zones, FitSetup, FittedSegment, ZoneEstimate};
+use super::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
 
 /// One zone's estimate against its truth.
 #[derive(Debug, Clone)]
@@ -52,6 +52,19 @@ pub struct ZonedRun {
     pub fit_seconds: f64,
     /// Wall-clock time of the zone estimation (members' models and zones), s.
     pub zone_seconds: f64,
+    /// Of which the members' misfit models ([`super::member_from_fit`]), s.
+    pub member_seconds: f64,
+}
+
+/// The zones of a fitted network and the time taken.
+#[derive(Debug, Clone)]
+pub struct Estimated {
+    /// Every zone with an estimate.
+    pub zones: Vec<ZoneCheck>,
+    /// Wall-clock time of the zone estimation (members' models and zones), s.
+    pub seconds: f64,
+    /// Of which the members' misfit models, s.
+    pub member_seconds: f64,
 }
 
 /// The default coordinates (log10 E_m, ν_m, ξ, effects…) of a fit's optimum.
@@ -88,23 +101,24 @@ pub fn run(seed: u64, zones: usize, per_zone: usize) -> ZonedRun {
         .map(|s| fit_segment(&s.segment_data(), &settings, crate::seed::derive(seed, 1)))
         .collect();
     let fit_seconds = t0.elapsed().as_secs_f64();
-    let (zones, zone_seconds) = estimate(&network, &fits, |_| true);
+    let est = estimate(&network, &fits, |_| true);
     ZonedRun {
         network,
         fits,
-        zones,
+        zones: est.zones,
         fit_seconds,
-        zone_seconds,
+        zone_seconds: est.seconds,
+        member_seconds: est.member_seconds,
     }
 }
 
 /// Estimate the zones of a fitted network from the segments `members` accepts (e.g. metal
-/// pipes only); returns the zones and the time taken, s.
+/// pipes only), each in the zone its `soil_zone` names.
 pub fn estimate(
     network: &[SynthSegment],
     fits: &[FitResult],
     members: impl Fn(&SynthSegment) -> bool,
-) -> (Vec<ZoneCheck>, f64) {
+) -> Estimated {
     let data: Vec<_> = network.iter().map(SynthSegment::segment_data).collect();
     let t1 = Instant::now();
     let fitted: Vec<FittedSegment<'_>> = network
@@ -125,11 +139,17 @@ pub fn estimate(
                     effects: r.effects.clone(),
                 },
                 x: optimum(r),
+                speed_rstd: [
+                    r.p_wave_speed.map(|w| w.relative()),
+                    r.s_wave_speed.map(|w| w.relative()),
+                ],
             })
         })
         .collect();
-    let estimates = estimate_zones(&fitted);
-    let zone_seconds = t1.elapsed().as_secs_f64();
+    let by_zone = members_by_zone(&fitted);
+    let member_seconds = t1.elapsed().as_secs_f64();
+    let estimates = estimate_member_zones(by_zone);
+    let seconds = t1.elapsed().as_secs_f64();
     let zones = estimates
         .into_iter()
         .map(|(zone, estimate)| {
@@ -138,7 +158,13 @@ pub fn estimate(
                 .zip(fits)
                 .filter(|(s, _)| estimate.members.iter().any(|m| m.segment_id == s.id))
                 .collect();
-            let truth = in_zone[0].0.zone_soil.expect("zoned network");
+            // The zone's truth: the soil most of its members were made in (a member moved in
+            // from another zone keeps its own).
+            let soils: Vec<(f64, f64)> = in_zone.iter().filter_map(|(s, _)| s.zone_soil).collect();
+            let truth = *soils
+                .iter()
+                .max_by_key(|t| soils.iter().filter(|u| u == t).count())
+                .expect("zoned network");
             let single = |p: Param| {
                 median(
                     in_zone
@@ -163,5 +189,9 @@ pub fn estimate(
             }
         })
         .collect();
-    (zones, zone_seconds)
+    Estimated {
+        zones,
+        seconds,
+        member_seconds,
+    }
 }
