@@ -741,3 +741,52 @@ fn recorded_metal_pipes_calibrate_and_give_c_p_within_its_errors() {
         100.0 * median
     );
 }
+
+/// The measurements `wavenumbers` writes for a segment id a spreadsheet would read as a formula
+/// (written `'+W3`, issue 17) import as that id: the import reads a `'` before a formula lead as
+/// a spreadsheet does.
+#[test]
+fn measurements_of_a_formula_like_id_import_as_that_id() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/sample_network/recordings/WM10003.wav"
+        ),
+        dir.join("WM10003.wav"),
+    )
+    .unwrap();
+    let (code, err, out) = wavenumbers(
+        dir,
+        &layout_text(&[
+            ("+W3", "WM10003.wav", 0, 0.0),
+            ("+W3", "WM10003.wav", 1, -70.5),
+            ("+W3", "WM10003.wav", 2, 59.7),
+        ]),
+    );
+    assert_eq!(code, Some(0), "{err}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    let rows = text.lines().count() - 1;
+    assert!(rows >= 4 && text.contains("\"'+W3\""), "{text}");
+    std::fs::write(
+        dir.join("segments.csv"),
+        "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n\
+         +W3,DI,326,7.2,1884\n",
+    )
+    .unwrap();
+    let db = dir.join("x.sqlite");
+    let o = run(&[
+        "import".as_ref(),
+        "--db".as_ref(),
+        db.as_os_str(),
+        "--segments".as_ref(),
+        dir.join("segments.csv").as_os_str(),
+        "--measurements".as_ref(),
+        out.as_os_str(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let database = pipewave::db::Database::open(&db).unwrap();
+    let m = pipewave::db::inventory::load_measurements(database.conn(), "+W3").unwrap();
+    assert_eq!(m.len(), rows);
+}
