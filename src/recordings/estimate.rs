@@ -11,9 +11,11 @@
 //!    (P73; with a third channel, the estimator P77 that reference-sensor noise does not bias),
 //!    its phase unwrapped from low frequency, and per bin Re k1 and the attenuation (P74) with
 //!    their variances (P75, generalised to any ratio of cross-spectra below);
-//! 4. per band: a weighted mean over the bins (weights from the smoothed variances, the
-//!    correlation of neighbouring Hann bins counted), then a generalised-least-squares mean over
-//!    the pairs with their covariances; the two sides compared (P76) and combined.
+//! 4. per band: a weighted mean over the bins (P75 weights, and the choice of bins, from the
+//!    variances and coherence of the *neighbouring* bins only, so neither depends on the bin's
+//!    own noise: [`VARIANCE_SMOOTHING_BINS`]; the correlation of neighbouring Hann bins
+//!    counted), then a generalised-least-squares mean over the pairs with their covariances;
+//!    the two sides compared (P76) and combined.
 //!
 //! **Errors of a ratio of cross-spectra.** Every estimator used is ln H = Σ_r s_r ln Ĝ_{x_r y_r}
 //! (H1: ln G_ab − ln G_aa; P77: ln G_cb − ln G_ca). For Gaussian signals, Isserlis' theorem gives
