@@ -4,10 +4,16 @@
 //! compressional speed c_P against the truth ([`pipewave::recordings::recovery`]). The fit sees
 //! only the inventory and the measurements.
 //!
-//!     cargo run --release --example wavenumbers_calibration -- [SEED] [METAL_PIPES] [SECONDS] [JOBS]
+//!     cargo run --release --example wavenumbers_calibration -- [SEED] [METAL_PIPES] [SECONDS] [JOBS] [FEED] [-v]
 //!
-//! Defaults: seed 20261122, 40 metal pipes, 30 s, 2 jobs. Prints one line per pipe (bands kept,
-//! fit status, c_P fitted ± σ against the truth, z = error / σ) and the summary.
+//! Defaults: seed 20261122, 40 metal pipes, 30 s, 2 jobs. Prints one line per pipe (bands kept
+//! and their mean z against the truth, fit status, c_P fitted ± σ against the truth,
+//! z = error / σ) and the summary. `FEED` (default `recordings`) swaps in a control
+//! (`Feed`): `ideal` (the truth plus Gaussian errors of the stated σ), `truth-k`, `truth-att`.
+//! `-v`: every band's z.
+//!
+//! Seed 20261122 was used to find and fix the attenuation bias of the bin weights (README);
+//! the figures quoted in the README are from seed 151122, run once after the fix.
 
 use pipewave::recordings::recovery::{run_chain, ChainSpec, Feed};
 

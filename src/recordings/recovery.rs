@@ -4,8 +4,14 @@
 //! `import` and `calibrate` → the fitted soil's compressional speed c_P against the truth
 //! ([`crate::network::recovery::compare`]).
 //!
-//! The fit sees only what a user would give it: the inventory (`segments.csv`) and the
-//! measurements written by the wavenumbers step. The truth is read only to judge the result.
+//! The recordings are those of `synth --recordings`: the seed layout with sensors at
+//! [`super::synth::sensor_range_m`] (20–80 m on metals), sensor noise
+//! [`super::synth::DEFAULT_NOISE_FRACTION`] of the source channel, 8 kHz.
+//!
+//! With [`Feed::Recordings`] the fit sees only what a user would give it: the inventory
+//! (`segments.csv`) and the measurements written by the wavenumbers step; the truth is read
+//! only to judge the result. The other [`Feed`]s are controls that put the truth into the
+//! measurements on purpose, to tell the errors of the wavenumbers step from those of the fit.
 //! This is issue 15's last acceptance item: "the resulting measurements calibrate without a
 //! failed fit, and give c_P within its 2σ for ≥ 90 % of metal pipes".
 
