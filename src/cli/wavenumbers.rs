@@ -10,14 +10,13 @@
 //! others are written, and the exit code is 1.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use pipewave::export::spreadsheet::{self, spreadsheet_safe};
 use pipewave::recordings::{
-    self, analyse_segment, read_layout, EstimateOptions, SegmentWavenumbers,
+    self, analyse_segment, read_layout, write_measurements, EstimateOptions,
 };
 
 use super::Outcome;
@@ -94,7 +93,8 @@ pub fn run(args: &WavenumbersArgs) -> anyhow::Result<Outcome> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    write_measurements(&args.out, &results, &campaign)?;
+    write_measurements(&args.out, &results, &campaign)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
     let rows: usize = results.iter().map(|r| r.bands.len()).sum();
     let reflections = results
         .iter()
@@ -150,45 +150,4 @@ fn progress_bar(segments: &[recordings::SegmentLayout]) -> Option<ProgressBar> {
     );
     bar.set_message("wavenumbers");
     Some(bar)
-}
-
-/// The one place the output file is written (its text cells: segment ids, campaign, notes).
-fn write_measurements(
-    path: &Path,
-    results: &[SegmentWavenumbers],
-    campaign: &str,
-) -> anyhow::Result<()> {
-    // Text cells follow the spreadsheet-safety rule of every CSV pipewave writes (issue 17).
-    let mut w = spreadsheet::writer_from_path(path)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    w.write_record([
-        "segment_id",
-        "frequency_hz",
-        "k_re_rad_per_m",
-        "attenuation_np_per_m",
-        "k_re_std",
-        "attenuation_std",
-        "campaign",
-    ])?;
-    for r in results {
-        for b in &r.bands {
-            w.write_record([
-                spreadsheet_safe(&r.segment_id).into_owned(),
-                format!("{:.3}", b.frequency_hz),
-                b.k_re.to_string(),
-                b.attenuation.to_string(),
-                b.k_re_std.to_string(),
-                b.attenuation_std.to_string(),
-                spreadsheet_safe(&if b.notes.is_empty() {
-                    campaign.to_string()
-                } else {
-                    format!("{campaign} ({})", b.notes.join(", "))
-                })
-                .into_owned(),
-            ])?;
-        }
-    }
-    w.flush()
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
 }

@@ -46,6 +46,26 @@ pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
     }
 }
 
+/// The inverse of [`spreadsheet_safe`], as a spreadsheet reads the cell: a leading `'` that
+/// is followed by one of [`FORMULA_LEADS`] is dropped; any other text is returned unchanged. The
+/// CSV import reads every cell through this, so pipewave's own CSV output (e.g. the
+/// `wavenumbers` measurements of a segment id `+1`, written `'+1`) imports as the id it was
+/// written for. A spreadsheet saving such a cell writes it without the `'` too. The one text
+/// that does not survive the round trip is one that itself begins with `'` and a formula lead
+/// (`'=1` is read as `=1`), exactly as a spreadsheet reads it.
+///
+/// ```
+/// use pipewave::export::spreadsheet::{spreadsheet_safe, unneutralise};
+/// assert_eq!(unneutralise(&spreadsheet_safe("+1")), "+1");
+/// assert_eq!(unneutralise("'quoted'"), "'quoted'");
+/// ```
+pub fn unneutralise(s: &str) -> &str {
+    match s.strip_prefix(TEXT_PREFIX) {
+        Some(rest) if rest.starts_with(FORMULA_LEADS) => rest,
+        _ => s,
+    }
+}
+
 /// A text cell for rows written with `csv::Writer::serialize`: serialises as
 /// [`spreadsheet_safe`] of the text. Number fields of the same row stay plain `f64`/`i64`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -97,6 +117,19 @@ mod tests {
         for c in FORMULA_LEADS {
             assert_eq!(spreadsheet_safe(&c.to_string()), format!("'{c}"));
         }
+    }
+
+    #[test]
+    fn unneutralise_inverts_spreadsheet_safe_and_nothing_else() {
+        for t in [
+            "=1+1", "+1", "-2", "@A1", "\t=x", "\r@y", "WM10003", "'", "'x", "''=1",
+        ] {
+            assert_eq!(unneutralise(&spreadsheet_safe(t)), t, "{t:?}");
+        }
+        // A `'` not followed by a formula lead is text the user wrote.
+        assert_eq!(unneutralise("'x"), "'x");
+        assert_eq!(unneutralise("O'Brien"), "O'Brien");
+        assert_eq!(unneutralise("'=1"), "=1");
     }
 
     #[test]

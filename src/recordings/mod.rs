@@ -11,20 +11,69 @@
 //! * [`estimate`]: transfer functions (eq. P73, the three-channel estimator P77), the phase
 //!   unwrapped from low frequency, Re k1 and the attenuation per band (P74) with standard errors
 //!   from the coherence (P75–P76), combined over bins, sensor pairs and the two sides;
-//! * [`synth`]: synthetic recordings from the forward model, with their truth.
+//! * [`synth`]: synthetic recordings from the forward model, with their truth;
+//! * [`recovery`]: the whole chain on a synthetic network (recordings → wavenumbers → calibrate),
+//!   judged by the fitted c_P against the truth.
 
 pub mod estimate;
 pub mod layout;
+pub mod recovery;
 pub mod spectra;
 pub mod synth;
 pub mod wav;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub use estimate::{analyse_segment, BandEstimate, EstimateOptions, SegmentWavenumbers};
 pub use layout::{read_layout, Layout, SegmentLayout, Sensor};
 
+use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::units::sig;
+
+/// Columns of the written measurements (interface.md `measurements.csv`; `import` accepts no
+/// other columns).
+pub const MEASUREMENT_COLUMNS: [&str; 7] = [
+    "segment_id",
+    "frequency_hz",
+    "k_re_rad_per_m",
+    "attenuation_np_per_m",
+    "k_re_std",
+    "attenuation_std",
+    "campaign",
+];
+
+/// The one place the `wavenumbers` output file is written: one row per band. A band's notes
+/// (`reflection_suspected`, ...) go in brackets after `campaign` in the campaign cell, because
+/// interface.md's `measurements.csv` has no notes column. Text cells follow the
+/// spreadsheet-safety rule of every CSV pipewave writes (issue 17).
+pub fn write_measurements(
+    path: &Path,
+    results: &[SegmentWavenumbers],
+    campaign: &str,
+) -> Result<(), csv::Error> {
+    let mut w = spreadsheet::writer_from_path(path)?;
+    w.write_record(MEASUREMENT_COLUMNS)?;
+    for r in results {
+        for b in &r.bands {
+            w.write_record([
+                spreadsheet_safe(&r.segment_id).into_owned(),
+                format!("{:.3}", b.frequency_hz),
+                b.k_re.to_string(),
+                b.attenuation.to_string(),
+                b.k_re_std.to_string(),
+                b.attenuation_std.to_string(),
+                spreadsheet_safe(&if b.notes.is_empty() {
+                    campaign.to_string()
+                } else {
+                    format!("{campaign} ({})", b.notes.join(", "))
+                })
+                .into_owned(),
+            ])?;
+        }
+    }
+    w.flush()?;
+    Ok(())
+}
 
 /// A problem with the recordings of a field test. Every message names the file (and the layout
 /// line and column, or the segment) and says what was expected.

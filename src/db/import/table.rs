@@ -398,7 +398,9 @@ fn read_csv(
         let mut bad = false;
         for (i, raw) in rec.iter().enumerate() {
             match std::str::from_utf8(raw) {
-                Ok(s) => cells.push(s.trim().to_string()),
+                // Our own CSV output neutralises formula-like text with a `'` (issue 17):
+                // read it back as written.
+                Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
                 Err(_) => {
                     errors.push(RowError::new(
                         &file,
