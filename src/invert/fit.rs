@@ -632,16 +632,33 @@ fn uncertainty(
     let mut r0 = vec![0.0; m];
     problem.residuals_of(predicted, &mut r0);
     let mut j = vec![0.0; m * n];
-    crate::optimize::jacobian_fd(
-        problem,
-        x,
-        &r0,
-        Some(bounds),
-        FiniteDifference::Central,
-        FiniteDifference::Central.default_rel_step(),
-        &mut j,
-    )
-    .ok()?;
+    let jacobian = |p: &Problem<'_>, step: f64, j: &mut [f64]| {
+        crate::optimize::jacobian_fd(
+            p,
+            x,
+            &r0,
+            Some(bounds),
+            FiniteDifference::Central,
+            step * FiniteDifference::Central.default_rel_step(),
+            j,
+        )
+        .is_ok()
+    };
+    // Next to a root at grazing, or where the continuation passes close to another branch,
+    // the search path may fail on both sides of a step while the reference path (which
+    // accepted the optimum) still solves: fall back to it, then to coarser steps (a
+    // continuation failure can sit between x and x ± h for the default h alone, as where the
+    // root of a thin plastic pipe in stiff soil jumps between branches near the optimum).
+    if !jacobian(problem, 1.0, &mut j) {
+        let reference = problem.on_path(SolvePath::Reference);
+        let found = JACOBIAN_FALLBACK_STEPS
+            .iter()
+            .any(|&step| jacobian(&reference, step, &mut j));
+        problem.add_evaluations(reference.evaluations());
+        if !found {
+            return None;
+        }
+    }
     Some(determine(
         &problem.specs,
         bounds,
@@ -655,6 +672,12 @@ fn uncertainty(
         |p| profile_misfit(problem, bounds, p),
     ))
 }
+
+/// Finite-difference steps, as multiples of the default, tried on the reference path when the
+/// search path cannot evaluate the Jacobian at the optimum: the default, then finer (a jump
+/// of the continuation just beyond x + h on one side), then coarser (a failure band narrower
+/// than the step).
+const JACOBIAN_FALLBACK_STEPS: [f64; 5] = [1.0, 0.1, 0.01, 10.0, 100.0];
 
 /// Iterations of the profile minimisation at a point of the valley scan.
 pub const PROFILE_LM_ITERATIONS: usize = 3;

@@ -296,6 +296,10 @@ pub enum SolvePath {
     /// As `Fast`, but the ramp is also used whenever the lowest root is more than 10 % from
     /// its in-vacuo value ([`predict`]).
     Safe,
+    /// The reference path (29-point ramp, reference tolerance, restarts past grazing), on
+    /// which answers are reported; the slowest. Used where the search paths cannot solve
+    /// next to an optimum the reference path has accepted (a root at grazing).
+    Reference,
 }
 
 impl<'a> Problem<'a> {
@@ -332,6 +336,27 @@ impl<'a> Problem<'a> {
             omegas: data.measurements.iter().map(|m| m.omega).collect(),
             evaluations: Cell::new(0),
         }
+    }
+
+    /// The same problem solved on another path (evaluations counted afresh).
+    pub fn on_path(&self, path: SolvePath) -> Problem<'a> {
+        Problem {
+            data: self.data,
+            model: self.model,
+            contact_mode: self.contact_mode,
+            effects: self.effects.clone(),
+            specs: self.specs.clone(),
+            method: self.method,
+            weighting: self.weighting,
+            path,
+            omegas: self.omegas.clone(),
+            evaluations: Cell::new(0),
+        }
+    }
+
+    /// Count `n` evaluations made on this problem's behalf (by [`Problem::on_path`]'s copy).
+    pub fn add_evaluations(&self, n: usize) {
+        self.evaluations.set(self.evaluations.get() + n);
     }
 
     /// Forward-model evaluations so far.
@@ -392,6 +417,9 @@ impl<'a> Problem<'a> {
         match self.path {
             SolvePath::Fast => predict_fast(sys, &self.omegas),
             SolvePath::Safe => predict(sys, &self.omegas),
+            SolvePath::Reference => self
+                .reference_roots(sys)
+                .map(|r| r.iter().map(|x| x.k1).collect()),
         }
     }
 

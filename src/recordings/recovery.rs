@@ -22,7 +22,7 @@ use std::sync::atomic::AtomicBool;
 use super::synth::{record_network_segments, write_recordings, TruthCurve, LAYOUT_CSV};
 use super::{analyse_segment, read_layout, write_measurements, BandEstimate, EstimateOptions};
 use crate::batch::{calibrate, CalibrateOptions};
-use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource};
+use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource, SegmentRecord};
 use crate::network::recovery::{compare, RecoveryReport};
 use crate::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
 use crate::physics::Material;
@@ -198,8 +198,14 @@ pub fn run_chain(spec: &ChainSpec, dir: &Path) -> Result<ChainResult, String> {
     // writes an empty measurements.csv, replaced by the wavenumbers step's).
     let tables = NetworkTables::from_synth(&network, opts.srid);
     let inventory = NetworkTables {
-        segments: tables.segments.clone(),
-        measurements: Vec::new(),
+        segments: tables
+            .segments
+            .iter()
+            .map(|s| SegmentRecord {
+                measurements: Vec::new(),
+                ..s.clone()
+            })
+            .collect(),
         truth: Vec::new(),
     };
     inventory.write_dir(dir).map_err(|e| e.to_string())?;
