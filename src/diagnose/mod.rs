@@ -281,6 +281,9 @@ pub struct Refit {
     pub holdout_base: f64,
     /// Leave-one-frequency-out prediction χ² of the extended model.
     pub holdout_ext: f64,
+    /// The extended fit itself explains the data: its χ² has upper-tail probability at least
+    /// [`EXPLAINED_P`].
+    pub explains: bool,
     /// Accepted as the missing effect.
     pub accepted: bool,
 }
@@ -350,6 +353,23 @@ impl Diagnosis {
             .iter()
             .find(|c| c.effect == e)
             .and_then(|c| c.refit.as_ref())
+    }
+
+    /// A gross misfit that no physical effect explains: the base could not be fitted, or its
+    /// misfit is far above the noise and no refit with a physical effect leaves a χ² consistent
+    /// with it ([`Refit::explains`]). Such a segment (a wrong record, a unit or transcription
+    /// error in its data) says nothing about an effect its group shares.
+    pub fn unexplained(&self) -> bool {
+        if self.base_failed() {
+            return true;
+        }
+        self.structure.structured
+            && !self
+                .candidates
+                .iter()
+                .filter(|c| c.effect != Effect::InventoryError)
+                .filter_map(|c| c.refit.as_ref())
+                .any(|r| r.explains)
     }
 
     /// The accepted refit.
@@ -586,6 +606,7 @@ fn judge(
         d_aicc,
         holdout_base: hb,
         holdout_ext: he,
+        explains,
         accepted,
     }
 }
