@@ -312,6 +312,8 @@ pub struct Diagnosis {
     /// The best candidate inventory record, when the inventory was checked, and the segment
     /// with that record.
     pub record: Option<(inventory::RecordCandidate, SegmentData)>,
+    /// Other records the data do not reject against it ([`inventory::RecordFit::alternatives`]).
+    pub record_alternatives: Vec<inventory::RecordCandidate>,
     /// Residuals after adding it.
     pub after: Option<Residuals>,
     /// Leave-one-frequency-out prediction χ² of the base model (computed once, when needed).
@@ -469,6 +471,7 @@ pub fn prepare(
         ambiguous_with: Vec::new(),
         ambiguity: Vec::new(),
         record: None,
+        record_alternatives: Vec::new(),
         after: None,
         holdout_base: None,
     }
@@ -644,6 +647,7 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
         diag, settings, &best.data, best.fit, &effects, false, n_tests,
     );
     diag.record = Some((best.candidate, best.data));
+    diag.record_alternatives = best.alternatives;
     diag.candidates.push(Candidate {
         effect: Effect::InventoryError,
         score: f64::NAN,

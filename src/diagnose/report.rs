@@ -66,8 +66,13 @@ pub fn record_sentence(d: &Diagnosis) -> Option<String> {
     }
     let (od, wall) = super::inventory::recorded_size(&d.data);
     let mm = |v: f64| ((v * 10.0).round() / 10.0).to_string();
+    let or: String = d
+        .record_alternatives
+        .iter()
+        .map(|a| format!(" (or equally {})", a.label()))
+        .collect();
     Some(format!(
-        "measured data fit {} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
+        "measured data fit {}{or} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
         c.label(),
         d.data.material.map(|m| m.code()).unwrap_or("pipe"),
         mm(od),
