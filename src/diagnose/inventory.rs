@@ -36,7 +36,9 @@ pub const MAX_DIAMETER_INCHES: f64 = 80.0;
 pub const NEAR_DIAMETER_FACTOR: f64 = 4.0;
 /// Screening fit of every candidate: one DE run with this budget per parameter …
 pub const SCREEN_EVALUATIONS_PER_DIMENSION: usize = 60;
-/// … then the best few are refitted with the full settings.
+/// … then the best few are refitted with the full settings, and the best-screened record of
+/// every material besides (a short search can miss a plastic pipe's optimum by far, and each
+/// material is a different physical answer).
 pub const SCREEN_KEEP: usize = 3;
 
 /// How a candidate record differs from the recorded one.
@@ -274,7 +276,19 @@ pub fn fit_best_record_among(
         })
         .collect();
     screened.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-    screened.truncate(SCREEN_KEEP);
+    let mut seen = Vec::new();
+    let screened: Vec<(usize, f64)> = screened
+        .iter()
+        .enumerate()
+        .filter(|(rank, (i, _))| {
+            let first_of_material = !seen.contains(&cands[*i].material);
+            if first_of_material {
+                seen.push(cands[*i].material);
+            }
+            *rank < SCREEN_KEEP || first_of_material
+        })
+        .map(|(_, x)| *x)
+        .collect();
     let fits: Vec<RecordFit> = screened
         .par_iter()
         .filter_map(|&(i, _)| {

@@ -614,33 +614,16 @@ fn judge(
     }
 }
 
-/// Step 2c (inventory, spec §8 E8): when no physical effect was accepted, fit the candidate
-/// records; when a compliance effect (thinning, air) was, fit the neighbouring wall classes,
-/// which the data may not tell apart from it. The best record is tested like an effect, with
-/// the number of records tried in the significance level.
+/// Step 2c (inventory, spec §8 E8): fit the candidate records of a segment whose misfit needs
+/// explaining, whether or not a physical effect was accepted (a thinner wall class looks like
+/// thinning, a thicker one like a stiffer, lossier wall, another material like either). The
+/// best record is tested like an effect, with the number of records tried in the
+/// significance level.
 pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
-    let physical = diag
-        .candidates
-        .iter()
-        .filter_map(|c| c.refit.as_ref().filter(|r| r.accepted).map(|_| c.effect))
-        .collect::<Vec<_>>();
-    let only_walls = !physical.is_empty();
-    if only_walls
-        && !physical
-            .iter()
-            .any(|e| matches!(e, Effect::WallThinning | Effect::AirInWater))
-    {
-        return;
-    }
     let fs = fit_settings(settings, settings.base_effects.clone());
-    let best = if only_walls {
-        inventory::fit_best_record_among(&diag.data, &fs, settings.seed, |c| {
-            c.change == inventory::RecordChange::WallClass
-        })
-    } else {
-        inventory::fit_best_record(&diag.data, &fs, settings.seed)
+    let Some(best) = inventory::fit_best_record(&diag.data, &fs, settings.seed) else {
+        return;
     };
-    let Some(best) = best else { return };
     let effects = settings.base_effects.clone();
     let n_tests = best.tried.max(1);
     let refit = judge(
@@ -658,9 +641,10 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// Step 2d: among accepted effects keep the one that explains most (lowest χ² after). Effects
 /// within [`TIE_LR`] of it explain the data equally well: the tie is broken by [`PRIOR_ORDER`]
 /// and the others are reported as ambiguous, with the quantity both change and the measurement
-/// that would separate them. An inventory record is named over a physical effect only when it
-/// fits better by more than [`TIE_LR`] (a record is a discrete choice, an effect a continuum
-/// that can mimic it).
+/// that would separate them. A record and a physical effect are not nested (a discrete choice
+/// against a continuum that can mimic it): the data tell them apart only when their χ² differ by
+/// more than the χ²₁ quantile at level [`ALPHA`], the level at which a record is accepted. Within
+/// that window they are a tie, named by [`PRIOR_ORDER`] (the physical effect first).
 pub fn name_effect(diag: &mut Diagnosis) {
     let chi2_of = |c: &Candidate| -> Option<f64> {
         let r = c.refit.as_ref().filter(|r| r.accepted)?;
@@ -672,10 +656,23 @@ pub fn name_effect(diag: &mut Diagnosis) {
         .enumerate()
         .filter_map(|(i, c)| chi2_of(c).map(|x| (i, x)))
         .collect();
-    let top = accepted.iter().map(|a| a.1).fold(f64::INFINITY, f64::min);
+    let is_record = |i: usize| diag.candidates[i].effect == Effect::InventoryError;
+    let (top_i, top) = accepted
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((usize::MAX, f64::INFINITY));
+    let record_tie = stats::chi2_isf(ALPHA, 1.0);
     let tied: Vec<usize> = accepted
         .iter()
-        .filter(|a| a.1 <= top + TIE_LR)
+        .filter(|a| {
+            let window = if top_i != usize::MAX && is_record(a.0) != is_record(top_i) {
+                record_tie
+            } else {
+                TIE_LR
+            };
+            a.1 <= top + window
+        })
         .map(|a| a.0)
         .collect();
     let rank = |i: &usize| {
