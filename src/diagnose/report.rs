@@ -555,7 +555,7 @@ mod tests {
         };
         assert_eq!(
             residual_runs(&r),
-            "attenuation: model above by 3σ at 200 Hz; below by 9–14σ at 300–400 Hz; above by 15σ at 500 Hz"
+            "attenuation: model above by 3.0σ at 200 Hz; below by 9.0–14σ at 300–400 Hz; above by 15σ at 500 Hz"
         );
         let quiet = Residuals {
             frequency_hz: vec![100.0, 200.0],
