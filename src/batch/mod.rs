@@ -680,7 +680,12 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     let rec = &job.record;
     let outcome = catch_unwind(AssertUnwindSafe(|| {
         segment_data(rec).map(|data| {
-            let result = fit_segment(&data, settings, job.seed);
+            // inventory_error is a choice among records, not a model input (spec §8 E8).
+            let result = if settings.effects.contains(&Effect::InventoryError) {
+                crate::diagnose::inventory::fit_with_records(&data, settings, job.seed).fit
+            } else {
+                fit_segment(&data, settings, job.seed)
+            };
             let curve = curve_points(&result);
             (result, curve)
         })

@@ -109,9 +109,11 @@ pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
             Effect::AirInWater => (f.air_fraction, f.air_fraction_std) = (v, s),
             Effect::WallThinning => (f.wall_thickness_ratio, f.wall_thickness_ratio_std) = (v, s),
             Effect::PipeLoss => (f.pipe_loss_factor, f.pipe_loss_factor_std) = (v, s),
-            // No `fits` column yet for the viscoelastic exponent (diagnose puts its value in
-            // the fit's message); inventory_error has no parameter.
-            Effect::FullModel | Effect::ViscoelasticWall | Effect::InventoryError => {}
+            Effect::ViscoelasticWall => {
+                (f.viscoelastic_exponent, f.viscoelastic_exponent_std) = (v, s)
+            }
+            // inventory_error has no parameter (the record chosen is in the fit's message).
+            Effect::FullModel | Effect::InventoryError => {}
         }
     }
     if let Some(cp) = r.p_wave_speed {

@@ -41,7 +41,8 @@ pub struct CalibrateArgs {
     #[arg(long, default_value = "default", value_parser = PossibleValuesParser::new(["default", "paper"]))]
     method: String,
     /// Effects to switch on, comma-separated: soil_damping, air_in_water, wall_thinning,
-    /// pipe_loss, full_model.
+    /// pipe_loss, full_model, viscoelastic_wall, inventory_error (fits the candidate records
+    /// too and stores the one the data choose, named in the fit's message).
     #[arg(long, value_name = "NAME,...")]
     effects: Option<String>,
     /// Fit only this segment (repeat for several); still only if its fit is stale, unless

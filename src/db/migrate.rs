@@ -52,6 +52,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0006_zone_fits.sql",
         sql: include_str!("../../migrations/0006_zone_fits.sql"),
     },
+    Migration {
+        version: 7,
+        name: "0007_diagnose_viscoelastic.sql",
+        sql: include_str!("../../migrations/0007_diagnose_viscoelastic.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

@@ -145,6 +145,10 @@ pub struct FitRow {
     pub pipe_loss_factor: Option<f64>,
     /// Its one-sigma error.
     pub pipe_loss_factor_std: Option<f64>,
+    /// Exponent n of the viscoelastic wall (effect `viscoelastic_wall`, physics P70).
+    pub viscoelastic_exponent: Option<f64>,
+    /// Its one-sigma error.
+    pub viscoelastic_exponent_std: Option<f64>,
     /// The soil's compressional speed c_P, m/s (physics P63).
     pub soil_p_wave_speed_m_per_s: Option<f64>,
     /// Its one-sigma error (P65).
@@ -238,6 +242,8 @@ impl FitRow {
             wall_thickness_ratio_std: None,
             pipe_loss_factor: None,
             pipe_loss_factor_std: None,
+            viscoelastic_exponent: None,
+            viscoelastic_exponent_std: None,
             soil_p_wave_speed_m_per_s: None,
             soil_p_wave_speed_std_m_per_s: None,
             soil_s_wave_speed_m_per_s: None,
@@ -479,6 +485,11 @@ fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
         ("wall_thickness_ratio_std", real(f.wall_thickness_ratio_std)),
         ("pipe_loss_factor", real(f.pipe_loss_factor)),
         ("pipe_loss_factor_std", real(f.pipe_loss_factor_std)),
+        ("viscoelastic_exponent", real(f.viscoelastic_exponent)),
+        (
+            "viscoelastic_exponent_std",
+            real(f.viscoelastic_exponent_std),
+        ),
         (
             "soil_p_wave_speed_m_per_s",
             real(f.soil_p_wave_speed_m_per_s),
@@ -561,6 +572,8 @@ fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
     f.wall_thickness_ratio_std = r.get("wall_thickness_ratio_std")?;
     f.pipe_loss_factor = r.get("pipe_loss_factor")?;
     f.pipe_loss_factor_std = r.get("pipe_loss_factor_std")?;
+    f.viscoelastic_exponent = r.get("viscoelastic_exponent")?;
+    f.viscoelastic_exponent_std = r.get("viscoelastic_exponent_std")?;
     f.soil_p_wave_speed_m_per_s = r.get("soil_p_wave_speed_m_per_s")?;
     f.soil_p_wave_speed_std_m_per_s = r.get("soil_p_wave_speed_std_m_per_s")?;
     f.soil_s_wave_speed_m_per_s = r.get("soil_s_wave_speed_m_per_s")?;

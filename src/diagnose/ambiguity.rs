@@ -53,6 +53,13 @@ pub fn shared_quantity(a: Effect, b: Effect) -> &'static str {
             "compliance: a softer pipe record and air both slow the wave"
         }
         (SoilDamping, ViscoelasticWall) => "loss rising with frequency",
+        (PipeLoss, InventoryError) => {
+            "wall loss: another wall class or material has another stiffness and loss factor"
+        }
+        (ViscoelasticWall, InventoryError) => {
+            "wall stiffness and loss: a thicker wall class or a stiffer material and a modulus \
+             rising with frequency both speed the wave up"
+        }
         _ => GENERIC_QUANTITY,
     }
 }

@@ -6,8 +6,12 @@
 //! candidate effect of a group at level [`GROUP_ALPHA`] with a Bonferroni correction over the
 //! effects keeps the group's false-alarm rate at or below [`GROUP_ALPHA`].
 //!
-//! Members whose base could not be fitted, or whose own diagnosis found a wrong inventory record,
-//! do not contribute ([`member_scores`]): a record error is not physics shared by the group.
+//! Members whose base could not be fitted, whose own diagnosis found a wrong inventory record, or
+//! whose misfit is far above the noise with no physical effect explaining it
+//! ([`super::Diagnosis::unexplained`]: a wrong record, a unit or transcription error in the data)
+//! do not contribute ([`member_scores`]). One such member has score statistics in the hundreds
+//! for every compliance or loss effect and would alone make the group "detected": the pooled
+//! test is for an effect the members share, not for one broken member.
 //!
 //! Measured calibration (tests/diagnose_groups.rs, `examples/diagnose_acceptance.rs groups`):
 //! on cast-iron groups without an effect the members' scores are somewhat over-dispersed
@@ -137,9 +141,10 @@ impl GroupTest {
 }
 
 /// A member's contribution to the pooled test: its score statistics per effect, or nothing when
-/// its base could not be fitted or its own diagnosis named a wrong inventory record.
+/// its own diagnosis named a wrong inventory record or left a gross misfit unexplained
+/// ([`super::Diagnosis::unexplained`], which includes a base that could not be fitted).
 pub fn member_scores(d: &super::Diagnosis) -> Vec<(Effect, f64)> {
-    if d.base_failed() || d.named == Some(Effect::InventoryError) {
+    if d.unexplained() || d.named == Some(Effect::InventoryError) {
         return Vec::new();
     }
     d.candidates

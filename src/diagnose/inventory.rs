@@ -5,8 +5,10 @@
 //! size DN recorded in place of the outside diameter. Each candidate is fitted with the same
 //! settings as the base; the answer names the record to check.
 //!
-//! [`fit_best_record`] is the `calibrate --effects inventory_error` entry point: it fits every
-//! candidate record and keeps the best.
+//! [`fit_with_records`] is the `calibrate --effects inventory_error` entry point: it fits the
+//! recorded pipe, tests every candidate record as `diagnose` does ([`fit_best_record`] and the
+//! diagnosis's likelihood-ratio, AICc and held-out tests), and keeps the record the data
+//! choose, saying which in the fit's message.
 
 use rayon::prelude::*;
 
@@ -34,7 +36,9 @@ pub const MAX_DIAMETER_INCHES: f64 = 80.0;
 pub const NEAR_DIAMETER_FACTOR: f64 = 4.0;
 /// Screening fit of every candidate: one DE run with this budget per parameter …
 pub const SCREEN_EVALUATIONS_PER_DIMENSION: usize = 60;
-/// … then the best few are refitted with the full settings.
+/// … then the best few are refitted with the full settings, and the best-screened record of
+/// every material besides (a short search can miss a plastic pipe's optimum by far, and each
+/// material is a different physical answer).
 pub const SCREEN_KEEP: usize = 3;
 
 /// How a candidate record differs from the recorded one.
@@ -233,6 +237,11 @@ pub struct RecordFit {
     pub fit: FitResult,
     /// How many candidate records were tried (for the significance level).
     pub tried: usize,
+    /// The other records fitted in full that the data do not reject against this one: their χ²
+    /// exceeds its χ² by less than the χ²₁ quantile at level [`super::ALPHA`] (the level at
+    /// which a record is rejected against the recorded one). Grey and ductile iron of about the
+    /// same stiffness per length, E_p·h, are one example.
+    pub alternatives: Vec<RecordCandidate>,
 }
 
 /// Fit every candidate record of `data` with `settings` (screened by a short fit, the best
@@ -267,7 +276,19 @@ pub fn fit_best_record_among(
         })
         .collect();
     screened.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-    screened.truncate(SCREEN_KEEP);
+    let mut seen = Vec::new();
+    let screened: Vec<(usize, f64)> = screened
+        .iter()
+        .enumerate()
+        .filter(|(rank, (i, _))| {
+            let first_of_material = !seen.contains(&cands[*i].material);
+            if first_of_material {
+                seen.push(cands[*i].material);
+            }
+            *rank < SCREEN_KEEP || first_of_material
+        })
+        .map(|(_, x)| *x)
+        .collect();
     let fits: Vec<RecordFit> = screened
         .par_iter()
         .filter_map(|&(i, _)| {
@@ -279,11 +300,114 @@ pub fn fit_best_record_among(
                 data: d,
                 fit,
                 tried,
+                alternatives: Vec::new(),
             })
         })
         .collect();
-    fits.into_iter()
-        .min_by(|a, b| a.fit.misfit.total_cmp(&b.fit.misfit))
+    let best = fits
+        .iter()
+        .min_by(|a, b| a.fit.misfit.total_cmp(&b.fit.misfit))?;
+    let tie = super::stats::chi2_isf(super::ALPHA, 1.0);
+    let alternatives = fits
+        .iter()
+        .filter(|f| f.candidate != best.candidate && f.fit.misfit < best.fit.misfit + tie)
+        .map(|f| f.candidate)
+        .collect();
+    Some(RecordFit {
+        alternatives,
+        ..best.clone()
+    })
+}
+
+/// The fit `calibrate --effects inventory_error` stores, and the record it was made with.
+#[derive(Debug, Clone)]
+pub struct RecordChoice {
+    /// The fit: of the chosen candidate record, or of the recorded pipe. Its `effects` include
+    /// `inventory_error`; its message says which record was fitted and why.
+    pub fit: FitResult,
+    /// The candidate record chosen over the recorded one (None: the recorded pipe was kept).
+    pub record: Option<RecordCandidate>,
+}
+
+/// `calibrate --effects inventory_error` (spec §8 E8): fit the segment as recorded with the
+/// other effects of `settings`, and test the candidate records exactly as `diagnose` does (only
+/// when the recorded pipe leaves a misfit far above the noise; the best record must pass the
+/// likelihood-ratio test with the number of records tried in its level, lower the AICc, predict
+/// held-out frequencies better and itself fit within the noise). When a record passes, the
+/// stored fit is that record's, made with `settings`; otherwise the recorded pipe's. The
+/// message names the record fitted, with χ²/dof of both.
+pub fn fit_with_records(data: &SegmentData, settings: &FitSettings, seed: u64) -> RecordChoice {
+    use super::report::{evidence, record_sentence};
+    use crate::physics::effects::Effect;
+    use crate::units::sig;
+
+    let others: Vec<Effect> = settings
+        .effects
+        .iter()
+        .copied()
+        .filter(|e| *e != Effect::InventoryError)
+        .collect();
+    let plain = FitSettings {
+        effects: others.clone(),
+        ..settings.clone()
+    };
+    let recorded = fit_segment(data, &plain, seed);
+    let ds = super::DiagnoseSettings {
+        model: settings.model,
+        contact_mode: settings.contact_mode,
+        base_effects: others,
+        candidates: vec![Effect::InventoryError],
+        seed,
+    };
+    let base = (settings.method == crate::invert::Method::Default).then(|| recorded.clone());
+    let diag = super::diagnose_segment(data, base, &ds);
+    let chi2 = |f: &FitResult| sig(f.chi2_per_dof.unwrap_or(f64::NAN), 3);
+    let (mut fit, record, message) = match (&diag.record, diag.named) {
+        (Some((c, d)), Some(Effect::InventoryError)) => {
+            let fit = fit_segment(d, &plain, seed);
+            let message = format!(
+                "inventory_error: {}; this fit is made with the record {} (chi2/dof {} -> {}; {})",
+                record_sentence(&diag).unwrap_or_default(),
+                c.label(),
+                sig(diag.chi2_per_dof_before(), 3),
+                sig(diag.chi2_per_dof_after(), 3),
+                evidence(&diag)
+            );
+            (fit, Some(*c), message)
+        }
+        (Some((c, _)), _) => {
+            let message = format!(
+                "inventory_error: recorded pipe kept (chi2/dof {}); the best other record, {}, \
+                 does not fit significantly better ({})",
+                chi2(&recorded),
+                c.label(),
+                evidence(&diag)
+            );
+            (recorded, None, message)
+        }
+        (None, _) => {
+            let message = format!(
+                "inventory_error: recorded pipe kept (chi2/dof {}): {}",
+                chi2(&recorded),
+                if super::needs_explanation(&diag) {
+                    "no candidate record could be fitted".to_string()
+                } else {
+                    evidence(&diag)
+                }
+            );
+            (recorded, None, message)
+        }
+    };
+    if fit.status != FitStatus::Failed {
+        fit.effects.push(Effect::InventoryError);
+        fit.effects.sort();
+        fit.effects.dedup();
+        fit.message = Some(match fit.message.take() {
+            Some(m) => format!("{message}; {m}"),
+            None => message,
+        });
+    }
+    RecordChoice { fit, record }
 }
 
 #[cfg(test)]

@@ -281,6 +281,9 @@ pub struct Refit {
     pub holdout_base: f64,
     /// Leave-one-frequency-out prediction χ² of the extended model.
     pub holdout_ext: f64,
+    /// The extended fit itself explains the data: its χ² has upper-tail probability at least
+    /// [`EXPLAINED_P`].
+    pub explains: bool,
     /// Accepted as the missing effect.
     pub accepted: bool,
 }
@@ -309,6 +312,8 @@ pub struct Diagnosis {
     /// The best candidate inventory record, when the inventory was checked, and the segment
     /// with that record.
     pub record: Option<(inventory::RecordCandidate, SegmentData)>,
+    /// Other records the data do not reject against it ([`inventory::RecordFit::alternatives`]).
+    pub record_alternatives: Vec<inventory::RecordCandidate>,
     /// Residuals after adding it.
     pub after: Option<Residuals>,
     /// Leave-one-frequency-out prediction χ² of the base model (computed once, when needed).
@@ -350,6 +355,23 @@ impl Diagnosis {
             .iter()
             .find(|c| c.effect == e)
             .and_then(|c| c.refit.as_ref())
+    }
+
+    /// A gross misfit that no physical effect explains: the base could not be fitted, or its
+    /// misfit is far above the noise and no refit with a physical effect leaves a χ² consistent
+    /// with it ([`Refit::explains`]). Such a segment (a wrong record, a unit or transcription
+    /// error in its data) says nothing about an effect its group shares.
+    pub fn unexplained(&self) -> bool {
+        if self.base_failed() {
+            return true;
+        }
+        self.structure.structured
+            && !self
+                .candidates
+                .iter()
+                .filter(|c| c.effect != Effect::InventoryError)
+                .filter_map(|c| c.refit.as_ref())
+                .any(|r| r.explains)
     }
 
     /// The accepted refit.
@@ -449,6 +471,7 @@ pub fn prepare(
         ambiguous_with: Vec::new(),
         ambiguity: Vec::new(),
         record: None,
+        record_alternatives: Vec::new(),
         after: None,
         holdout_base: None,
     }
@@ -586,43 +609,28 @@ fn judge(
         d_aicc,
         holdout_base: hb,
         holdout_ext: he,
+        explains,
         accepted,
     }
 }
 
-/// Step 2c (inventory, spec §8 E8): when no physical effect was accepted, fit the candidate
-/// records; when a compliance effect (thinning, air) was, fit the neighbouring wall classes,
-/// which the data may not tell apart from it. The best record is tested like an effect, with
-/// the number of records tried in the significance level.
+/// Step 2c (inventory, spec §8 E8): fit the candidate records of a segment whose misfit needs
+/// explaining, whether or not a physical effect was accepted (a thinner wall class looks like
+/// thinning, a thicker one like a stiffer, lossier wall, another material like either). The
+/// best record is tested like an effect, with the number of records tried in the
+/// significance level.
 pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
-    let physical = diag
-        .candidates
-        .iter()
-        .filter_map(|c| c.refit.as_ref().filter(|r| r.accepted).map(|_| c.effect))
-        .collect::<Vec<_>>();
-    let only_walls = !physical.is_empty();
-    if only_walls
-        && !physical
-            .iter()
-            .any(|e| matches!(e, Effect::WallThinning | Effect::AirInWater))
-    {
-        return;
-    }
     let fs = fit_settings(settings, settings.base_effects.clone());
-    let best = if only_walls {
-        inventory::fit_best_record_among(&diag.data, &fs, settings.seed, |c| {
-            c.change == inventory::RecordChange::WallClass
-        })
-    } else {
-        inventory::fit_best_record(&diag.data, &fs, settings.seed)
+    let Some(best) = inventory::fit_best_record(&diag.data, &fs, settings.seed) else {
+        return;
     };
-    let Some(best) = best else { return };
     let effects = settings.base_effects.clone();
     let n_tests = best.tried.max(1);
     let refit = judge(
         diag, settings, &best.data, best.fit, &effects, false, n_tests,
     );
     diag.record = Some((best.candidate, best.data));
+    diag.record_alternatives = best.alternatives;
     diag.candidates.push(Candidate {
         effect: Effect::InventoryError,
         score: f64::NAN,
@@ -633,9 +641,10 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// Step 2d: among accepted effects keep the one that explains most (lowest χ² after). Effects
 /// within [`TIE_LR`] of it explain the data equally well: the tie is broken by [`PRIOR_ORDER`]
 /// and the others are reported as ambiguous, with the quantity both change and the measurement
-/// that would separate them. An inventory record is named over a physical effect only when it
-/// fits better by more than [`TIE_LR`] (a record is a discrete choice, an effect a continuum
-/// that can mimic it).
+/// that would separate them. A record and a physical effect are not nested (a discrete choice
+/// against a continuum that can mimic it): the data tell them apart only when their χ² differ by
+/// more than the χ²₁ quantile at level [`ALPHA`], the level at which a record is accepted. Within
+/// that window they are a tie, named by [`PRIOR_ORDER`] (the physical effect first).
 pub fn name_effect(diag: &mut Diagnosis) {
     let chi2_of = |c: &Candidate| -> Option<f64> {
         let r = c.refit.as_ref().filter(|r| r.accepted)?;
@@ -647,10 +656,23 @@ pub fn name_effect(diag: &mut Diagnosis) {
         .enumerate()
         .filter_map(|(i, c)| chi2_of(c).map(|x| (i, x)))
         .collect();
-    let top = accepted.iter().map(|a| a.1).fold(f64::INFINITY, f64::min);
+    let is_record = |i: usize| diag.candidates[i].effect == Effect::InventoryError;
+    let (top_i, top) = accepted
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((usize::MAX, f64::INFINITY));
+    let record_tie = stats::chi2_isf(ALPHA, 1.0);
     let tied: Vec<usize> = accepted
         .iter()
-        .filter(|a| a.1 <= top + TIE_LR)
+        .filter(|a| {
+            let window = if top_i != usize::MAX && is_record(a.0) != is_record(top_i) {
+                record_tie
+            } else {
+                TIE_LR
+            };
+            a.1 <= top + window
+        })
         .map(|a| a.0)
         .collect();
     let rank = |i: &usize| {

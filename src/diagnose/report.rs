@@ -66,14 +66,74 @@ pub fn record_sentence(d: &Diagnosis) -> Option<String> {
     }
     let (od, wall) = super::inventory::recorded_size(&d.data);
     let mm = |v: f64| ((v * 10.0).round() / 10.0).to_string();
+    let or: String = d
+        .record_alternatives
+        .iter()
+        .map(|a| format!(" (or equally {})", a.label()))
+        .collect();
     Some(format!(
-        "measured data fit {} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
+        "measured data fit {}{or} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
         c.label(),
         d.data.material.map(|m| m.code()).unwrap_or("pipe"),
         mm(od),
         mm(wall),
         c.change.describe()
     ))
+}
+
+/// A residual counts as off when it is beyond this many standard deviations.
+pub const OFF_SIGMAS: f64 = 2.0;
+
+/// Where the residuals are off, in words: runs of neighbouring frequencies at which the model is
+/// above (or below) the data by more than [`OFF_SIGMAS`], for Re k and the attenuation, e.g.
+/// `attenuation: model below the data by 9.1–14σ at 425–525 Hz; above by 5.2–15σ at 575–725 Hz`.
+pub fn residual_runs(r: &Residuals) -> String {
+    let part = |v: &[f64], name: &str| -> Option<String> {
+        let mut order: Vec<usize> = (0..v.len()).collect();
+        order.sort_by(|&a, &b| r.frequency_hz[a].total_cmp(&r.frequency_hz[b]));
+        let mut runs: Vec<(f64, Vec<usize>)> = Vec::new();
+        for i in order {
+            let x = v[i];
+            let sign = if x > OFF_SIGMAS {
+                1.0
+            } else if x < -OFF_SIGMAS {
+                -1.0
+            } else {
+                0.0
+            };
+            match runs.last_mut() {
+                Some((s, members)) if *s == sign => members.push(i),
+                _ => runs.push((sign, vec![i])),
+            }
+        }
+        let words: Vec<String> = runs
+            .iter()
+            .filter(|(s, _)| *s != 0.0)
+            .map(|(s, members)| {
+                let mags: Vec<f64> = members.iter().map(|&i| v[i].abs()).collect();
+                let lo = mags.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = mags.iter().copied().fold(0.0, f64::max);
+                let f0 = r.frequency_hz[members[0]];
+                let f1 = r.frequency_hz[*members.last().unwrap_or(&members[0])];
+                let by = if members.len() == 1 {
+                    format!("{}σ at {f0:.0} Hz", sig(hi, 2))
+                } else {
+                    format!("{}–{}σ at {f0:.0}–{f1:.0} Hz", sig(lo, 2), sig(hi, 2))
+                };
+                format!("{} by {by}", if *s > 0.0 { "above" } else { "below" })
+            })
+            .collect();
+        (!words.is_empty()).then(|| format!("{name}: model {}", words.join("; ")))
+    };
+    let parts: Vec<String> = [part(&r.re, "Re k"), part(&r.att, "attenuation")]
+        .into_iter()
+        .flatten()
+        .collect();
+    if parts.is_empty() {
+        format!("no residual beyond {OFF_SIGMAS}σ")
+    } else {
+        parts.join("; ")
+    }
 }
 
 /// χ²/dof before and after each refitted candidate: `base 38.4; pipe_loss 38.1; …`.
@@ -375,7 +435,11 @@ pub fn write_html(
     }
     h.push_str("</table>");
     if !groups.is_empty() {
-        h.push_str("<h2>Pooled over groups</h2><p>The pooled score test adds the members' one-sided score statistics for each candidate effect; under \"no effect\" the sum of n members follows the mixture Σ C(n,k)2<sup>−n</sup>χ²<sub>k</sub>. A group detects an effect when its p-value is below 0.01 divided by the number of effects tested; its members are then refitted with the effect.</p><table><tr><th>group</th><th>segments</th><th>detected effect</th><th>ambiguous with</th><th>statistic</th><th>p</th><th>refitted</th><th>all effects</th></tr>");
+        let _ = write!(
+            h,
+            "<h2>Pooled over groups</h2><p>The pooled score test adds the members' one-sided score statistics for each candidate effect; under \"no effect\" the sum of n members follows the mixture Σ C(n,k)2<sup>−n</sup>χ²<sub>k</sub>. A group detects an effect when its p-value is below {} divided by the number of effects tested; its members are then refitted with the effect. Members with a misfit far above the noise that no physical effect explains (a wrong record, a unit or transcription error) are left out of the sum.</p><table><tr><th>group</th><th>segments</th><th>detected effect</th><th>ambiguous with</th><th>statistic</th><th>p</th><th>refitted</th><th>all effects</th></tr>",
+            sig(super::group::GROUP_ALPHA, 2)
+        );
         for g in groups {
             let _ = write!(
                 h,
@@ -422,8 +486,9 @@ pub fn write_html(
         }
         let _ = write!(
             h,
-            "<p>Residual pattern: {}. χ²/dof before and after each candidate: {}.</p>",
+            "<p>Residual pattern: {}. Where: {}. χ²/dof before and after each candidate: {}.</p>",
             esc(&d.structure.pattern),
+            esc(&residual_runs(&d.before)),
             esc(&candidates_chi2(d))
         );
         if let Some(t) = record_sentence(d) {
@@ -475,4 +540,28 @@ pub fn write_html(
     }
     h.push_str("</body></html>\n");
     std::fs::write(path, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn residual_runs_name_where_and_by_how_much() {
+        let r = Residuals {
+            frequency_hz: vec![400.0, 100.0, 200.0, 300.0, 500.0],
+            re: vec![0.5, -0.3, 1.0, 0.2, -1.9],
+            att: vec![-14.0, 0.1, 3.0, -9.0, 15.0],
+        };
+        assert_eq!(
+            residual_runs(&r),
+            "attenuation: model above by 3.0σ at 200 Hz; below by 9.0–14σ at 300–400 Hz; above by 15σ at 500 Hz"
+        );
+        let quiet = Residuals {
+            frequency_hz: vec![100.0, 200.0],
+            re: vec![0.5, -1.0],
+            att: vec![1.5, -2.0],
+        };
+        assert_eq!(residual_runs(&quiet), "no residual beyond 2σ");
+    }
 }
