@@ -60,3 +60,35 @@ fn no_segment_of_a_stress_network_is_left_without_a_fit() {
     // pass without exercising it.
     assert!(grazing >= 1, "no fit reached a soil wave speed");
 }
+
+/// The one failure of the 10,000-segment stress run before the `unstable_root` flag: a thick
+/// HDPE pipe (OD 250 mm) with its wall thinned to 0.69 of nominal, whose optimum lies where
+/// the model's root jumps between branches (near 488 Hz) for the slightest change of E_m or ξ,
+/// so no finite-difference Jacobian exists on any solve path or step. It gets a fit, flagged
+/// `unstable_root`, with intervals spanning the search range instead of none.
+#[test]
+fn an_optimum_without_a_jacobian_is_flagged_not_dropped() {
+    let (lo, hi) = default_hidden_range(Effect::WallThinning).expect("a default range");
+    let net = generate(&SynthOptions {
+        segments: 2500,
+        seed: 13,
+        defect_fraction: 0.0,
+        hidden_effect: Some((Effect::WallThinning, lo, hi)),
+        ..SynthOptions::default()
+    });
+    let s = net.iter().find(|s| s.id == "WM10951").expect("the segment");
+    let r = fit_segment(
+        &s.segment_data(),
+        &FitSettings::default(),
+        pipewave::batch::segment_seed(11, &s.id),
+    );
+    assert_eq!(r.status, FitStatus::Flagged, "{:?}", r.message);
+    assert!(
+        r.flags.iter().any(|f| f.code.as_str() == "unstable_root"),
+        "{:?}",
+        r.flags
+    );
+    for e in &r.estimates {
+        assert!(e.interval.hi > e.interval.lo, "{e:?}");
+    }
+}

@@ -100,8 +100,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 
 /// Version of the fitting algorithm. A fit made by another version is stale: `calibrate`
 /// refits it on its own (issue 9). Version 1: pipewave 0.1.0. Version 2: what the data
-/// determine (soil speeds, intervals, curve errors), flags and notes re-derived.
-pub const FIT_ALGORITHM_VERSION: i64 = 2;
+/// determine (soil speeds, intervals, curve errors), flags and notes re-derived. Version 3:
+/// no fit fails at grazing or for want of a Jacobian (issue 11; fits that failed under
+/// version 2 get an answer, the others are unchanged).
+pub const FIT_ALGORITHM_VERSION: i64 = 3;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -544,8 +546,7 @@ fn assemble(
         Weighting::Relative if dof > 0 => ss / dof as f64,
         Weighting::Relative => 1.0,
     };
-    let determined = uncertainty(problem, bounds, x, &predicted, ss, scale)
-        .ok_or_else(|| "the Jacobian could not be evaluated at the optimum".to_string())?;
+    let determined = uncertainty(problem, bounds, x, &predicted, ss, scale);
     let estimates: Vec<Estimate> = problem
         .specs
         .iter()
@@ -626,7 +627,7 @@ fn uncertainty(
     predicted: &[Complex64],
     ss: f64,
     scale: f64,
-) -> Option<Determined> {
+) -> Determined {
     let m = problem.n_residuals();
     let n = problem.specs.len();
     let mut r0 = vec![0.0; m];
@@ -649,6 +650,10 @@ fn uncertainty(
     // accepted the optimum) still solves: fall back to it, then to coarser steps (a
     // continuation failure can sit between x and x ± h for the default h alone, as where the
     // root of a thin plastic pipe in stiff soil jumps between branches near the optimum).
+    // When nothing works the Jacobian is left zero: the quadratic model then holds only the
+    // weak prior, the intervals span the search range, and the fit is flagged, rather than the
+    // segment left without an answer.
+    let mut curvature_unknown = false;
     if !jacobian(problem, 1.0, &mut j) {
         let reference = problem.on_path(SolvePath::Reference);
         let found = JACOBIAN_FALLBACK_STEPS
@@ -656,10 +661,11 @@ fn uncertainty(
             .any(|&step| jacobian(&reference, step, &mut j));
         problem.add_evaluations(reference.evaluations());
         if !found {
-            return None;
+            j.fill(0.0);
+            curvature_unknown = true;
         }
     }
-    Some(determine(
+    let mut determined = determine(
         &problem.specs,
         bounds,
         x,
@@ -670,7 +676,9 @@ fn uncertainty(
         ss,
         |p| problem.predict(p).map(|k| problem.sum_of_squares(&k)),
         |p| profile_misfit(problem, bounds, p),
-    ))
+    );
+    determined.curvature_unknown = curvature_unknown;
+    determined
 }
 
 /// Finite-difference steps, as multiples of the default, tried on the reference path when the

@@ -71,6 +71,9 @@ pub enum FlagCode {
     MultipleMinima,
     /// The leak-band speed is uncertain by more than [`SPEED_RSTD_MAX`] (flag).
     SpeedUncertain,
+    /// The model's root cannot be followed next to the optimum, so the misfit's curvature is
+    /// unknown and the intervals are the search range (flag).
+    UnstableRoot,
     /// E_m and ν_m known only through c_P (note).
     SoilViaCp,
     /// E_m and ν_m known only through c_S (note).
@@ -110,6 +113,7 @@ impl FlagCode {
             FlagCode::AtBound => "at_bound",
             FlagCode::NearGrazing => "near_grazing",
             FlagCode::EquivalentMinima => "equivalent_minima",
+            FlagCode::UnstableRoot => "unstable_root",
         }
     }
 
@@ -121,7 +125,8 @@ impl FlagCode {
             | FlagCode::InconsistentMeasurements
             | FlagCode::OutOfValidity
             | FlagCode::MultipleMinima
-            | FlagCode::SpeedUncertain => Severity::Flag,
+            | FlagCode::SpeedUncertain
+            | FlagCode::UnstableRoot => Severity::Flag,
             _ => Severity::Note,
         }
     }
@@ -144,17 +149,19 @@ impl FlagCode {
             FlagCode::AtBound => "a parameter's interval reaches its search bound: the data bound it on one side only",
             FlagCode::NearGrazing => "the predicted wave is within 2 % of a soil wave speed: the model is near a singular point there",
             FlagCode::EquivalentMinima => "separated optima fit equally well but predict the same speed; nothing to do",
+            FlagCode::UnstableRoot => "the model's wave jumps between branches next to the fitted soil, so no uncertainty can be computed: do not use the values; check the inventory record and run `diagnose`",
         }
     }
 
     /// Every code.
-    pub const ALL: [FlagCode; 15] = [
+    pub const ALL: [FlagCode; 16] = [
         FlagCode::HighMisfit,
         FlagCode::TooFewMeasurements,
         FlagCode::InconsistentMeasurements,
         FlagCode::OutOfValidity,
         FlagCode::MultipleMinima,
         FlagCode::SpeedUncertain,
+        FlagCode::UnstableRoot,
         FlagCode::SoilViaCp,
         FlagCode::SoilViaCs,
         FlagCode::SoilViaSpeeds,
@@ -240,6 +247,14 @@ pub fn assess(ev: &Evidence<'_>) -> Vec<Flag> {
     }
     if let Some(reason) = misfit_too_high(problem, ev) {
         push(FlagCode::HighMisfit, reason);
+    }
+    if ev.determined.curvature_unknown {
+        push(
+            FlagCode::UnstableRoot,
+            "the finite-difference Jacobian could not be evaluated at the optimum on any \
+             solve path or step: the intervals are the search range"
+                .to_string(),
+        );
     }
     let hz = |r: &Root| format!("{:.0} Hz", r.omega / std::f64::consts::TAU);
     let out_hz: Vec<String> = ev

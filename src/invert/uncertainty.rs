@@ -116,6 +116,9 @@ pub struct Determined {
     pub correlation: Vec<f64>,
     /// Condition number of the column-scaled Jacobian (unit-free).
     pub condition_number: f64,
+    /// The Jacobian could not be evaluated at the optimum: the quadratic model holds only the
+    /// weak prior, so the intervals span the search range (the `unstable_root` flag).
+    pub curvature_unknown: bool,
 }
 
 /// The linear map T = ∂u/∂x from the search coordinates x to u = (ln c_P, ln c_S, rest) at x,
@@ -350,6 +353,7 @@ pub fn determine(
         cov: cov_x,
         correlation,
         condition_number,
+        curvature_unknown: false,
     }
 }
 
