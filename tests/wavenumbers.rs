@@ -300,9 +300,9 @@ fn acceptance_on_fresh_synthetic_recordings_and_the_fit() {
     }
 }
 
-/// A small recording for the field-mistake tests: a ductile-iron pipe, sensors at 0, −25, +40 m.
-fn small_recording() -> (HydrantRecording, Vec<f64>) {
-    let sys = System::new(
+/// The ductile-iron pipe (second size) in a loam of the recording tests.
+fn ductile_iron_in_loam() -> System {
+    System::new(
         Fluid::water(),
         pipewave::synth::pipe_of(
             Material::DuctileIron,
@@ -313,7 +313,12 @@ fn small_recording() -> (HydrantRecording, Vec<f64>) {
         Model::Full,
         ContactMode::Reciprocal,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// A small recording for the field-mistake tests: a ductile-iron pipe, sensors at 0, −25, +40 m.
+fn small_recording() -> (HydrantRecording, Vec<f64>) {
+    let sys = ductile_iron_in_loam();
     let positions = vec![0.0, -25.0, 40.0];
     let spec = RecordingSpec {
         sample_rate: 8000,
@@ -802,18 +807,7 @@ fn attenuation_is_not_biased_low_where_the_coherence_falls() {
     use pipewave::recordings::estimate::analyse_audio;
     use pipewave::recordings::wav::SegmentAudio;
     use pipewave::recordings::{EstimateOptions, SegmentLayout, Sensor};
-    let sys = System::new(
-        Fluid::water(),
-        pipewave::synth::pipe_of(
-            Material::DuctileIron,
-            &pipewave::synth::sizes(Material::DuctileIron)[1],
-        ),
-        Soil::new(5e7, 0.3, 1900.0, 0.0).unwrap(),
-        0.5,
-        Model::Full,
-        ContactMode::Reciprocal,
-    )
-    .unwrap();
+    let sys = ductile_iron_in_loam();
     let positions = vec![0.0, -45.0, 70.0];
     let seg = SegmentLayout {
         segment_id: "B".into(),

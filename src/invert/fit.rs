@@ -471,9 +471,7 @@ fn run(
     let optima = search(problem, settings, seed, &bounds, start)?;
     let best_i = (0..optima.len())
         .min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost))
-        .ok_or_else(|| {
-            "the forward model could not be solved anywhere in the search space".to_string()
-        })?;
+        .ok_or_else(|| no_root_anywhere(problem, &bounds))?;
     let x = optima[best_i].x.clone();
     let sys = problem
         .system_at(&x)
@@ -516,6 +514,32 @@ fn run(
     }
     assemble(
         problem, settings, &bounds, &optima, best_i, sys, predicted, &roots,
+    )
+}
+
+/// Why no soil in the search range gives an s = 1 root: the reference solver's reason (e.g.
+/// grazing at a soil wave speed, no convergence) at the centre of the search box, a typical
+/// soil, so the user learns the physical cause rather than only that the search failed.
+fn no_root_anywhere(problem: &Problem<'_>, bounds: &crate::optimize::Bounds) -> String {
+    let centre: Vec<f64> = bounds
+        .lower()
+        .iter()
+        .zip(bounds.upper())
+        .map(|(lo, hi)| 0.5 * (lo + hi))
+        .collect();
+    let reason = problem
+        .system_at(&centre)
+        .and_then(|sys| problem.reference_failure(&sys))
+        .unwrap_or_else(|| "the inputs give no physical system".to_string());
+    let soil: Vec<String> = problem
+        .specs
+        .iter()
+        .zip(problem.values(&centre))
+        .map(|(s, v)| format!("{} = {}", s.param.name(), crate::units::short(v)))
+        .collect();
+    format!(
+        "no s = 1 root for any soil in the search range; for a typical soil ({}): {reason}",
+        soil.join(", ")
     )
 }
 

@@ -541,6 +541,6 @@ mod tests {
             .iter()
             .filter(|c| c.severity() == Severity::Flag)
             .count();
-        assert_eq!(flags, 6);
+        assert_eq!(flags, 7);
     }
 }
