@@ -14,7 +14,7 @@ use pipewave::physics::{ContactMode, Fluid, Material, Model, Soil, System};
 use pipewave::recordings::estimate::analyse_audio;
 use pipewave::recordings::synth::{hydrant_test, seed_layout, sensor_range_m, RecordingSpec};
 use pipewave::recordings::wav::SegmentAudio;
-use pipewave::recordings::{EstimateOptions, SegmentLayout, Sensor};
+use pipewave::recordings::{EstimateOptions, SegmentLayout};
 use rand::{Rng, SeedableRng};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -60,20 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 seed: rng.gen(),
             };
             let rec = hydrant_test(&sys, &spec)?;
-            let seg = SegmentLayout {
-                segment_id: "X".into(),
-                sensors: positions
-                    .iter()
-                    .enumerate()
-                    .map(|(c, &x)| Sensor {
-                        line: c as u64 + 2,
-                        file: "x.wav".into(),
-                        path: "x.wav".into(),
-                        channel: c as u16,
-                        position_m: x,
-                    })
-                    .collect(),
-            };
+            let seg = SegmentLayout::one_file("X", "x.wav", &positions);
             let audio = SegmentAudio {
                 sample_rate: 8000,
                 channels: rec.channels.clone(),

@@ -806,23 +806,10 @@ fn measurements_of_a_formula_like_id_import_as_that_id() {
 fn attenuation_is_not_biased_low_where_the_coherence_falls() {
     use pipewave::recordings::estimate::analyse_audio;
     use pipewave::recordings::wav::SegmentAudio;
-    use pipewave::recordings::{EstimateOptions, SegmentLayout, Sensor};
+    use pipewave::recordings::{EstimateOptions, SegmentLayout};
     let sys = ductile_iron_in_loam();
     let positions = vec![0.0, -45.0, 70.0];
-    let seg = SegmentLayout {
-        segment_id: "B".into(),
-        sensors: positions
-            .iter()
-            .enumerate()
-            .map(|(c, &x)| Sensor {
-                line: c as u64 + 2,
-                file: "b.wav".into(),
-                path: "b.wav".into(),
-                channel: c as u16,
-                position_m: x,
-            })
-            .collect(),
-    };
+    let seg = SegmentLayout::one_file("B", "b.wav", &positions);
     let (mut z, mut n) = (0.0, 0usize);
     for seed in 0..20u64 {
         let spec = RecordingSpec {

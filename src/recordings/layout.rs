@@ -41,6 +41,27 @@ pub struct SegmentLayout {
     pub sensors: Vec<Sensor>,
 }
 
+impl SegmentLayout {
+    /// The layout of one multichannel file `file` whose channel c sits at `positions_m[c]`,
+    /// as a layout file of one row per channel would give it (lines from 2).
+    pub fn one_file(segment_id: &str, file: &str, positions_m: &[f64]) -> SegmentLayout {
+        SegmentLayout {
+            segment_id: segment_id.to_string(),
+            sensors: positions_m
+                .iter()
+                .enumerate()
+                .map(|(c, &x)| Sensor {
+                    line: c as u64 + 2,
+                    file: file.to_string(),
+                    path: PathBuf::from(file),
+                    channel: c as u16,
+                    position_m: x,
+                })
+                .collect(),
+        }
+    }
+}
+
 /// A checked layout file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Layout {
