@@ -244,9 +244,10 @@ pub const PSI_CF_MAX_ABS: f64 = 1e4;
 /// ψ(w) of eq. P24 and 1/(2C₂) by Gauss' continued fraction of J₁/J₀ (DLMF 10.10.1 with
 /// ν = 0): J₁(z)/J₀(z) = z/C₁ with C_k = 2k − w/C_{k+1}, so ψ = C₁/2 = 1 − w/(2C₂), in w = z²
 /// only (no square root, no branch). Evaluated backwards from a depth that grows with |z|;
-/// the truncation error falls like (|z|/2)^{2N}/(N!)².
-fn psi_cf(w: Complex64) -> (Complex64, Complex64) {
-    let depth = 12 + (2.0 * w.norm().sqrt()) as usize;
+/// the truncation error falls like (|z|/2)^{2N}/(N!)². `abs_w_squared` is |w|², which the
+/// caller has computed.
+fn psi_cf(w: Complex64, abs_w_squared: f64) -> (Complex64, Complex64) {
+    let depth = 12 + (2.0 * abs_w_squared.sqrt().sqrt()) as usize;
     let mut c = Complex64::new(2.0 * (depth + 1) as f64, 0.0);
     for k in (2..=depth).rev() {
         c = 2.0 * k as f64 - w / c;
@@ -263,11 +264,13 @@ pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
     if !(w.re.is_finite() && w.im.is_finite()) {
         return Err(SpecialError::BadArgument(w));
     }
-    if w.norm() < PSI_SERIES_Z2 {
+    // |w|² against the squared limits: the same branches without a hypot per call.
+    let r2 = w.norm_sqr();
+    if r2 < PSI_SERIES_Z2 * PSI_SERIES_Z2 {
         return Ok((1.0 - w / 8.0 - w * w / 192.0, -1.0 / 8.0 - w / 96.0));
     }
-    if w.norm() <= PSI_CF_MAX_ABS && !amos_only() {
-        let (psi, one_minus_psi_over_w) = psi_cf(w);
+    if r2 <= PSI_CF_MAX_ABS * PSI_CF_MAX_ABS && !amos_only() {
+        let (psi, one_minus_psi_over_w) = psi_cf(w, r2);
         if psi.is_finite() && one_minus_psi_over_w.is_finite() {
             return Ok((psi, psi * one_minus_psi_over_w - 0.25));
         }

@@ -54,8 +54,8 @@ pub const TIE_LR: f64 = 2.0;
 /// wall thinning is common in old iron; free air needs a reason (a high point, a recent
 /// repair); soil damping shows only in stiff soil (spec §8 E1); the full model is the default.
 /// A viscoelastic wall is a wall loss with a rising modulus: it comes after the plain loss
-/// factor. An inventory record comes last: it is named over a physical effect only when it
-/// fits clearly better (see [`name_effect`]).
+/// factor. The inventory record is listed last, but a tie between a record and a physical
+/// effect is broken by AICc instead (see [`name_effect`]).
 pub const PRIOR_ORDER: [Effect; 7] = [
     Effect::PipeLoss,
     Effect::ViscoelasticWall,
@@ -644,7 +644,14 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// that would separate them. A record and a physical effect are not nested (a discrete choice
 /// against a continuum that can mimic it): the data tell them apart only when their χ² differ by
 /// more than the χ²₁ quantile at level [`ALPHA`], the level at which a record is accepted. Within
-/// that window they are a tie, named by [`PRIOR_ORDER`] (the physical effect first).
+/// that window they are a tie, broken by AICc: the record, which has no continuous parameter,
+/// is named when its AICc is no higher than that of the best tied physical effect (its χ² at
+/// most the AIC's price of the effect's parameter above), the physical effect otherwise. A
+/// wrong record is the commonest real discrepancy and the cheapest to check (issue 13). One
+/// exception: in a pipe that corrodes or graphitises (every non-plastic material, spec §8 E4),
+/// wall thinning keeps its place when it is the physical effect [`PRIOR_ORDER`] names and fits
+/// at least as well as the record, because an old iron wall thins as often as its record is
+/// wrong; a plastic wall does not thin, so there a thinner wall is a record to check.
 pub fn name_effect(diag: &mut Diagnosis) {
     let chi2_of = |c: &Candidate| -> Option<f64> {
         let r = c.refit.as_ref().filter(|r| r.accepted)?;
@@ -681,7 +688,31 @@ pub fn name_effect(diag: &mut Diagnosis) {
             .position(|e| *e == diag.candidates[*i].effect)
             .unwrap_or(PRIOR_ORDER.len())
     };
-    let best = tied.iter().copied().min_by_key(rank);
+    let d_aicc = |i: usize| {
+        diag.candidates[i]
+            .refit
+            .as_ref()
+            .map_or(f64::INFINITY, |r| r.d_aicc)
+    };
+    let physical = tied.iter().copied().filter(|&i| !is_record(i));
+    let record = tied.iter().copied().find(|&i| is_record(i));
+    let best_physical_aicc = physical.clone().map(d_aicc).fold(f64::INFINITY, f64::min);
+    let physical_named = physical.min_by_key(rank);
+    let chi2 = |i: usize| {
+        accepted
+            .iter()
+            .find(|a| a.0 == i)
+            .map_or(f64::INFINITY, |a| a.1)
+    };
+    let corroded_wall = |r: usize| {
+        physical_named.is_some_and(|i| {
+            diag.candidates[i].effect == Effect::WallThinning && chi2(i) <= chi2(r)
+        }) && diag.data.material.is_some_and(|m| !m.is_plastic())
+    };
+    let best = match record {
+        Some(r) if d_aicc(r) <= best_physical_aicc && !corroded_wall(r) => Some(r),
+        _ => physical_named.or(record),
+    };
     for (i, c) in diag.candidates.iter_mut().enumerate() {
         if let Some(r) = c.refit.as_mut() {
             r.accepted = Some(i) == best;
