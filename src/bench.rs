@@ -769,6 +769,21 @@ pub fn print_verify(rows: &[VerifyRow]) -> bool {
         "  {} segment(s) more than {} above the exhaustive chi2 (failed fits count), {} failed",
         over, VERIFY_DCHI2_MAX, failed
     );
+    let mut listed: Vec<&VerifyRow> = rows
+        .iter()
+        .filter(|r| r.excess().is_nan() || r.excess() > VERIFY_DCHI2_MAX)
+        .collect();
+    listed.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
+    for r in listed {
+        println!(
+            "    {} ({:?}) chi2 {:.4} vs exhaustive {:.4}: {:+.4}",
+            r.id,
+            r.material,
+            r.chi2,
+            r.chi2_exhaustive,
+            r.excess()
+        );
+    }
     over == 0
 }
 
