@@ -55,17 +55,82 @@ pub fn member_from_fit(
         .iter()
         .position(|s| s.param == Param::SoilPoisson)?;
     let bounds = problem.bounds().ok()?;
-    let m = problem.n_residuals();
     let k = problem.predict(x)?;
-    let mut r0 = vec![0.0; m];
-    problem.residuals_of(&k, &mut r0);
-    let ss: f64 = r0.iter().map(|v| v * v).sum();
+    let ss = problem.sum_of_squares(&k);
     if !ss.is_finite() {
         return None;
     }
+    // Residual variance as in the single fit: at least 1 when the model does not explain the
+    // data (chi-square), σ̂² for relative residuals.
+    let dof = problem.n_residuals().saturating_sub(n).max(1) as f64;
+    let scale = match problem.weighting {
+        Weighting::ChiSquare => (ss / dof).max(1.0),
+        Weighting::Relative => ss / dof,
+    };
+    let h = soil_information(&problem, x, &k, scale)?;
+    // To (ln c_P, ln c_S): u = T x locally, H_u = T⁻ᵀ H_x T⁻¹ (P65).
+    let (le, nu) = (x[ie], x[inu]);
+    let half_ln10 = 0.5 * std::f64::consts::LN_10;
+    let t = [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)];
+    let det = t[0] * t[3] - t[1] * t[2];
+    let ti = [t[3] / det, -t[1] / det, -t[2] / det, t[0] / det];
+    let tit = [ti[0], ti[2], ti[1], ti[3]];
+    let hu = mul(&mul(&tit, &h), &ti);
+    let hu = [hu[0], 0.5 * (hu[1] + hu[2]), 0.5 * (hu[1] + hu[2]), hu[3]];
+    if !(hu.iter().all(|v| v.is_finite()) && hu[0] >= 0.0 && hu[3] >= 0.0) {
+        return None;
+    }
+    let (cp, cs) = soil_speeds(10f64.powf(le), nu, data.soil_density);
+    // Widen along the principal axes where the real misfit rises less than the quadratic
+    // model says (the valley flattens, e.g. toward a soft soil's small c_S), as the single
+    // fit's uncertainty does (physics §7.10): probe at two model sigmas on both sides.
+    let hu = widen(hu, |du| {
+        let mut u = x.to_vec();
+        u[ie] = cp.ln() + du[0];
+        u[inu] = cs.ln() + du[1];
+        let q = coordinates_from_speeds(&problem.specs, &u, data.soil_density, &bounds)?;
+        let k = problem.predict(&q)?;
+        Some((problem.sum_of_squares(&k) - ss) / scale)
+    });
+    let hu = no_tighter_than(hu, speed_rstd);
+    Some(Member {
+        segment_id: segment_id.to_string(),
+        soil_density: data.soil_density,
+        single: (le, nu),
+        u_hat: [cp.ln(), cs.ln()],
+        info: hu,
+    })
+}
+
+/// The information of (log10 E_m, ν_m) of `problem` at `x` (whose prediction is `k`): the
+/// Gauss–Newton information JᵀJ / `scale` of the weighted residuals (central differences,
+/// 2n forward evaluations), ξ and any effect parameters profiled out (Schur complement) with a
+/// weak prior one search range wide on each (as the single fit's). Row-major 2 × 2; `None` if
+/// the Jacobian cannot be evaluated or the nuisance block is not positive definite. At the true
+/// parameters with `scale` = 1 this is the Fisher information whose inverse is the Cramér–Rao
+/// bound of the member's soil ([`super::bound`]).
+pub fn soil_information(
+    problem: &Problem<'_>,
+    x: &[f64],
+    k: &[num_complex::Complex64],
+    scale: f64,
+) -> Option<[f64; 4]> {
+    let n = problem.specs.len();
+    let ie = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilModulus)?;
+    let inu = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilPoisson)?;
+    let bounds = problem.bounds().ok()?;
+    let m = problem.n_residuals();
+    let mut r0 = vec![0.0; m];
+    problem.residuals_of(k, &mut r0);
     let mut jac = vec![0.0; m * n];
     jacobian_fd(
-        &problem,
+        problem,
         x,
         &r0,
         Some(&bounds),
@@ -74,13 +139,6 @@ pub fn member_from_fit(
         &mut jac,
     )
     .ok()?;
-    // Residual variance as in the single fit: at least 1 when the model does not explain the
-    // data (chi-square), σ̂² for relative residuals.
-    let dof = m.saturating_sub(n).max(1) as f64;
-    let scale = match problem.weighting {
-        Weighting::ChiSquare => (ss / dof).max(1.0),
-        Weighting::Relative => ss / dof,
-    };
     let mut info = crate::optimize::linalg::jtj(&jac, m, n);
     for v in info.iter_mut() {
         *v /= scale;
@@ -120,38 +178,7 @@ pub fn member_from_fit(
             }
         }
     }
-    // To (ln c_P, ln c_S): u = T x locally, H_u = T⁻ᵀ H_x T⁻¹ (P65).
-    let (le, nu) = (x[ie], x[inu]);
-    let half_ln10 = 0.5 * std::f64::consts::LN_10;
-    let t = [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)];
-    let det = t[0] * t[3] - t[1] * t[2];
-    let ti = [t[3] / det, -t[1] / det, -t[2] / det, t[0] / det];
-    let tit = [ti[0], ti[2], ti[1], ti[3]];
-    let hu = mul(&mul(&tit, &h), &ti);
-    let hu = [hu[0], 0.5 * (hu[1] + hu[2]), 0.5 * (hu[1] + hu[2]), hu[3]];
-    if !(hu.iter().all(|v| v.is_finite()) && hu[0] >= 0.0 && hu[3] >= 0.0) {
-        return None;
-    }
-    let (cp, cs) = soil_speeds(10f64.powf(le), nu, data.soil_density);
-    // Widen along the principal axes where the real misfit rises less than the quadratic
-    // model says (the valley flattens, e.g. toward a soft soil's small c_S), as the single
-    // fit's uncertainty does (physics §7.10): probe at two model sigmas on both sides.
-    let hu = widen(hu, |du| {
-        let mut u = x.to_vec();
-        u[ie] = cp.ln() + du[0];
-        u[inu] = cs.ln() + du[1];
-        let q = coordinates_from_speeds(&problem.specs, &u, data.soil_density, &bounds)?;
-        let k = problem.predict(&q)?;
-        Some((problem.sum_of_squares(&k) - ss) / scale)
-    });
-    let hu = no_tighter_than(hu, speed_rstd);
-    Some(Member {
-        segment_id: segment_id.to_string(),
-        soil_density: data.soil_density,
-        single: (le, nu),
-        u_hat: [cp.ln(), cs.ln()],
-        info: hu,
-    })
+    h.iter().all(|v| v.is_finite()).then_some(h)
 }
 
 /// The information `h` of (ln c_P, ln c_S) with each coordinate's marginal variance raised to

@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::invert::{fit_segment, FitResult, FitSettings, FitStatus, Param};
 use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
 
+use super::bound::{member_fisher, zone_bound, ZoneBound};
 use super::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
 
 /// One zone's estimate against its truth.
@@ -194,4 +195,37 @@ pub fn estimate(
         seconds,
         member_seconds,
     }
+}
+
+/// The Cramér–Rao bound of a zone ([`super::bound`]) for its members' pipes, frequency plans and
+/// noise, at their true soils and ξ, with the zone's scatter `tau` (τ_E decades, τ_ν) of P67.
+/// Members whose information cannot be evaluated at their truth are left out (and counted in
+/// the second value).
+pub fn zone_bound_at_truth(
+    network: &[SynthSegment],
+    fits: &[FitResult],
+    zone: &ZoneCheck,
+    tau: (f64, f64),
+) -> (ZoneBound, usize) {
+    let infos: Vec<Option<[f64; 4]>> = zone
+        .estimate
+        .members
+        .par_iter()
+        .map(|m| {
+            let i = network.iter().position(|s| s.id == m.segment_id)?;
+            let (s, r) = (&network[i], &fits[i]);
+            let setup = FitSetup {
+                model: r.model,
+                contact_mode: r.contact_mode,
+                effects: r.effects.clone(),
+            };
+            if !setup.effects.is_empty() || s.hidden.is_some() {
+                return None;
+            }
+            let x = [s.soil_modulus.log10(), s.soil_poisson, s.contact];
+            member_fisher(&s.segment_data(), &setup, &x)
+        })
+        .collect();
+    let ok: Vec<[f64; 4]> = infos.iter().flatten().copied().collect();
+    (zone_bound(&ok, tau), infos.len() - ok.len())
 }
