@@ -42,7 +42,12 @@ pub fn member_fisher(data: &SegmentData, setup: &FitSetup, x_true: &[f64]) -> Op
 pub fn information_on_zone(h: &[f64; 4], tau: (f64, f64)) -> [f64; 4] {
     let t = [tau.0 * tau.0, tau.1 * tau.1];
     // A = I + T H.
-    let a = [1.0 + t[0] * h[0], t[0] * h[1], t[1] * h[2], 1.0 + t[1] * h[3]];
+    let a = [
+        1.0 + t[0] * h[0],
+        t[0] * h[1],
+        t[1] * h[2],
+        1.0 + t[1] * h[3],
+    ];
     let det = a[0] * a[3] - a[1] * a[2];
     let ai = [a[3] / det, -a[1] / det, -a[2] / det, a[0] / det];
     let g = [

@@ -38,10 +38,62 @@ const FINE_POINTS: usize = 41;
 /// Gauss–Newton iterations of the inner (per-member) minimisation.
 const INNER_ITERATIONS: usize = 12;
 /// The inner minimisation stops when its step is below this fraction of the scatter (τ_E, τ_ν).
-const INNER_TOLERANCE: f64 = 1e-6;
+const INNER_TOLERANCE: f64 = 1e-4;
 
-/// What one member segment brings to its zone: the quadratic model of its misfit in the soil
-/// speeds.
+/// One principal axis of a member's misfit model in the soil speeds: along the unit direction
+/// `dir`, at t = dirᵀ(u − û) from the single fit, the misfit is λ g(t)² with
+/// g(t) = (e^{b t} − 1)/b (t when b = 0), so the information there, λ e^{2 b t}, grows at the
+/// rate `growth` = b measured at the fit. A plain quadratic (b = 0) evaluated at a noisy
+/// optimum weighs the members whose noise pushed them toward the better-seen side (a stiffer
+/// soil for a plastic pipe's c_S) more, and biased soft zones stiff.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    /// Information along the axis at the single fit, λ.
+    pub lambda: f64,
+    /// Unit direction in (ln c_P, ln c_S).
+    pub dir: [f64; 2],
+    /// Growth rate b of the information, per unit ln speed.
+    pub growth: f64,
+}
+
+impl Axis {
+    /// g(t) and g′(t) = e^{b t}.
+    pub fn shape(&self, t: f64) -> (f64, f64) {
+        let bt = (self.growth * t).min(MAX_GROWTH_EXPONENT);
+        if bt.abs() < 1e-9 {
+            (t, 1.0)
+        } else {
+            (bt.exp_m1() / self.growth, bt.exp())
+        }
+    }
+}
+
+/// Largest exponent b t of an axis's shape (keeps e^{b t} finite far from the fit).
+const MAX_GROWTH_EXPONENT: f64 = 50.0;
+
+/// The eigenvalues and unit eigenvectors of a symmetric 2 × 2 matrix (row-major), largest first.
+pub fn eigen(h: &[f64; 4]) -> [(f64, [f64; 2]); 2] {
+    let (a, b, d) = (h[0], 0.5 * (h[1] + h[2]), h[3]);
+    let tr = 0.5 * (a + d);
+    let disc = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    let vec = |l: f64| {
+        if b.abs() > 1e-300 {
+            let (x, y) = (l - d, b);
+            let n = (x * x + y * y).sqrt();
+            [x / n, y / n]
+        } else if (l - a).abs() <= (l - d).abs() {
+            [1.0, 0.0]
+        } else {
+            [0.0, 1.0]
+        }
+    };
+    let (l1, l2) = (tr + disc, tr - disc);
+    let v1 = vec(l1);
+    // The second axis orthogonal to the first (also when the eigenvalues coincide).
+    [(l1, v1), (l2, [-v1[1], v1[0]])]
+}
+
+/// What one member segment brings to its zone: the model of its misfit in the soil speeds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Member {
     /// Segment.
@@ -52,22 +104,90 @@ pub struct Member {
     pub single: (f64, f64),
     /// The single fit's (ln c_P, ln c_S).
     pub u_hat: [f64; 2],
-    /// Information of (ln c_P, ln c_S), row-major 2 × 2 (other coordinates profiled out).
+    /// Information of (ln c_P, ln c_S) at the single fit, row-major 2 × 2 (other coordinates
+    /// profiled out): Σ λ dir dirᵀ over [`Self::axes`].
     pub info: [f64; 4],
+    /// The misfit model's principal axes.
+    pub axes: [Axis; 2],
 }
 
 impl Member {
+    /// A member from its single fit and the axes of its misfit model.
+    pub fn new(
+        segment_id: &str,
+        soil_density: f64,
+        single: (f64, f64),
+        u_hat: [f64; 2],
+        axes: [Axis; 2],
+    ) -> Self {
+        let mut info = [0.0; 4];
+        for a in &axes {
+            info[0] += a.lambda * a.dir[0] * a.dir[0];
+            info[1] += a.lambda * a.dir[0] * a.dir[1];
+            info[2] += a.lambda * a.dir[1] * a.dir[0];
+            info[3] += a.lambda * a.dir[1] * a.dir[1];
+        }
+        Self {
+            segment_id: segment_id.to_string(),
+            soil_density,
+            single,
+            u_hat,
+            info,
+            axes,
+        }
+    }
+
+    /// A member whose misfit is the quadratic (u − û)ᵀ `info` (u − û) (no growth).
+    pub fn quadratic(
+        segment_id: &str,
+        soil_density: f64,
+        single: (f64, f64),
+        u_hat: [f64; 2],
+        info: [f64; 4],
+    ) -> Self {
+        let axes = eigen(&info).map(|(l, dir)| Axis {
+            lambda: l.max(0.0),
+            dir,
+            growth: 0.0,
+        });
+        Self::new(segment_id, soil_density, single, u_hat, axes)
+    }
+
     /// (ln c_P, ln c_S) of this member's soil at (log10 E, ν) (P63–P64).
     fn u(&self, le: f64, nu: f64) -> [f64; 2] {
         let (cp, cs) = soil_speeds(10f64.powf(le), nu, self.soil_density);
         [cp.ln(), cs.ln()]
     }
 
-    /// The quadratic misfit above the single fit's minimum at (log10 E, ν).
-    pub fn misfit(&self, le: f64, nu: f64) -> f64 {
-        let u = self.u(le, nu);
+    /// The misfit model at speeds `u`: (misfit, ½ its gradient in u, its Gauss–Newton
+    /// curvature ½ ∇² in u), from the residuals √λ g(t) of the axes.
+    fn local(&self, u: [f64; 2]) -> (f64, [f64; 2], [f64; 4]) {
         let d = [u[0] - self.u_hat[0], u[1] - self.u_hat[1]];
-        quad(&self.info, d)
+        let mut f = 0.0;
+        let mut g = [0.0; 2];
+        let mut h = [0.0; 4];
+        for a in &self.axes {
+            let t = a.dir[0] * d[0] + a.dir[1] * d[1];
+            let (gt, dg) = a.shape(t);
+            let r = a.lambda.sqrt() * gt;
+            let j = [
+                a.lambda.sqrt() * dg * a.dir[0],
+                a.lambda.sqrt() * dg * a.dir[1],
+            ];
+            f += r * r;
+            g[0] += r * j[0];
+            g[1] += r * j[1];
+            h[0] += j[0] * j[0];
+            h[1] += j[0] * j[1];
+            h[2] += j[1] * j[0];
+            h[3] += j[1] * j[1];
+        }
+        (f, g, h)
+    }
+
+    /// The modelled misfit above the single fit's minimum at (log10 E, ν).
+    pub fn misfit(&self, le: f64, nu: f64) -> f64 {
+        self.local(self.u(le, nu)).0
     }
 
     /// ∂u/∂(log10 E, ν) at ν, row-major (P65).
@@ -76,36 +196,40 @@ impl Member {
         [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)]
     }
 
-    /// The Gauss–Newton curvature JᵀHJ + P of the inner objective at `t` (P68).
-    fn curvature(&self, t: (f64, f64), p: [f64; 2]) -> [f64; 4] {
-        let j = Self::jacobian(t.1);
-        let hj = mat2_mul(&self.info, &j);
-        let jt = [j[0], j[2], j[1], j[3]];
-        let mut a = mat2_mul(&jt, &hj);
-        a[0] += p[0];
-        a[3] += p[1];
-        a
-    }
-
     /// min over (E_s, ν_s) of misfit + δ²/τ_E² + ε²/τ_ν² with the zone at `z` (P68); returns
     /// the minimum and the minimiser (the member's values shrunk toward the zone).
     pub fn profile(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, (f64, f64)) {
+        let (f, t, _) = self.inner(z, tau);
+        (f, t)
+    }
+
+    /// [`Self::profile`] and the Gauss–Newton curvature JᵀHJ + P at the minimiser.
+    fn inner(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, (f64, f64), [f64; 4]) {
         let p = [1.0 / (tau.0 * tau.0), 1.0 / (tau.1 * tau.1)];
-        let objective = |t: (f64, f64)| {
-            self.misfit(t.0, t.1) + p[0] * (t.0 - z.0).powi(2) + p[1] * (t.1 - z.1).powi(2)
+        // The objective at t and the misfit model's local values there.
+        let at = |t: (f64, f64)| {
+            let loc = self.local(self.u(t.0, t.1));
+            (
+                loc.0 + p[0] * (t.0 - z.0).powi(2) + p[1] * (t.1 - z.1).powi(2),
+                loc,
+            )
+        };
+        let curvature = |t: (f64, f64), h: &[f64; 4]| {
+            let j = Self::jacobian(t.1);
+            let hj = mat2_mul(h, &j);
+            let jt = [j[0], j[2], j[1], j[3]];
+            let mut a = mat2_mul(&jt, &hj);
+            a[0] += p[0];
+            a[3] += p[1];
+            a
         };
         let mut t = (z.0, z.1.min(NU_CAP));
-        let mut f = objective(t);
+        let (mut f, mut loc) = at(t);
         for _ in 0..INNER_ITERATIONS {
-            let u = self.u(t.0, t.1);
-            let d = [u[0] - self.u_hat[0], u[1] - self.u_hat[1]];
+            let hd = loc.1;
             let j = Self::jacobian(t.1);
-            // Gauss–Newton: (JᵀHJ + P) Δ = −(JᵀH d + P (t − z)).
-            let a = self.curvature(t, p);
-            let hd = [
-                self.info[0] * d[0] + self.info[1] * d[1],
-                self.info[2] * d[0] + self.info[3] * d[1],
-            ];
+            // Gauss–Newton: (JᵀHJ + P) Δ = −(Jᵀ ½∇misfit + P (t − z)).
+            let a = curvature(t, &loc.2);
             let g = [
                 j[0] * hd[0] + j[2] * hd[1] + p[0] * (t.0 - z.0),
                 j[1] * hd[0] + j[3] * hd[1] + p[1] * (t.1 - z.1),
@@ -130,11 +254,12 @@ impl Member {
                     t.0 + lambda * step[0],
                     (t.1 + lambda * step[1]).clamp(0.0, NU_CAP),
                 );
-                let fc = objective(cand);
+                let (fc, lc) = at(cand);
                 if fc.is_finite() && fc <= f {
                     let moved = (cand.0 - t.0).abs() + (cand.1 - t.1).abs();
                     t = cand;
                     f = fc;
+                    loc = lc;
                     accepted = moved > 1e-10;
                     break;
                 }
@@ -144,7 +269,7 @@ impl Member {
                 break;
             }
         }
-        (f, t)
+        (f, t, curvature(t, &loc.2))
     }
 
     /// The member's term of the zone's marginal objective at `z`: −2 ln of
@@ -156,9 +281,8 @@ impl Member {
     /// zones came out with ν_m too high and E_m too low. Returns (term, profile minimum,
     /// minimiser).
     pub fn marginal(&self, z: (f64, f64), tau: (f64, f64)) -> (f64, f64, (f64, f64)) {
-        let (f, t) = self.profile(z, tau);
+        let (f, t, a) = self.inner(z, tau);
         let p = [1.0 / (tau.0 * tau.0), 1.0 / (tau.1 * tau.1)];
-        let a = self.curvature(t, p);
         let det = a[0] * a[3] - a[1] * a[2];
         let occam = if det.is_finite() && det > 0.0 {
             (det / (p[0] * p[1])).ln()
@@ -167,10 +291,6 @@ impl Member {
         };
         (f + occam, f, t)
     }
-}
-
-fn quad(h: &[f64; 4], d: [f64; 2]) -> f64 {
-    d[0] * (h[0] * d[0] + h[1] * d[1]) + d[1] * (h[2] * d[0] + h[3] * d[1])
 }
 
 fn mat2_mul(a: &[f64; 4], b: &[f64; 4]) -> [f64; 4] {
@@ -489,13 +609,13 @@ mod tests {
     /// A member whose single fit sees its soil's speeds with relative errors (σ_P, σ_S).
     fn member(id: &str, le: f64, nu: f64, rho: f64, sp: f64, ss: f64) -> Member {
         let (cp, cs) = soil_speeds(10f64.powf(le), nu, rho);
-        Member {
-            segment_id: id.into(),
-            soil_density: rho,
-            single: (le, nu),
-            u_hat: [cp.ln(), cs.ln()],
-            info: [1.0 / (sp * sp), 0.0, 0.0, 1.0 / (ss * ss)],
-        }
+        Member::quadratic(
+            id,
+            rho,
+            (le, nu),
+            [cp.ln(), cs.ln()],
+            [1.0 / (sp * sp), 0.0, 0.0, 1.0 / (ss * ss)],
+        )
     }
 
     #[test]
