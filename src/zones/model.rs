@@ -15,7 +15,7 @@
 //! quantile is an outlier: reported and left out of the zone estimate.
 
 use crate::invert::problem::E_BOUNDS;
-use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_speeds, DCHI2_95};
+use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_from_speeds, soil_speeds, DCHI2_95};
 use crate::physics::inputs::MAX_SOIL_POISSON;
 
 /// Typical scatter of log10 E_m between segments of one soil unit, decades (physics §7.11:
@@ -34,7 +34,7 @@ const NU_CAP: f64 = 0.4995;
 const COARSE_STEP_E: f64 = 0.1;
 const COARSE_STEP_NU: f64 = 0.02;
 /// Fine grid: points per side over the coarse 95 % region.
-const FINE_POINTS: usize = 41;
+const FINE_POINTS: usize = 31;
 /// Gauss–Newton iterations of the inner (per-member) minimisation.
 const INNER_ITERATIONS: usize = 12;
 /// The inner minimisation stops when its step is below this fraction of the scatter (τ_E, τ_ν).
@@ -459,7 +459,60 @@ fn search_box() -> ((f64, f64), (f64, f64)) {
 /// The minimum of Φ, the 95 % intervals of E_z and ν_z, and the 95 % region's points.
 type Solution = ((f64, f64, f64), ZoneInterval, ZoneInterval, Vec<(f64, f64)>);
 
-/// Minimum and 95 % region of Φ: coarse grid over the box, then a fine grid over the region.
+/// A grid of Φ in the speeds (ln c_P, ln c_S) at density `rho`, `n` × `n` points over the
+/// box: points (ln c_P, ln c_S, log10 E, ν, Φ), Φ infinite where the speeds give no soil in the
+/// search box.
+#[allow(clippy::too_many_arguments)]
+fn speed_grid(
+    members: &[Member],
+    keep: &[bool],
+    tau: (f64, f64),
+    rho: f64,
+    p_range: (f64, f64),
+    s_range: (f64, f64),
+    n: usize,
+) -> Vec<[f64; 5]> {
+    let (eb, nb) = search_box();
+    let mut out = Vec::with_capacity(n * n);
+    for i in 0..n {
+        let lp = p_range.0 + (p_range.1 - p_range.0) * i as f64 / (n - 1).max(1) as f64;
+        for j in 0..n {
+            let ls = s_range.0 + (s_range.1 - s_range.0) * j as f64 / (n - 1).max(1) as f64;
+            let soil = soil_from_speeds(lp.exp(), ls.exp(), rho)
+                .map(|(e, nu)| (e.log10(), nu))
+                .filter(|&(le, nu)| {
+                    (eb.0..=eb.1).contains(&le) && (nb.0..=nb.1).contains(&nu) && nu <= NU_CAP
+                });
+            let (le, nu, f) = match soil {
+                Some((le, nu)) => (le, nu, phi(members, keep, (le, nu), tau)),
+                None => (f64::NAN, f64::NAN, f64::INFINITY),
+            };
+            out.push([lp, ls, le, nu, f]);
+        }
+    }
+    out
+}
+
+/// The bounding box in the speeds of the points with Φ ≤ `level`, padded by `pad` on each
+/// side.
+fn speed_box(points: &[[f64; 5]], level: f64, pad: (f64, f64)) -> ((f64, f64), (f64, f64)) {
+    let inside: Vec<&[f64; 5]> = points.iter().filter(|p| p[4] <= level).collect();
+    let range = |k: usize, pad: f64| {
+        let lo = inside.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
+        let hi = inside
+            .iter()
+            .map(|p| p[k])
+            .fold(f64::NEG_INFINITY, f64::max);
+        (lo - pad, hi + pad)
+    };
+    (range(0, pad.0), range(1, pad.1))
+}
+
+/// Minimum and 95 % region of Φ: a coarse grid in (log10 E, ν) over the search box, then two
+/// grids in the speeds (ln c_P, ln c_S), where a zone's valley is nearly straight and along
+/// the axes: one over the coarse region, one zoomed on its region. (A grid in (log10 E, ν)
+/// steps across a narrow c_P valley, and its minimum then lies where the lattice happens to
+/// meet the valley, not where the data put it.)
 fn solve(members: &[Member], keep: &[bool], tau: (f64, f64)) -> Option<Solution> {
     let (eb, nb) = search_box();
     let ne = ((eb.1 - eb.0) / COARSE_STEP_E).round() as usize + 1;
@@ -469,54 +522,101 @@ fn solve(members: &[Member], keep: &[bool], tau: (f64, f64)) -> Option<Solution>
     if !best.2.is_finite() {
         return None;
     }
-    // The coarse region (with a margin for the grid's coarseness), one step wider each side.
+    let kept: Vec<&Member> = members
+        .iter()
+        .zip(keep)
+        .filter(|(_, &k)| k)
+        .map(|(m, _)| m)
+        .collect();
+    let rho = kept.iter().map(|m| m.soil_density).sum::<f64>() / kept.len().max(1) as f64;
+    let speeds = |le: f64, nu: f64| {
+        let (cp, cs) = soil_speeds(10f64.powf(le), nu, rho);
+        [cp.ln(), cs.ln()]
+    };
+    // The coarse region in the speeds, padded by the speeds' change over one coarse step there
+    // (the region's edge lies within a step of its outermost point).
     let (de, dn) = (
         (eb.1 - eb.0) / (ne - 1) as f64,
         (nb.1 - nb.0) / (nn - 1) as f64,
     );
-    let inside: Vec<_> = coarse
+    let c0 = speeds(best.0, best.1);
+    let mut pad = (0.0f64, 0.0f64);
+    for (dle, dnu) in [(de, 0.0), (-de, 0.0), (0.0, dn), (0.0, -dn)] {
+        let nu = (best.1 + dnu).clamp(nb.0, NU_CAP);
+        let c = speeds(best.0 + dle, nu);
+        pad.0 = pad.0.max((c[0] - c0[0]).abs());
+        pad.1 = pad.1.max((c[1] - c0[1]).abs());
+    }
+    let coarse_speeds: Vec<[f64; 5]> = coarse
         .iter()
-        .filter(|p| p.2 <= best.2 + 2.0 * DCHI2_95)
+        .map(|p| {
+            let c = speeds(p.0, p.1);
+            [c[0], c[1], p.0, p.1, p.2]
+        })
         .collect();
-    let lo_e = inside.iter().map(|p| p.0).fold(f64::INFINITY, f64::min) - de;
-    let hi_e = inside.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max) + de;
-    let lo_n = inside.iter().map(|p| p.1).fold(f64::INFINITY, f64::min) - dn;
-    let hi_n = inside.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max) + dn;
-    let e_range = (lo_e.max(eb.0), hi_e.min(eb.1));
-    let nu_range = (lo_n.max(nb.0), hi_n.min(nb.1));
-    let fine = grid(
-        members,
-        keep,
-        tau,
-        e_range,
-        nu_range,
-        FINE_POINTS,
-        FINE_POINTS,
-    );
-    let fbest = minimum(&fine);
-    let best = if fbest.2 <= best.2 { fbest } else { best };
-    let region: Vec<_> = fine.iter().filter(|p| p.2 <= best.2 + DCHI2_95).collect();
-    // Half a fine step beyond the outermost point inside: the region's edge lies between it
-    // and the next point.
-    let half_e = 0.5 * (e_range.1 - e_range.0) / (FINE_POINTS - 1) as f64;
-    let half_n = 0.5 * (nu_range.1 - nu_range.0) / (FINE_POINTS - 1) as f64;
-    let interval = |vals: Vec<f64>, half: f64, b: (f64, f64)| {
-        let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (pr, sr) = speed_box(&coarse_speeds, best.2 + 2.0 * DCHI2_95, pad);
+    let fine = speed_grid(members, keep, tau, rho, pr, sr, FINE_POINTS);
+    let fbest = fine
+        .iter()
+        .map(|p| p[4])
+        .fold(f64::INFINITY, f64::min)
+        .min(best.2);
+    // Zoom on the fine grid's region, one fine step wider each side.
+    let step = |r: (f64, f64)| (r.1 - r.0) / (FINE_POINTS - 1) as f64;
+    let (pr2, sr2) = speed_box(&fine, fbest + DCHI2_95, (step(pr), step(sr)));
+    let zoom = if pr2.0.is_finite() && sr2.0.is_finite() {
+        speed_grid(members, keep, tau, rho, pr2, sr2, FINE_POINTS)
+    } else {
+        Vec::new()
+    };
+    let all: Vec<[f64; 5]> = fine.iter().chain(&zoom).copied().collect();
+    let zbest = all
+        .iter()
+        .copied()
+        .filter(|p| p[4].is_finite())
+        .fold([f64::NAN; 5], |a, p| if !(a[4] <= p[4]) { p } else { a });
+    let best = if zbest[4] <= best.2 {
+        (zbest[2], zbest[3], zbest[4])
+    } else {
+        best
+    };
+    // The region: the zoomed grid's points inside (the fine grid's where there is no zoom),
+    // each standing for its cell (half a step each side in the speeds).
+    let (grid_pts, hp, hs) = if zoom.is_empty() {
+        (&fine, 0.5 * step(pr), 0.5 * step(sr))
+    } else {
+        (&zoom, 0.5 * step(pr2), 0.5 * step(sr2))
+    };
+    let region: Vec<&[f64; 5]> = grid_pts
+        .iter()
+        .filter(|p| p[4] <= best.2 + DCHI2_95)
+        .collect();
+    let mut le_range = (best.0, best.0);
+    let mut nu_range = (best.1, best.1);
+    for p in &region {
+        for (a, b) in [(-hp, -hs), (-hp, hs), (hp, -hs), (hp, hs), (0.0, 0.0)] {
+            if let Some((e, nu)) = soil_from_speeds((p[0] + a).exp(), (p[1] + b).exp(), rho) {
+                let (le, nu) = (e.log10().clamp(eb.0, eb.1), nu.clamp(nb.0, nb.1));
+                le_range = (le_range.0.min(le), le_range.1.max(le));
+                nu_range = (nu_range.0.min(nu), nu_range.1.max(nu));
+            }
+        }
+    }
+    let interval = |r: (f64, f64), b: (f64, f64)| {
         let reach = 1e-3 * (b.1 - b.0);
-        let (lo, hi) = ((lo - half).max(b.0), (hi + half).min(b.1));
         ZoneInterval {
-            lo,
-            hi,
-            reaches_lower_bound: lo <= b.0 + reach,
-            reaches_upper_bound: hi >= b.1 - reach,
+            lo: r.0,
+            hi: r.1,
+            reaches_lower_bound: r.0 <= b.0 + reach,
+            reaches_upper_bound: r.1 >= b.1 - reach,
         }
     };
-    let mut e_int = interval(region.iter().map(|p| p.0).collect(), half_e, eb);
+    let mut e_int = interval(le_range, eb);
     e_int.lo = 10f64.powf(e_int.lo);
     e_int.hi = 10f64.powf(e_int.hi);
-    let nu_int = interval(region.iter().map(|p| p.1).collect(), half_n, nb);
-    let points = region.iter().map(|p| (p.0, p.1)).collect();
+    let nu_int = interval(nu_range, nb);
+    let mut points: Vec<(f64, f64)> = region.iter().map(|p| (p[2], p[3])).collect();
+    points.push((best.0, best.1));
     Some((best, e_int, nu_int, points))
 }
 
@@ -694,5 +794,68 @@ mod tests {
         let f = z.members.iter().find(|m| m.segment_id == "FAR").unwrap();
         assert!(!f.outlier, "{f:?}");
         assert!((f.shrunk_poisson - nu).abs() < 0.03, "{f:?}");
+    }
+
+    /// Plastic-like members whose c_S misfit is κ (e^{b u} − e^{b û})² / b² exactly (the
+    /// information grows as e^{2 b u}, as a plastic pipe's in soft soil) and whose single fits
+    /// lie symmetrically about the truth in e^{b u}: the growth model recovers the zone's c_S,
+    /// a quadratic at each fit (b = 0) is drawn toward the stiffer fits.
+    #[test]
+    fn growing_information_does_not_bias_the_zone_toward_the_better_seen_side() {
+        let (le, nu, rho) = (7.0, 0.25, 1800.0);
+        let (cp, cs) = soil_speeds(10f64.powf(le), nu, rho);
+        let (b, kappa, eps): (f64, f64, f64) = (1.7, 25.0, 0.3);
+        let members = |growth: bool| -> Vec<Member> {
+            [1.0, -1.0, 1.0, -1.0]
+                .iter()
+                .enumerate()
+                .map(|(i, sgn)| {
+                    let t = (1.0 + sgn * eps).ln() / b;
+                    let lambda = kappa * (2.0 * b * t).exp();
+                    Member::new(
+                        &format!("P{i}"),
+                        rho,
+                        (le, nu),
+                        [cp.ln(), cs.ln() + t],
+                        [
+                            Axis {
+                                lambda: 1.0 / (0.03 * 0.03),
+                                dir: [1.0, 0.0],
+                                growth: 0.0,
+                            },
+                            Axis {
+                                lambda,
+                                dir: [0.0, 1.0],
+                                growth: if growth { b } else { 0.0 },
+                            },
+                        ],
+                    )
+                })
+                .collect()
+        };
+        let bias = |ms: &[Member]| {
+            let z = estimate_zone(ms).unwrap();
+            (z.speeds().1 / cs).ln()
+        };
+        let with = bias(&members(true));
+        let without = bias(&members(false));
+        assert!(with.abs() < 0.01, "with growth: ln c_S bias {with}");
+        assert!(without > 0.04, "quadratic: ln c_S bias {without}");
+    }
+
+    #[test]
+    fn an_axis_shape_is_the_integral_of_its_growing_information() {
+        let a = Axis {
+            lambda: 4.0,
+            dir: [0.6, 0.8],
+            growth: 1.5,
+        };
+        for t in [-0.7, -0.1, 0.0, 0.2, 0.9] {
+            let (g, dg) = a.shape(t);
+            assert!((g - ((1.5 * t).exp() - 1.0) / 1.5).abs() < 1e-12);
+            assert!((dg - (1.5 * t).exp()).abs() < 1e-12);
+        }
+        let flat = Axis { growth: 0.0, ..a };
+        assert_eq!(flat.shape(0.3), (0.3, 1.0));
     }
 }
