@@ -31,8 +31,8 @@ pub const OUTLIER_CHI2: f64 = 13.815_510_557_964_274;
 /// Largest ν the inner minimisation visits: ν = 0.5 is singular (c_P infinite).
 const NU_CAP: f64 = 0.4995;
 /// Coarse grid: steps in log10 E (decades) and ν.
-const COARSE_STEP_E: f64 = 0.1;
-const COARSE_STEP_NU: f64 = 0.02;
+const COARSE_STEP_E: f64 = 0.125;
+const COARSE_STEP_NU: f64 = 0.025;
 /// Fine grid: points per side over the coarse 95 % region.
 const FINE_POINTS: usize = 31;
 /// Gauss–Newton iterations of the inner (per-member) minimisation.
