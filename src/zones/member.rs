@@ -1,8 +1,10 @@
-//! A member segment's quadratic misfit model in the soil speeds, from its single fit and the
-//! real misfit (`invert::Problem`): the Gauss–Newton information JᵀJ of the weighted residuals
-//! at the fit's optimum (central differences, 2n forward evaluations), ξ and any effect
-//! parameters profiled out (Schur complement, with the single fit's weak prior one search
-//! range wide on them), carried to (ln c_P, ln c_S) by the exact Jacobian of P63–P64 (P65).
+//! A member segment's misfit model in the soil speeds, from its single fit and the real misfit
+//! (`invert::Problem`): the Gauss–Newton information JᵀJ of the weighted residuals at the fit's
+//! optimum (central differences, 2n forward evaluations), ξ and any effect parameters profiled
+//! out (Schur complement, with the single fit's weak prior one search range wide on them),
+//! carried to (ln c_P, ln c_S) by the exact Jacobian of P63–P64 (P65); along each principal
+//! axis, the growth of that information measured at probes on both sides of the fit and the
+//! model checked against the real misfit there.
 
 use crate::invert::problem::{Param, Problem, Weighting};
 use crate::invert::uncertainty::{coordinates_from_speeds, dln_cp_dnu, dln_cs_dnu, soil_speeds};

@@ -1,17 +1,18 @@
-//! The hierarchical model of one soil zone (physics §7.11, P67–P68), on per-segment quadratic
-//! models of the misfit in the soil speeds u = (ln c_P, ln c_S) (P63–P64).
+//! The hierarchical model of one soil zone (physics §7.11, P67–P68), on per-segment models
+//! of the misfit in the soil speeds u = (ln c_P, ln c_S) (P63–P64).
 //!
-//! Each member s brings its single fit's speeds û_s and the information H_s (2 × 2, the
-//! inverse covariance of û_s with ξ and any effect parameters profiled out), so that
-//! χ²_s(E_s, ν_s) ≈ χ²_s,min + (u_s(E_s, ν_s) − û_s)ᵀ H_s (u_s(E_s, ν_s) − û_s): a quadratic in
-//! the speeds (where the misfit valley is nearly straight), mapped exactly from (log10 E, ν)
-//! with the segment's own ρ_m. The zone's objective Φ(E_z, ν_z) is −2 ln of its marginal
-//! likelihood: for each member, the minimum over (E_s, ν_s) of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²]
-//! (P68) plus the Laplace (Occam) term ln det(JᵀHJ + P) − ln det P at the minimiser, which
-//! integrates the member's own (E_s, ν_s) out ([`Member::marginal`]). Φ is evaluated on a grid
-//! over the whole search box and then on a fine grid over its 95 % region; the 95 % intervals
-//! are {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84} (as P66). A member whose own
-//! misfit at the zone, allowing for the scatter (the P68 minimum alone), exceeds the χ²₂ 0.999
+//! Each member s brings its single fit's speeds û_s and, along the two principal axes of its
+//! information there (ξ and any effect parameters profiled out), the information λ and how it
+//! grows with the speeds ([`Axis`]): χ²_s(E_s, ν_s) ≈ χ²_s,min + Σ_axes λ g(t)², t the
+//! coordinate of u_s(E_s, ν_s) − û_s along the axis, g(t) = (e^{bt} − 1)/b (a quadratic when
+//! b = 0), mapped exactly from (log10 E, ν) with the segment's own ρ_m. The zone's objective
+//! Φ(E_z, ν_z) is −2 ln of its marginal likelihood: for each member, the minimum over (E_s, ν_s)
+//! of [χ²_s + δ_s²/τ_E² + ε_s²/τ_ν²] (P68) plus the Laplace (Occam) term
+//! ln det(JᵀHJ + P) − ln det P at the minimiser, which integrates the member's own (E_s, ν_s)
+//! out ([`Member::marginal`]). Φ is evaluated on a coarse grid over the whole search box, then
+//! on a grid in the speeds over its 95 % region and one zoomed on that grid's region; the 95 %
+//! intervals are {θ : min over the other coordinate of Φ ≤ Φ_min + 3.84} (as P66). A member
+//! whose own misfit at the zone, allowing for the scatter (the P68 minimum alone), exceeds the χ²₂ 0.999
 //! quantile is an outlier: reported and left out of the zone estimate.
 
 use crate::invert::problem::E_BOUNDS;
@@ -574,11 +575,10 @@ fn solve(members: &[Member], keep: &[bool], tau: (f64, f64)) -> Option<Solution>
         .iter()
         .copied()
         .filter(|p| p[4].is_finite())
-        .fold([f64::NAN; 5], |a, p| if !(a[4] <= p[4]) { p } else { a });
-    let best = if zbest[4] <= best.2 {
-        (zbest[2], zbest[3], zbest[4])
-    } else {
-        best
+        .min_by(|a, b| a[4].total_cmp(&b[4]));
+    let best = match zbest.filter(|z| z[4] <= best.2) {
+        Some(zbest) => (zbest[2], zbest[3], zbest[4]),
+        None => best,
     };
     // The region: the zoomed grid's points inside (the fine grid's where there is no zoom),
     // each standing for its cell (half a step each side in the speeds).
