@@ -3,9 +3,17 @@
 //! version of every zone, and the time of the zone estimation against the segment fits.
 //!
 //! `cargo run --release --example zones_acceptance -- [SEED] [ZONES] [PER_ZONE]`
-//! (default 20261122 16 10).
+//! (default 20261122 16 10). Also prints every zone's Cramér–Rao bound against its estimate
+//! and what an efficient estimator would reach (`efficient-estimator bound: …`).
+//!
+//! `cargo run --release --example zones_acceptance -- --bound-only FROM TO [ZONES PER_ZONE]`:
+//! only the efficient-estimator line, for the networks of seeds FROM..=TO (not fitted).
 
-use pipewave::zones::synthetic::{estimate, run, ZoneCheck};
+use pipewave::zones::bound::{pooled_error_quantile, sample_quantile_distribution};
+use pipewave::zones::synthetic::{
+    estimate, network_bounds, run, zone_bound_at_truth, ZoneCheck, ZonedRun,
+};
+use pipewave::zones::{TAU_E_DECADES, TAU_NU};
 
 fn quantile(v: &[f64], p: f64) -> f64 {
     let mut v = v.to_vec();
@@ -76,6 +84,15 @@ fn report(label: &str, zones: &[ZoneCheck]) {
 }
 
 fn main() {
+    if std::env::args().nth(1).as_deref() == Some("--bound-only") {
+        let args: Vec<u64> = std::env::args()
+            .skip(2)
+            .map(|a| a.parse().expect("FROM TO ZONES PER_ZONE are integers"))
+            .collect();
+        assert!(args.len() >= 2, "--bound-only FROM TO [ZONES PER_ZONE]");
+        bound_only(&args);
+        return;
+    }
     let args: Vec<u64> = std::env::args()
         .skip(1)
         .map(|a| a.parse().expect("SEED ZONES PER_ZONE are integers"))
@@ -94,11 +111,95 @@ fn main() {
         r.member_seconds,
         r.zone_seconds - r.member_seconds
     );
+    bounds(&r);
     if std::env::var("ZONES_DEBUG").is_ok() {
         debug(&r);
     }
     let metal = estimate(&r.network, &r.fits, |s| !s.material.is_plastic()).zones;
     report(&format!("seed {seed}, metal pipes only"), &metal);
+}
+
+/// The Cramér–Rao bound of every zone (its members' information at their true soils, the
+/// scatter of P67 at the generator's values) against the estimate's own 95 % interval, and the
+/// E_m error p90 an efficient estimator would reach over these zones.
+fn bounds(r: &ZonedRun) {
+    let z95 = pipewave::invert::uncertainty::Z_95;
+    let mut sds = Vec::new();
+    println!("Cramer-Rao bound per zone: sd(ln E) bound / implied by our 95 % interval; sd(nu) bound / ours");
+    for z in &r.zones {
+        let (b, left_out) = zone_bound_at_truth(&r.network, &r.fits, z, (TAU_E_DECADES, TAU_NU));
+        let e = &z.estimate;
+        let ours_e = (e.modulus_interval.hi / e.modulus_interval.lo).ln() / (2.0 * z95);
+        let ours_nu = (e.poisson_interval.hi - e.poisson_interval.lo) / (2.0 * z95);
+        println!(
+            "  {} ({} metal, {} plastic{}): sd(ln E) {:.3} / {:.3} (x{:.2}); sd(nu) {:.4} / {:.4}; \
+             ln E error {:+.3} ({:+.1} bound sd)",
+            z.zone,
+            z.metal,
+            z.plastic,
+            if left_out > 0 { format!(", {left_out} left out") } else { String::new() },
+            b.sd_ln_modulus,
+            ours_e,
+            ours_e / b.sd_ln_modulus,
+            b.sd_poisson,
+            ours_nu,
+            (e.modulus() / z.truth.0).ln(),
+            (e.modulus() / z.truth.0).ln() / b.sd_ln_modulus,
+        );
+        sds.push(b.sd_ln_modulus);
+    }
+    println!("{}", bound_line(&sds));
+}
+
+/// Draws of the efficient estimator's errors for the sample p90's distribution.
+const BOUND_DRAWS: usize = 20_000;
+/// Issue 12's E_m p90 acceptance threshold.
+const P90_TARGET: f64 = 0.15;
+/// Issue 12's E_m median acceptance threshold.
+const MEDIAN_TARGET: f64 = 0.06;
+
+/// The efficient-estimator line: the pooled p90 and median of |E_est/E_true − 1| for errors
+/// at the Cramér–Rao bound of every zone, the median of the sample p90 over this network's
+/// zones, and the probability that it is within issue 12's 15 %.
+/// (And the same probability for the sample median within 6 %.)
+fn bound_line(sds: &[f64]) -> String {
+    let (med, pass) = sample_quantile_distribution(sds, 0.9, P90_TARGET, BOUND_DRAWS, 1);
+    let (_, pass_median) = sample_quantile_distribution(sds, 0.5, MEDIAN_TARGET, BOUND_DRAWS, 2);
+    format!(
+        "efficient-estimator bound: E_m error p90 {:.1} % (median {:.1} %) over {} zones; this \
+         network's sample p90 median {:.1} %, <= 15 % with probability {:.2} (sample median \
+         <= 6 % with probability {:.2})",
+        100.0 * pooled_error_quantile(sds, 0.9),
+        100.0 * pooled_error_quantile(sds, 0.5),
+        sds.len(),
+        100.0 * med,
+        pass,
+        pass_median
+    )
+}
+
+/// `--bound-only FROM TO [ZONES PER_ZONE]`: the efficient-estimator line for the networks of
+/// seeds FROM..=TO, generated but not fitted, and over all their zones pooled.
+fn bound_only(args: &[u64]) {
+    let (from, to) = (args[0], args[1]);
+    let zones = args.get(2).copied().unwrap_or(16) as usize;
+    let per_zone = args.get(3).copied().unwrap_or(10) as usize;
+    let mut all = Vec::new();
+    let mut passes = 0.0;
+    for seed in from..=to {
+        let b = network_bounds(seed, zones, per_zone, (TAU_E_DECADES, TAU_NU));
+        let sds: Vec<f64> = b.iter().map(|(_, b, _)| b.sd_ln_modulus).collect();
+        let (_, pass) = sample_quantile_distribution(&sds, 0.9, P90_TARGET, BOUND_DRAWS, 1);
+        passes += pass;
+        println!("seed {seed}: {}", bound_line(&sds));
+        all.extend(sds);
+    }
+    println!(
+        "seeds {from}..={to} ({} networks): {}; mean probability that a network's p90 <= 15 %: {:.2}",
+        to - from + 1,
+        bound_line(&all),
+        passes / (to - from + 1) as f64
+    );
 }
 
 /// Members of the zones whose E_m is off by more than 20 % (set ZONES_DEBUG=1).

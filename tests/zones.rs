@@ -327,3 +327,83 @@ fn calibrate_estimates_stores_and_exports_zones() {
         .unwrap();
     assert_eq!(polys, 2);
 }
+
+/// The Cramér–Rao bound's member information (`zones::bound::member_fisher`) is the curvature
+/// of the real misfit at the truth: on noise-free data, χ² minimised over ξ (with the same weak
+/// prior on ξ, one search range wide) at the true (log10 E_m, ν_m) moved by δ along v rises by
+/// δ² vᵀHv, for a plastic and a metal pipe.
+#[test]
+fn member_fisher_information_is_the_curvature_of_the_misfit_profiled_over_xi() {
+    use pipewave::invert::{FitSettings, Measurement, Method, Problem};
+    use pipewave::synth::{generate, SynthOptions};
+    use pipewave::zones::bound::member_fisher;
+    use pipewave::zones::synthetic::default_setup;
+
+    let network = generate(&SynthOptions {
+        segments: 40,
+        seed: 5,
+        defect_fraction: 0.0,
+        zones: 4,
+        ..SynthOptions::default()
+    });
+    let setup = default_setup(&FitSettings::default());
+    let mut checked = [0usize; 2];
+    for s in &network {
+        let kind = usize::from(s.material.is_plastic());
+        if checked[kind] > 0 || !(0.2..0.8).contains(&s.contact) {
+            continue;
+        }
+        let x0 = [s.soil_modulus.log10(), s.soil_poisson, s.contact];
+        // Noise-free data: the model at the truth, with the synthetic standard deviations.
+        let mut data = s.segment_data();
+        let k = Problem::new(&data, Method::Default, setup.model, setup.contact_mode, &[])
+            .predict(&x0)
+            .expect("model at the truth");
+        data.measurements = data
+            .measurements
+            .iter()
+            .zip(&k)
+            .map(|(m, k)| {
+                Measurement::new(m.omega, k.re, -k.im, m.k_re_std, m.attenuation_std).unwrap()
+            })
+            .collect();
+        let h = member_fisher(&data, &setup, &x0).expect("information at the truth");
+        let problem = Problem::new(&data, Method::Default, setup.model, setup.contact_mode, &[]);
+        // χ² at (log10 E, ν) minimised over ξ by golden section, with the prior (ξ − ξ₀)²/1².
+        let profiled = |le: f64, nu: f64| {
+            let f = |xi: f64| {
+                let k = problem
+                    .predict(&[le, nu, xi])
+                    .expect("model near the truth");
+                problem.sum_of_squares(&k) + (xi - x0[2]).powi(2)
+            };
+            let (mut a, mut b) = ((x0[2] - 0.15).max(0.0), (x0[2] + 0.15).min(1.0));
+            let g = 0.5 * (5f64.sqrt() - 1.0);
+            for _ in 0..60 {
+                let (c, d) = (b - g * (b - a), a + g * (b - a));
+                if f(c) < f(d) {
+                    b = d;
+                } else {
+                    a = c;
+                }
+            }
+            f(0.5 * (a + b))
+        };
+        for v in [[1.0, 0.0], [0.0, 1.0], [1.0, 0.05]] {
+            let q = v[0] * (h[0] * v[0] + h[1] * v[1]) + v[1] * (h[2] * v[0] + h[3] * v[1]);
+            // A tenth of a standard deviation along v: modelled rise 0.01.
+            let delta = 0.1 / q.sqrt();
+            let rise = 0.5
+                * (profiled(x0[0] + delta * v[0], x0[1] + delta * v[1])
+                    + profiled(x0[0] - delta * v[0], x0[1] - delta * v[1]));
+            assert!(
+                (rise / 0.01 - 1.0).abs() < 0.03,
+                "{} ({:?}) along {v:?}: profiled rise {rise}, Fisher 0.01",
+                s.id,
+                s.material
+            );
+        }
+        checked[kind] += 1;
+    }
+    assert_eq!(checked, [1, 1], "a metal and a plastic pipe checked");
+}

@@ -1,8 +1,10 @@
-//! A member segment's quadratic misfit model in the soil speeds, from its single fit and the
-//! real misfit (`invert::Problem`): the Gauss–Newton information JᵀJ of the weighted residuals
-//! at the fit's optimum (central differences, 2n forward evaluations), ξ and any effect
-//! parameters profiled out (Schur complement, with the single fit's weak prior one search
-//! range wide on them), carried to (ln c_P, ln c_S) by the exact Jacobian of P63–P64 (P65).
+//! A member segment's misfit model in the soil speeds, from its single fit and the real misfit
+//! (`invert::Problem`): the Gauss–Newton information JᵀJ of the weighted residuals at the fit's
+//! optimum (central differences, 2n forward evaluations), ξ and any effect parameters profiled
+//! out (Schur complement, with the single fit's weak prior one search range wide on them),
+//! carried to (ln c_P, ln c_S) by the exact Jacobian of P63–P64 (P65); along each principal
+//! axis, the growth of that information measured at probes on both sides of the fit and the
+//! model checked against the real misfit there.
 
 use crate::invert::problem::{Param, Problem, Weighting};
 use crate::invert::uncertainty::{coordinates_from_speeds, dln_cp_dnu, dln_cs_dnu, soil_speeds};
@@ -11,7 +13,7 @@ use crate::optimize::lm::{jacobian_fd, FiniteDifference};
 use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Model};
 
-use super::model::Member;
+use super::model::{eigen, Axis, Member};
 
 /// The settings a member's fit was made with (from its `fits` row).
 #[derive(Debug, Clone, PartialEq)]
@@ -55,17 +57,143 @@ pub fn member_from_fit(
         .iter()
         .position(|s| s.param == Param::SoilPoisson)?;
     let bounds = problem.bounds().ok()?;
-    let m = problem.n_residuals();
     let k = problem.predict(x)?;
-    let mut r0 = vec![0.0; m];
-    problem.residuals_of(&k, &mut r0);
-    let ss: f64 = r0.iter().map(|v| v * v).sum();
+    let ss = problem.sum_of_squares(&k);
     if !ss.is_finite() {
         return None;
     }
+    // Residual variance as in the single fit: at least 1 when the model does not explain the
+    // data (chi-square), σ̂² for relative residuals.
+    let dof = problem.n_residuals().saturating_sub(n).max(1) as f64;
+    let scale = match problem.weighting {
+        Weighting::ChiSquare => (ss / dof).max(1.0),
+        Weighting::Relative => ss / dof,
+    };
+    let h = soil_information(&problem, x, &k, scale)?;
+    let (le, nu) = (x[ie], x[inu]);
+    let hu = to_speeds(&h, nu)?;
+    if !(hu[0] >= 0.0 && hu[3] >= 0.0) {
+        return None;
+    }
+    let (cp, cs) = soil_speeds(10f64.powf(le), nu, data.soil_density);
+    let u_hat = [cp.ln(), cs.ln()];
+    // The point of the search space at speeds u_hat + du (the other coordinates at the fit).
+    let at = |du: [f64; 2]| {
+        let mut u = x.to_vec();
+        u[ie] = u_hat[0] + du[0];
+        u[inu] = u_hat[1] + du[1];
+        coordinates_from_speeds(&problem.specs, &u, data.soil_density, &bounds)
+    };
+    let hu_fit = no_tighter_than(hu, speed_rstd);
+    let mut axes = Vec::with_capacity(2);
+    for (lambda, dir) in eigen(&hu_fit) {
+        let mut axis = Axis {
+            lambda: lambda.max(0.0),
+            dir,
+            growth: 0.0,
+        };
+        if axis.lambda > 0.0 {
+            let step = (PROBE_SIGMAS / axis.lambda.sqrt()).min(PROBE_MAX_LN);
+            // How the information along the axis grows with the speeds (a soft soil's c_S is
+            // seen less well the softer it is): the slope of ln λ over the fit and a probe on
+            // each side, λ(t) = λ₀ e^{2 b t}.
+            let mut pts = vec![(0.0, quad(&hu, dir))];
+            for sgn in [1.0, -1.0] {
+                let t = sgn * step;
+                let lam = at([t * dir[0], t * dir[1]]).and_then(|q| {
+                    let k = problem.predict(&q)?;
+                    let hq = soil_information(&problem, &q, &k, scale)?;
+                    to_speeds(&hq, q[inu]).map(|hq| quad(&hq, dir))
+                });
+                if let Some(l) = lam.filter(|l| l.is_finite() && *l > 0.0) {
+                    pts.push((t, l));
+                }
+            }
+            if pts[0].1 > 0.0 && pts.len() > 1 {
+                let n = pts.len() as f64;
+                let mt = pts.iter().map(|p| p.0).sum::<f64>() / n;
+                let ml = pts.iter().map(|p| p.1.ln()).sum::<f64>() / n;
+                let sxy: f64 = pts.iter().map(|p| (p.0 - mt) * (p.1.ln() - ml)).sum();
+                let sxx: f64 = pts.iter().map(|p| (p.0 - mt).powi(2)).sum();
+                axis.growth = (0.5 * sxy / sxx).clamp(-MAX_GROWTH, MAX_GROWTH);
+            }
+            // Widen where the real misfit rises less than the model says (the valley flattens,
+            // e.g. toward a soft soil's small c_S), as the single fit's uncertainty does
+            // (physics §7.10): probe on both sides.
+            let real = [1.0, -1.0]
+                .iter()
+                .filter_map(|sgn| {
+                    let t = sgn * step;
+                    let q = at([t * dir[0], t * dir[1]])?;
+                    let k = problem.predict(&q)?;
+                    let rise = (problem.sum_of_squares(&k) - ss) / scale;
+                    let modelled = axis.lambda * axis.shape(t).0.powi(2);
+                    (rise.is_finite() && modelled > 0.0).then_some(rise / modelled)
+                })
+                .fold(f64::INFINITY, f64::min);
+            if real.is_finite() && real < 1.0 {
+                axis.lambda *= real.max(MIN_WIDENING);
+            }
+        }
+        axes.push(axis);
+    }
+    Some(Member::new(
+        segment_id,
+        data.soil_density,
+        (le, nu),
+        u_hat,
+        [axes[0], axes[1]],
+    ))
+}
+
+/// The information `h` of (log10 E_m, ν_m) carried to (ln c_P, ln c_S): u = T x locally,
+/// H_u = T⁻ᵀ H_x T⁻¹ (P65), symmetrised; `None` if not finite.
+fn to_speeds(h: &[f64; 4], nu: f64) -> Option<[f64; 4]> {
+    let half_ln10 = 0.5 * std::f64::consts::LN_10;
+    let t = [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)];
+    let det = t[0] * t[3] - t[1] * t[2];
+    let ti = [t[3] / det, -t[1] / det, -t[2] / det, t[0] / det];
+    let tit = [ti[0], ti[2], ti[1], ti[3]];
+    let hu = mul(&mul(&tit, h), &ti);
+    let off = 0.5 * (hu[1] + hu[2]);
+    let hu = [hu[0], off, off, hu[3]];
+    hu.iter().all(|v| v.is_finite()).then_some(hu)
+}
+
+/// vᵀ H v.
+fn quad(h: &[f64; 4], v: [f64; 2]) -> f64 {
+    v[0] * (h[0] * v[0] + h[1] * v[1]) + v[1] * (h[2] * v[0] + h[3] * v[1])
+}
+
+/// The information of (log10 E_m, ν_m) of `problem` at `x` (whose prediction is `k`): the
+/// Gauss–Newton information JᵀJ / `scale` of the weighted residuals (central differences,
+/// 2n forward evaluations), ξ and any effect parameters profiled out (Schur complement) with a
+/// weak prior one search range wide on each (as the single fit's). Row-major 2 × 2; `None` if
+/// the Jacobian cannot be evaluated or the nuisance block is not positive definite. At the true
+/// parameters with `scale` = 1 this is the Fisher information whose inverse is the Cramér–Rao
+/// bound of the member's soil ([`super::bound`]).
+pub fn soil_information(
+    problem: &Problem<'_>,
+    x: &[f64],
+    k: &[num_complex::Complex64],
+    scale: f64,
+) -> Option<[f64; 4]> {
+    let n = problem.specs.len();
+    let ie = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilModulus)?;
+    let inu = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::SoilPoisson)?;
+    let bounds = problem.bounds().ok()?;
+    let m = problem.n_residuals();
+    let mut r0 = vec![0.0; m];
+    problem.residuals_of(k, &mut r0);
     let mut jac = vec![0.0; m * n];
     jacobian_fd(
-        &problem,
+        problem,
         x,
         &r0,
         Some(&bounds),
@@ -74,13 +202,6 @@ pub fn member_from_fit(
         &mut jac,
     )
     .ok()?;
-    // Residual variance as in the single fit: at least 1 when the model does not explain the
-    // data (chi-square), σ̂² for relative residuals.
-    let dof = m.saturating_sub(n).max(1) as f64;
-    let scale = match problem.weighting {
-        Weighting::ChiSquare => (ss / dof).max(1.0),
-        Weighting::Relative => ss / dof,
-    };
     let mut info = crate::optimize::linalg::jtj(&jac, m, n);
     for v in info.iter_mut() {
         *v /= scale;
@@ -120,38 +241,7 @@ pub fn member_from_fit(
             }
         }
     }
-    // To (ln c_P, ln c_S): u = T x locally, H_u = T⁻ᵀ H_x T⁻¹ (P65).
-    let (le, nu) = (x[ie], x[inu]);
-    let half_ln10 = 0.5 * std::f64::consts::LN_10;
-    let t = [half_ln10, dln_cp_dnu(nu), half_ln10, dln_cs_dnu(nu)];
-    let det = t[0] * t[3] - t[1] * t[2];
-    let ti = [t[3] / det, -t[1] / det, -t[2] / det, t[0] / det];
-    let tit = [ti[0], ti[2], ti[1], ti[3]];
-    let hu = mul(&mul(&tit, &h), &ti);
-    let hu = [hu[0], 0.5 * (hu[1] + hu[2]), 0.5 * (hu[1] + hu[2]), hu[3]];
-    if !(hu.iter().all(|v| v.is_finite()) && hu[0] >= 0.0 && hu[3] >= 0.0) {
-        return None;
-    }
-    let (cp, cs) = soil_speeds(10f64.powf(le), nu, data.soil_density);
-    // Widen along the principal axes where the real misfit rises less than the quadratic
-    // model says (the valley flattens, e.g. toward a soft soil's small c_S), as the single
-    // fit's uncertainty does (physics §7.10): probe at two model sigmas on both sides.
-    let hu = widen(hu, |du| {
-        let mut u = x.to_vec();
-        u[ie] = cp.ln() + du[0];
-        u[inu] = cs.ln() + du[1];
-        let q = coordinates_from_speeds(&problem.specs, &u, data.soil_density, &bounds)?;
-        let k = problem.predict(&q)?;
-        Some((problem.sum_of_squares(&k) - ss) / scale)
-    });
-    let hu = no_tighter_than(hu, speed_rstd);
-    Some(Member {
-        segment_id: segment_id.to_string(),
-        soil_density: data.soil_density,
-        single: (le, nu),
-        u_hat: [cp.ln(), cs.ln()],
-        info: hu,
-    })
+    h.iter().all(|v| v.is_finite()).then_some(h)
 }
 
 /// The information `h` of (ln c_P, ln c_S) with each coordinate's marginal variance raised to
@@ -180,53 +270,16 @@ fn no_tighter_than(h: [f64; 4], rstd: [Option<f64>; 2]) -> [f64; 4] {
     ]
 }
 
-/// Model sigmas at which the quadratic model is checked against the real misfit.
+/// Model sigmas at which the misfit model is checked against the real misfit (and its
+/// information's growth measured).
 const PROBE_SIGMAS: f64 = 2.0;
 /// Largest probe step in ln c_P or ln c_S (a factor e): beyond it the model is not checked.
 const PROBE_MAX_LN: f64 = 1.0;
 /// Smallest factor an eigenvalue is reduced by (keeps the information positive).
 const MIN_WIDENING: f64 = 0.02;
-
-/// The information `h` with each principal direction's eigenvalue reduced by the ratio of the
-/// real rise to the modelled one (PROBE_SIGMAS² at ± PROBE_SIGMAS model sigmas), where the real
-/// misfit (`rise`, above the minimum, in units of the residual variance) rises less.
-fn widen(h: [f64; 4], mut rise: impl FnMut([f64; 2]) -> Option<f64>) -> [f64; 4] {
-    let (a, b, d) = (h[0], h[1], h[3]);
-    let tr = 0.5 * (a + d);
-    let disc = (0.25 * (a - d) * (a - d) + b * b).sqrt();
-    let lambdas = [tr + disc, tr - disc];
-    let mut out = [0.0; 4];
-    for &l in &lambdas {
-        // Unit eigenvector of l.
-        let v = if b.abs() > 1e-300 {
-            let (x, y) = (l - d, b);
-            let n = (x * x + y * y).sqrt();
-            [x / n, y / n]
-        } else if (l - a).abs() <= (l - d).abs() {
-            [1.0, 0.0]
-        } else {
-            [0.0, 1.0]
-        };
-        let mut lw = l.max(0.0);
-        if lw > 0.0 {
-            let step = (PROBE_SIGMAS / lw.sqrt()).min(PROBE_MAX_LN);
-            let modelled = lw * step * step;
-            let real = [1.0, -1.0]
-                .iter()
-                .filter_map(|sgn| rise([sgn * step * v[0], sgn * step * v[1]]))
-                .filter(|r| r.is_finite())
-                .fold(f64::INFINITY, f64::min);
-            if real.is_finite() && real < modelled {
-                lw *= (real / modelled).max(MIN_WIDENING);
-            }
-        }
-        out[0] += lw * v[0] * v[0];
-        out[1] += lw * v[0] * v[1];
-        out[2] += lw * v[1] * v[0];
-        out[3] += lw * v[1] * v[1];
-    }
-    out
-}
+/// Largest growth rate b of an axis's information, λ ∝ e^{2 b t} per unit ln speed (the
+/// information of a plastic pipe's c_S grows about as c_S^3.3 in soft soils, b ≈ 1.7).
+const MAX_GROWTH: f64 = 5.0;
 
 fn mul(a: &[f64; 4], b: &[f64; 4]) -> [f64; 4] {
     [

@@ -5,10 +5,12 @@
 //! * [`model`]: the hierarchical model P67–P68 on per-segment quadratic misfit models in
 //!   (ln c_P, ln c_S); the zone's estimate, 95 % profile intervals, members shrunk toward it,
 //!   and outliers (reported, left out).
+//! * [`bound`]: the Cramér–Rao bound of a zone's soil from its members' true parameters.
 //! * [`flags`]: the zone's flags and its verdict on a member (`zone_outlier`, with evidence).
 //! * [`member`]: a member's quadratic model from its data and single fit (real misfit).
 //! * [`run`]: the zones of a database after `calibrate`: estimated when a member's fit has
 //!   changed, stored in `zone_fits` / `zone_members`.
+pub mod bound;
 pub mod flags;
 pub mod member;
 pub mod model;

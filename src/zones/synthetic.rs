@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::invert::{fit_segment, FitResult, FitSettings, FitStatus, Param};
 use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
 
+use super::bound::{member_fisher, zone_bound, ZoneBound};
 use super::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
 
 /// One zone's estimate against its truth.
@@ -194,4 +195,90 @@ pub fn estimate(
         seconds,
         member_seconds,
     }
+}
+
+/// The Cramér–Rao bound of a zone ([`super::bound`]) for its members' pipes, frequency plans and
+/// noise, at their true soils and ξ, with the zone's scatter `tau` (τ_E decades, τ_ν) of P67.
+/// Members whose information cannot be evaluated at their truth (or that carry a hidden effect
+/// the fit does not model) are left out and counted in the second value.
+pub fn bound_at_truth(
+    members: &[&SynthSegment],
+    setup: &FitSetup,
+    tau: (f64, f64),
+) -> (ZoneBound, usize) {
+    let infos: Vec<Option<[f64; 4]>> = members
+        .par_iter()
+        .map(|s| {
+            if !setup.effects.is_empty() || s.hidden.is_some() {
+                return None;
+            }
+            let x = [s.soil_modulus.log10(), s.soil_poisson, s.contact];
+            member_fisher(&s.segment_data(), setup, &x)
+        })
+        .collect();
+    let ok: Vec<[f64; 4]> = infos.iter().flatten().copied().collect();
+    (zone_bound(&ok, tau), infos.len() - ok.len())
+}
+
+/// [`bound_at_truth`] for the members of an estimated zone, fitted with `fits`' settings.
+pub fn zone_bound_at_truth(
+    network: &[SynthSegment],
+    fits: &[FitResult],
+    zone: &ZoneCheck,
+    tau: (f64, f64),
+) -> (ZoneBound, usize) {
+    let mut members = Vec::new();
+    let mut setup = None;
+    for m in &zone.estimate.members {
+        if let Some(i) = network.iter().position(|s| s.id == m.segment_id) {
+            members.push(&network[i]);
+            setup.get_or_insert_with(|| FitSetup {
+                model: fits[i].model,
+                contact_mode: fits[i].contact_mode,
+                effects: fits[i].effects.clone(),
+            });
+        }
+    }
+    let setup = setup.unwrap_or_else(|| default_setup(&FitSettings::default()));
+    bound_at_truth(&members, &setup, tau)
+}
+
+/// The setup of a fit made with `settings`.
+pub fn default_setup(settings: &FitSettings) -> FitSetup {
+    FitSetup {
+        model: settings.model,
+        contact_mode: settings.contact_mode,
+        effects: settings.effects.clone(),
+    }
+}
+
+/// The zones of a zoned network (generated as [`run`] does, without fitting it) and the
+/// Cramér–Rao bound of each for the default fit settings: (zone, bound, truth E_z Pa, ν_z).
+pub fn network_bounds(
+    seed: u64,
+    zones: usize,
+    per_zone: usize,
+    tau: (f64, f64),
+) -> Vec<(String, ZoneBound, (f64, f64))> {
+    let network = generate(&SynthOptions {
+        segments: zones * per_zone,
+        seed,
+        defect_fraction: 0.0,
+        zones,
+        ..SynthOptions::default()
+    });
+    let setup = default_setup(&FitSettings::default());
+    let mut by_zone: std::collections::BTreeMap<String, Vec<&SynthSegment>> = Default::default();
+    for s in &network {
+        if let Some(z) = &s.soil_zone {
+            by_zone.entry(z.clone()).or_default().push(s);
+        }
+    }
+    by_zone
+        .into_iter()
+        .filter_map(|(z, ms)| {
+            let truth = ms[0].zone_soil?;
+            Some((z, bound_at_truth(&ms, &setup, tau).0, truth))
+        })
+        .collect()
 }
