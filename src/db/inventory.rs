@@ -307,6 +307,20 @@ pub fn load_segments(
     }
 }
 
+/// The segments that may lie in a soil zone (`soil_zone` holds more than spaces), with their
+/// measurements, sorted by id. Reads only those: asking costs nothing on a network without
+/// zones.
+pub fn load_zoned_segments(conn: &Connection) -> Result<Vec<SegmentRecord>, DbError> {
+    let mut stmt = conn.prepare(&format!(
+        "SELECT {SEGMENT_COLUMNS} FROM segments WHERE trim(soil_zone) != '' \
+         ORDER BY segment_id"
+    ))?;
+    let rows: Vec<_> = stmt
+        .query_map([], segment_from_row)?
+        .collect::<Result<_, _>>()?;
+    rows.into_iter().map(|r| finish_segment(conn, r)).collect()
+}
+
 /// All segment ids in the inventory.
 pub(crate) fn segment_ids(conn: &Connection) -> Result<BTreeSet<String>, DbError> {
     let mut stmt = conn.prepare("SELECT segment_id FROM segments")?;

@@ -31,7 +31,9 @@ pub use import::{
     import, known_columns, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError,
     SourceKind,
 };
-pub use inventory::{load_segment, load_segments, MeasurementRecord, SegmentRecord};
+pub use inventory::{
+    load_segment, load_segments, load_zoned_segments, MeasurementRecord, SegmentRecord,
+};
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{
     curves_for, finish_run, fit_states_page, insert_fit_with_curves, latest_fits, load_run,
