@@ -15,7 +15,13 @@ use crate::db::DbError;
 /// The staging tables of one import, dropped when this is dropped.
 pub(super) struct Staging<'c> {
     conn: &'c Connection,
+    /// The temporary database's cache size before, restored after.
+    cache_size: i64,
 }
+
+/// Page cache of the temporary database while an import stages its rows, KiB (SQLite's
+/// default is 2000): what the staging may hold in memory, whatever the size of the files.
+const TEMP_CACHE_KIB: u32 = 8192;
 
 const DROP: &str = "DROP TABLE IF EXISTS temp.import_segments; \
     DROP TABLE IF EXISTS temp.import_measurements;";
@@ -23,8 +29,10 @@ const DROP: &str = "DROP TABLE IF EXISTS temp.import_segments; \
 impl<'c> Staging<'c> {
     /// Create the (empty) staging tables.
     pub fn create(conn: &'c Connection) -> Result<Self, DbError> {
+        let cache_size = conn.query_row("PRAGMA temp.cache_size", [], |r| r.get(0))?;
         conn.execute_batch(&format!(
             "{DROP}
+            PRAGMA temp.cache_size = -{TEMP_CACHE_KIB};
             -- Every row of the segments file whose id could be read; `valid`: the whole row is.
             CREATE TEMP TABLE import_segments (
                 line INTEGER NOT NULL, valid INTEGER NOT NULL, segment_id TEXT NOT NULL,
@@ -43,7 +51,7 @@ impl<'c> Staging<'c> {
                 attenuation_np_per_m REAL NOT NULL, k_re_std REAL, attenuation_std REAL,
                 measured_on TEXT, campaign TEXT);"
         ))?;
-        Ok(Staging { conn })
+        Ok(Staging { conn, cache_size })
     }
 
     /// Stage a segment row: its checked record, or only its id when the row is invalid.
@@ -154,7 +162,7 @@ impl<'c> Staging<'c> {
     pub fn index_measurements(&self) -> Result<(), DbError> {
         self.conn.execute_batch(
             "CREATE INDEX temp.import_measurements_id \
-             ON import_measurements (segment_id, omega_rad_s, line);",
+             ON import_measurements (segment_id, omega_rad_s, line, omega_given);",
         )?;
         Ok(())
     }
@@ -315,7 +323,10 @@ impl<'c> Staging<'c> {
 impl Drop for Staging<'_> {
     fn drop(&mut self) {
         // Nothing to report: the tables are temporary and vanish with the connection anyway.
-        let _ = self.conn.execute_batch(DROP);
+        let _ = self.conn.execute_batch(&format!(
+            "{DROP} PRAGMA temp.cache_size = {}; PRAGMA shrink_memory;",
+            self.cache_size
+        ));
     }
 }
 
