@@ -218,7 +218,9 @@ pub struct CalibrateSummary {
     pub jobs: usize,
     /// The settings hash of the run's fits.
     pub settings_hash: String,
-    /// Segments selected for fitting.
+    /// Segments selected for fitting: as counted before the fits, and once every one was
+    /// handed out, as the pages held when the fits read them (the two differ only if an import
+    /// changed the inventory meanwhile).
     pub selected: usize,
     /// Segments in scope whose latest fit was current.
     pub up_to_date: usize,
