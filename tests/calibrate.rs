@@ -314,6 +314,60 @@ fn jobs_do_not_change_the_stored_fits() {
     assert_ne!(stored_fits(&c).0, fa);
 }
 
+/// Streaming: a run reads the inventory a page at a time. Pages of 1 and of 5 segments (12 is
+/// a multiple of the one and not of the other), with up-to-date segments among those to fit,
+/// store exactly the fits of a run that reads everything in one page, each segment once, and
+/// count the same segments.
+#[test]
+fn a_run_read_in_small_pages_stores_the_same_fits_as_one_page() {
+    use pipewave::batch::{calibrate as run_calibrate, CalibrateOptions, DEFAULT_CHUNK_SIZE};
+    use std::sync::atomic::AtomicBool;
+
+    let tmp = tempfile::tempdir().unwrap();
+    let net = synth(tmp.path(), 12, 16);
+    let mut lines = Vec::new();
+    for chunk_size in [1, 5, DEFAULT_CHUNK_SIZE] {
+        let db = tmp.path().join(format!("chunk{chunk_size}.sqlite"));
+        import(&db, &net);
+        // Two segments already fitted, so pages mix segments to fit and up-to-date ones.
+        calibrate(&db, &["--segment", "WM10002", "--segment", "WM10007"]);
+        let mut database = Database::open(&db).unwrap();
+        let opts = CalibrateOptions {
+            jobs: Some(2),
+            seed: 7,
+            chunk_size,
+            ..CalibrateOptions::default()
+        };
+        let summary =
+            run_calibrate(database.conn_mut(), &opts, &mut (), &AtomicBool::new(false)).unwrap();
+        assert_eq!(
+            (summary.selected, summary.stored(), summary.up_to_date),
+            (10, 10, 2),
+            "chunk {chunk_size}: {}",
+            summary.line()
+        );
+        assert!(!summary.interrupted, "chunk {chunk_size}");
+        let per = fits_per_segment(&db);
+        assert_eq!(per.len(), 12, "chunk {chunk_size}");
+        assert!(
+            per.iter().all(|(_, n)| *n == 1),
+            "chunk {chunk_size}: {per:?}"
+        );
+        assert_eq!(
+            count(
+                &db,
+                "SELECT count(*) FROM runs WHERE status = 'finished' AND n_segments = 10"
+            ),
+            1,
+            "chunk {chunk_size}"
+        );
+        lines.push(stored_fits(&db));
+    }
+    assert_eq!(lines[0].0.len(), 12);
+    assert_eq!(lines[0], lines[1]);
+    assert_eq!(lines[0], lines[2]);
+}
+
 #[test]
 fn a_killed_run_loses_nothing_and_the_next_run_finishes_it() {
     let tmp = tempfile::tempdir().unwrap();

@@ -2,11 +2,15 @@
 //! as soon as it is done (issue 4).
 //!
 //! Shape (docs/style.md, "Data"): the calling thread holds the database. It takes the run lock,
-//! chooses and loads the segments, and records the run. A rayon pool of `jobs` workers turns each
-//! segment into a fit and its curve and sends it over a channel; the calling thread is the only
-//! writer and commits every segment in its own transaction as it arrives. So a run that is
-//! killed at any moment loses only the segments in flight, and the next run, which selects the
-//! segments whose latest fit is missing or stale, does the rest.
+//! counts the segments to fit, and records the run. Then it reads the segments a page
+//! ([`CalibrateOptions::chunk_size`]) at a time, in id order, and hands them one by one to a
+//! rayon pool of `jobs` workers, never more than [`IN_FLIGHT_PER_JOB`] per worker ahead of the
+//! writes; each worker turns a segment into a fit and its curve and sends it back over a
+//! bounded channel. The calling thread is the only writer and commits every segment in its own
+//! transaction as it arrives. So a run holds one page of segments and a few fits whatever the
+//! size of the network, a run that is killed at any moment loses only the segments in flight,
+//! and the next run, which selects the segments whose latest fit is missing or stale, does the
+//! rest.
 //!
 //! Determinism: the seed of a segment is `splitmix64(run_seed ^ fnv1a64(segment_id))`, and a fit
 //! depends only on its segment, its settings and that seed, so the stored fits are the same
@@ -20,18 +24,16 @@ pub mod throughput;
 
 pub use rows::{curve_points, fit_row, segment_data};
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
+use std::sync::{mpsc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
-
-use rayon::prelude::*;
 
 use crate::db::hash::{fnv1a64, Canonical};
 use crate::db::{
-    self, CurvePoint, DbError, FitRow, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
+    self, CurvePoint, DbError, FitRow, FitState, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
 };
 use crate::invert::{fit_segment, FitSettings, Method};
@@ -43,6 +45,15 @@ pub use db::Connection;
 
 /// Seed of a run when none is given (`calibrate --seed`).
 pub const DEFAULT_SEED: u64 = 1;
+
+/// Segments a run reads from the database at a time (`CalibrateOptions::chunk_size`): what a
+/// run holds is one page of this many segments with their measurements (about 1 kB each) and
+/// the fits in flight, so its memory does not grow with the network.
+pub const DEFAULT_CHUNK_SIZE: usize = 1024;
+
+/// Segments handed to the workers ahead of the writer, per worker thread: enough that a worker
+/// never waits while the writer stores a fit or reads the next page.
+pub const IN_FLIGHT_PER_JOB: usize = 2;
 
 /// How often a run started with `wait_for_lock` asks again for the run lock.
 pub const LOCK_POLL: Duration = Duration::from_millis(250);
@@ -73,6 +84,9 @@ pub struct CalibrateOptions {
     pub segments: Option<Vec<String>>,
     /// When another run holds the lock: wait for it (`true`) or fail at once (`false`).
     pub wait_for_lock: bool,
+    /// Segments read from the database at a time (at least 1; [`DEFAULT_CHUNK_SIZE`]). It
+    /// bounds the run's memory and changes nothing in the stored fits.
+    pub chunk_size: usize,
 }
 
 impl Default for CalibrateOptions {
@@ -87,6 +101,7 @@ impl Default for CalibrateOptions {
             effects: Vec::new(),
             segments: None,
             wait_for_lock: false,
+            chunk_size: DEFAULT_CHUNK_SIZE,
         }
     }
 }
@@ -203,7 +218,9 @@ pub struct CalibrateSummary {
     pub jobs: usize,
     /// The settings hash of the run's fits.
     pub settings_hash: String,
-    /// Segments selected for fitting.
+    /// Segments selected for fitting: as counted before the fits, and once every one was
+    /// handed out, as the pages held when the fits read them (the two differ only if an import
+    /// changed the inventory meanwhile).
     pub selected: usize,
     /// Segments in scope whose latest fit was current.
     pub up_to_date: usize,
@@ -449,89 +466,11 @@ fn locked_run(
     started: Instant,
 ) -> Result<CalibrateSummary, BatchError> {
     let jobs = summary.jobs;
-    // Which segments: those needing a fit, within the named ones if any. A segment's settings
-    // are the run's with its own effects added (set by `diagnose`), so its expected settings
-    // hash is computed per segment.
-    let own_effects = db::segment_effects(conn)?;
-    let settings_for = |id: &str| -> Result<(FitSettings, String), BatchError> {
-        let mut effects = opts.effects.clone();
-        if let Some(text) = own_effects.get(id) {
-            let extra = parse_effects(text).map_err(|e| BatchError::StoredEffects {
-                segment: id.to_string(),
-                message: e.to_string(),
-            })?;
-            effects.extend(extra);
-        }
-        effects.sort();
-        effects.dedup();
-        let hash = settings_hash(opts.method, opts.model, opts.contact_mode, &effects);
-        let mut settings = opts.fit_settings();
-        settings.effects = effects;
-        Ok((settings, hash))
-    };
-    let states = db::fit_states(conn)?;
-    let mut needing = Vec::new();
-    let mut with_measurements = Vec::new();
-    let mut by_other_algorithm = std::collections::BTreeSet::new();
-    for st in states.iter().filter(|st| st.has_measurements) {
-        with_measurements.push(st.segment_id.clone());
-        let (_, hash) = settings_for(&st.segment_id)?;
-        if opts.force || st.is_stale(&hash) {
-            needing.push(st.segment_id.clone());
-            if st.made_by_other_algorithm() {
-                by_other_algorithm.insert(st.segment_id.clone());
-            }
-        }
-    }
-    let (selected, in_scope): (Vec<String>, usize) = match &opts.segments {
-        None => (needing, with_measurements.len()),
-        Some(named) => {
-            // Check the names first: an unknown id is an error naming every such id.
-            let records = db::load_segments(conn, Some(named))?;
-            let named: std::collections::BTreeSet<&str> =
-                records.iter().map(|r| r.segment_id.as_str()).collect();
-            summary.without_measurements = records
-                .iter()
-                .filter(|r| r.measurements.is_empty())
-                .map(|r| r.segment_id.clone())
-                .collect();
-            let in_scope = with_measurements
-                .iter()
-                .filter(|id| named.contains(id.as_str()))
-                .count();
-            (
-                needing
-                    .into_iter()
-                    .filter(|id| named.contains(id.as_str()))
-                    .collect(),
-                in_scope,
-            )
-        }
-    };
-    summary.selected = selected.len();
-    summary.algorithm_refits = selected
-        .iter()
-        .filter(|id| by_other_algorithm.contains(*id))
-        .count();
-    summary.up_to_date = in_scope.saturating_sub(selected.len());
-
-    let records = if selected.is_empty() {
-        Vec::new()
-    } else {
-        db::load_segments(conn, Some(&selected))?
-    };
-    let work: Vec<Job> = records
-        .into_iter()
-        .map(|record| {
-            let (settings, settings_hash) = settings_for(&record.segment_id)?;
-            Ok(Job {
-                seed: segment_seed(opts.seed, &record.segment_id),
-                record,
-                settings,
-                settings_hash,
-            })
-        })
-        .collect::<Result<_, BatchError>>()?;
+    let selection = Selection::new(conn, opts, &mut summary)?;
+    // Count first, a page at a time, for the run's row and the progress bar; the fits then read
+    // the inventory again, page by page, as the workers need it.
+    let plan = selection.count(conn)?;
+    plan.apply(&mut summary);
 
     let run_id = db::start_run(
         conn,
@@ -543,25 +482,32 @@ fn locked_run(
             effects: effects_text(&opts.effects),
             program_version: env!("CARGO_PKG_VERSION").to_string(),
             jobs: i64::try_from(jobs).ok(),
-            n_segments: i64::try_from(work.len()).unwrap_or(i64::MAX),
+            n_segments: i64::try_from(plan.to_fit).unwrap_or(i64::MAX),
         },
     )?;
     summary.run_id = Some(run_id);
     observer.started(&RunPlan {
         run_id,
-        to_fit: work.len(),
+        to_fit: plan.to_fit,
         up_to_date: summary.up_to_date,
         jobs,
     });
 
-    let written = if work.is_empty() {
-        Ok(())
+    let written = if plan.to_fit == 0 {
+        Ok(true)
     } else {
-        fit_and_store(conn, run_id, &work, observer, stop, &mut summary)
+        let mut feed = Feed::new(&selection);
+        fit_and_store(conn, run_id, &mut feed, observer, stop, &mut summary).inspect(|&complete| {
+            // What the pages held when they were read is what the run did (the count
+            // before differs only if an import ran meanwhile).
+            if complete {
+                feed.tally.apply(&mut summary);
+            }
+        })
     };
-    summary.interrupted = summary.stored() < summary.selected;
+    summary.interrupted = !matches!(written, Ok(true));
     summary.elapsed_s = started.elapsed().as_secs_f64();
-    let status = if summary.interrupted || written.is_err() {
+    let status = if summary.interrupted {
         RunStatus::Interrupted
     } else {
         RunStatus::Finished
@@ -581,42 +527,294 @@ fn locked_run(
     Ok(summary)
 }
 
-/// The pool, the workers and the writer loop.
+/// Which segments a run fits, and with what settings: those with measurements whose latest fit
+/// is missing or stale under their own settings (the run's, plus the segment's own effects set
+/// by `diagnose`), or all of them with `force`; within the named segments, if any.
+struct Selection<'a> {
+    opts: &'a CalibrateOptions,
+    /// The segments named with `opts.segments`.
+    named: Option<BTreeSet<&'a str>>,
+}
+
+/// What a run does with one segment.
+enum Verdict {
+    /// No measurements, or not among the named segments.
+    OutOfScope,
+    /// Its latest fit is current.
+    UpToDate,
+    /// To fit, with these settings.
+    Fit {
+        settings: FitSettings,
+        settings_hash: String,
+        /// Its latest fit was made by another version of the fitting algorithm.
+        other_algorithm: bool,
+    },
+}
+
+/// Segments in scope and to fit, over the pages read.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Tally {
+    in_scope: usize,
+    to_fit: usize,
+    algorithm_refits: usize,
+}
+
+impl Tally {
+    fn add(&mut self, verdict: &Verdict) {
+        match verdict {
+            Verdict::OutOfScope => {}
+            Verdict::UpToDate => self.in_scope += 1,
+            Verdict::Fit {
+                other_algorithm, ..
+            } => {
+                self.in_scope += 1;
+                self.to_fit += 1;
+                self.algorithm_refits += usize::from(*other_algorithm);
+            }
+        }
+    }
+
+    fn apply(&self, summary: &mut CalibrateSummary) {
+        summary.selected = self.to_fit;
+        summary.algorithm_refits = self.algorithm_refits;
+        summary.up_to_date = self.in_scope.saturating_sub(self.to_fit);
+    }
+}
+
+impl<'a> Selection<'a> {
+    /// Check the named segments (an unknown id is an error naming every such id) and note in
+    /// `summary` those without measurements. Reads one named segment at a time.
+    fn new(
+        conn: &Connection,
+        opts: &'a CalibrateOptions,
+        summary: &mut CalibrateSummary,
+    ) -> Result<Selection<'a>, BatchError> {
+        let named = opts
+            .segments
+            .as_ref()
+            .map(|ids| ids.iter().map(String::as_str).collect::<BTreeSet<&str>>());
+        if let Some(named) = &named {
+            let mut missing = Vec::new();
+            for &id in named {
+                match db::load_segment(conn, id)? {
+                    None => missing.push(id),
+                    Some(r) if r.measurements.is_empty() => {
+                        summary.without_measurements.push(r.segment_id)
+                    }
+                    Some(_) => {}
+                }
+            }
+            if !missing.is_empty() {
+                return Err(DbError::UnknownSegments {
+                    ids: missing.join(", "),
+                }
+                .into());
+            }
+        }
+        Ok(Selection { opts, named })
+    }
+
+    /// The verdict on one segment, from its fit state and its own effects (comma-separated).
+    fn judge(&self, st: &FitState, own_effects: &str) -> Result<Verdict, BatchError> {
+        let named = |id: &str| self.named.as_ref().is_none_or(|n| n.contains(id));
+        if !st.has_measurements || !named(&st.segment_id) {
+            return Ok(Verdict::OutOfScope);
+        }
+        let opts = self.opts;
+        let mut effects = opts.effects.clone();
+        effects.extend(
+            parse_effects(own_effects).map_err(|e| BatchError::StoredEffects {
+                segment: st.segment_id.clone(),
+                message: e.to_string(),
+            })?,
+        );
+        effects.sort();
+        effects.dedup();
+        let settings_hash = settings_hash(opts.method, opts.model, opts.contact_mode, &effects);
+        if !(opts.force || st.is_stale(&settings_hash)) {
+            return Ok(Verdict::UpToDate);
+        }
+        let mut settings = opts.fit_settings();
+        settings.effects = effects;
+        Ok(Verdict::Fit {
+            settings,
+            settings_hash,
+            other_algorithm: st.made_by_other_algorithm(),
+        })
+    }
+
+    /// Count the segments in scope and to fit, reading the inventory a page at a time.
+    fn count(&self, conn: &Connection) -> Result<Tally, BatchError> {
+        let mut tally = Tally::default();
+        let mut after: Option<String> = None;
+        loop {
+            let page = db::fit_states_page(conn, after.as_deref(), self.page_size())?;
+            for (st, own_effects) in &page {
+                tally.add(&self.judge(st, own_effects)?);
+            }
+            if page.len() < self.page_size() {
+                return Ok(tally);
+            }
+            after = page.last().map(|(st, _)| st.segment_id.clone());
+        }
+    }
+
+    fn page_size(&self) -> usize {
+        self.opts.chunk_size.max(1)
+    }
+}
+
+/// The segments to fit, read from the database a page at a time as the workers need them: a
+/// run holds at most one page of segments, whatever the size of the network. A segment is
+/// judged when its page is read.
+struct Feed<'s> {
+    selection: &'s Selection<'s>,
+    /// The id the next page starts after (`None`: from the first).
+    after: Option<String>,
+    /// The last page has been read.
+    exhausted: bool,
+    /// Jobs of the page read last, not yet handed out.
+    ready: VecDeque<Job>,
+    /// What the pages read so far held.
+    tally: Tally,
+}
+
+impl<'s> Feed<'s> {
+    fn new(selection: &'s Selection<'s>) -> Self {
+        Self {
+            selection,
+            after: None,
+            exhausted: false,
+            ready: VecDeque::new(),
+            tally: Tally::default(),
+        }
+    }
+
+    /// The next segment to fit, or `None` when every page has been read and handed out.
+    fn next(&mut self, conn: &Connection) -> Result<Option<Job>, BatchError> {
+        loop {
+            if let Some(job) = self.ready.pop_front() {
+                return Ok(Some(job));
+            }
+            if self.exhausted {
+                return Ok(None);
+            }
+            self.read_page(conn)?;
+        }
+    }
+
+    /// Every segment was handed out.
+    fn is_done(&self) -> bool {
+        self.exhausted && self.ready.is_empty()
+    }
+
+    fn read_page(&mut self, conn: &Connection) -> Result<(), BatchError> {
+        let size = self.selection.page_size();
+        let page = db::fit_states_page(conn, self.after.as_deref(), size)?;
+        self.exhausted = page.len() < size;
+        if let Some((last, _)) = page.last() {
+            self.after = Some(last.segment_id.clone());
+        }
+        let run_seed = self.selection.opts.seed;
+        for (st, own_effects) in &page {
+            let verdict = self.selection.judge(st, own_effects)?;
+            if let Verdict::Fit {
+                settings,
+                settings_hash,
+                ..
+            } = &verdict
+            {
+                // A segment deleted since its state was read is not fitted.
+                let Some(record) = db::load_segment(conn, &st.segment_id)? else {
+                    continue;
+                };
+                self.ready.push_back(Job {
+                    seed: segment_seed(run_seed, &record.segment_id),
+                    record,
+                    settings: settings.clone(),
+                    settings_hash: settings_hash.clone(),
+                });
+            }
+            self.tally.add(&verdict);
+        }
+        Ok(())
+    }
+}
+
+/// The pool, the workers and the writer loop. The calling thread reads the segments from the
+/// feed and hands them to the workers one at a time, never more than [`IN_FLIGHT_PER_JOB`] ×
+/// `jobs` ahead of the writes, so neither channel nor the feed grows with the network.
+/// Returns whether every selected segment was fitted and stored (false: stopped first).
 fn fit_and_store(
     conn: &mut Connection,
     run_id: i64,
-    work: &[Job],
+    feed: &mut Feed<'_>,
     observer: &mut dyn RunObserver,
     stop: &AtomicBool,
     summary: &mut CalibrateSummary,
-) -> Result<(), BatchError> {
+) -> Result<bool, BatchError> {
     let jobs = summary.jobs;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs)
         .thread_name(|i| format!("pipewave-fit-{i}"))
         .build()
         .map_err(|source| BatchError::ThreadPool { jobs, source })?;
-    // Set when the writer fails: the workers stop taking segments.
+    // Set when the writer or the feed fails: the workers stop fitting.
     let abort = AtomicBool::new(false);
-    let (tx, rx) = mpsc::sync_channel::<Computed>(2 * jobs);
+    let window = IN_FLIGHT_PER_JOB * jobs;
+    // Jobs go out one by one while fewer than `window` are unanswered, and every job is
+    // answered once (`None`: skipped because the run is stopping), so neither channel ever
+    // holds more than `window` messages.
+    let (job_tx, job_rx) = mpsc::channel::<Job>();
+    let job_rx = Mutex::new(job_rx);
+    let (tx, rx) = mpsc::sync_channel::<Option<Computed>>(window);
     let mut error: Option<BatchError> = None;
+    let mut skipped = 0usize;
 
     std::thread::scope(|scope| {
-        let abort = &abort;
-        let pool = &pool;
+        let (abort, job_rx, pool) = (&abort, &job_rx, &pool);
         scope.spawn(move || {
-            pool.install(|| {
-                work.par_iter().for_each_with(tx, |tx, job| {
-                    if stop.load(Ordering::SeqCst) || abort.load(Ordering::SeqCst) {
-                        return;
+            pool.broadcast(|_| {
+                let tx = tx.clone();
+                loop {
+                    // Nothing panics while holding the lock, so it cannot be poisoned.
+                    let next = job_rx.lock().unwrap_or_else(PoisonError::into_inner).recv();
+                    let Ok(job) = next else { break };
+                    let result = (!stop.load(Ordering::SeqCst) && !abort.load(Ordering::SeqCst))
+                        .then(|| compute(&job, run_id));
+                    // The writer hangs up only when it is gone, when results are dropped anyway.
+                    if tx.send(result).is_err() {
+                        break;
                     }
-                    let computed = compute(job, run_id);
-                    // The writer only hangs up after an error, when results are dropped anyway.
-                    let _ = tx.send(computed);
-                });
+                }
             });
         });
-        for c in rx.iter() {
+        let mut in_flight = 0usize;
+        loop {
+            while in_flight < window && error.is_none() && !stop.load(Ordering::SeqCst) {
+                match feed.next(conn) {
+                    Ok(Some(job)) => {
+                        if job_tx.send(job).is_err() {
+                            break;
+                        }
+                        in_flight += 1;
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        abort.store(true, Ordering::SeqCst);
+                        error = Some(e);
+                    }
+                }
+            }
+            if in_flight == 0 {
+                break;
+            }
+            let Ok(result) = rx.recv() else { break };
+            in_flight -= 1;
+            let Some(c) = result else {
+                skipped += 1;
+                continue;
+            };
             if error.is_some() {
                 continue; // drain what is in flight; nothing more is stored
             }
@@ -642,10 +840,12 @@ fn fit_and_store(
                 }
             }
         }
+        // The workers end once the job channel is closed and empty.
+        drop(job_tx);
     });
     match error {
         Some(e) => Err(e),
-        None => Ok(()),
+        None => Ok(feed.is_done() && skipped == 0),
     }
 }
 

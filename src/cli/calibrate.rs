@@ -78,6 +78,7 @@ impl CalibrateArgs {
             effects: parse_effects(self.effects.as_deref().unwrap_or(""))?,
             segments: (!self.segments.is_empty()).then(|| self.segments.clone()),
             wait_for_lock: self.wait,
+            chunk_size: batch::DEFAULT_CHUNK_SIZE,
         })
     }
 }

@@ -183,16 +183,17 @@ impl SegmentRecord {
     }
 }
 
-const SEGMENT_COLUMNS: &str = "segment_id, material, outer_diameter_mm, wall_thickness_mm, \
+pub(crate) const SEGMENT_COLUMNS: &str =
+    "segment_id, material, outer_diameter_mm, wall_thickness_mm, \
     soil_density_kg_m3, pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, \
     pipe_loss_factor, fluid_density_kg_m3, fluid_bulk_modulus_pa, length_m, soil_type, \
     install_year, geometry_wkt, srid, inputs_hash, imported_at, soil_zone";
 
-const MEASUREMENT_COLUMNS: &str = "omega_rad_s, frequency_hz, k_re_rad_per_m, \
+pub(crate) const MEASUREMENT_COLUMNS: &str = "omega_rad_s, frequency_hz, k_re_rad_per_m, \
     attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign";
 
 /// A segment row without its measurements; the material is parsed afterwards.
-fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, String)> {
+pub(crate) fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, String)> {
     let material: String = r.get(1)?;
     Ok((
         SegmentRecord {
@@ -222,7 +223,7 @@ fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, String)> {
     ))
 }
 
-fn measurement_from_row(r: &Row<'_>) -> rusqlite::Result<MeasurementRecord> {
+pub(crate) fn measurement_from_row(r: &Row<'_>) -> rusqlite::Result<MeasurementRecord> {
     Ok(MeasurementRecord {
         omega_rad_s: r.get(0)?,
         frequency_hz: r.get(1)?,
@@ -307,13 +308,18 @@ pub fn load_segments(
     }
 }
 
-/// All segment ids in the inventory.
-pub(crate) fn segment_ids(conn: &Connection) -> Result<BTreeSet<String>, DbError> {
-    let mut stmt = conn.prepare("SELECT segment_id FROM segments")?;
-    let ids = stmt
-        .query_map([], |r| r.get(0))?
+/// The segments that may lie in a soil zone (`soil_zone` holds more than spaces), with their
+/// measurements, sorted by id. Reads only those: asking costs nothing on a network without
+/// zones.
+pub fn load_zoned_segments(conn: &Connection) -> Result<Vec<SegmentRecord>, DbError> {
+    let mut stmt = conn.prepare(&format!(
+        "SELECT {SEGMENT_COLUMNS} FROM segments WHERE trim(soil_zone) != '' \
+         ORDER BY segment_id"
+    ))?;
+    let rows: Vec<_> = stmt
+        .query_map([], segment_from_row)?
         .collect::<Result<_, _>>()?;
-    Ok(ids)
+    rows.into_iter().map(|r| finish_segment(conn, r)).collect()
 }
 
 /// Insert a new segment row (without measurements; `inputs_hash` as given).

@@ -31,11 +31,14 @@ pub use import::{
     import, known_columns, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError,
     SourceKind,
 };
-pub use inventory::{load_segment, load_segments, MeasurementRecord, SegmentRecord};
+pub use inventory::{
+    load_segment, load_segments, load_zoned_segments, MeasurementRecord, SegmentRecord,
+};
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{
-    curves_for, finish_run, insert_fit_with_curves, latest_fits, load_run, segments_needing_fit,
-    start_run, CurvePoint, FitRow, FitStatus, NewRun, RunCounts, RunRow, RunStatus,
+    curves_for, finish_run, fit_states_page, insert_fit_with_curves, latest_fits, load_run,
+    segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun, RunCounts, RunRow,
+    RunStatus,
 };
 
 /// How long a statement waits for another connection's write lock before giving up. A calibrate

@@ -9,7 +9,7 @@ use rusqlite::Connection;
 
 use crate::batch::segment_data;
 use crate::db::zones::{insert_zone_fit, latest_zone_fit, ZoneFitRow, ZoneMemberRow};
-use crate::db::{latest_fits, load_segments, DbError, FitRow, FitStatus, SegmentRecord};
+use crate::db::{latest_fits, load_zoned_segments, DbError, FitRow, FitStatus, SegmentRecord};
 use crate::invert::problem::{parameter_space, Param};
 use crate::invert::Method;
 use crate::physics::effects::parse_effects;
@@ -94,7 +94,7 @@ fn members_hash(fits: &[&FitRow]) -> String {
 pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUpdate, DbError> {
     let started = Instant::now();
     let mut update = ZoneUpdate::default();
-    let records: Vec<SegmentRecord> = load_segments(conn, None)?
+    let records: Vec<SegmentRecord> = load_zoned_segments(conn)?
         .into_iter()
         .filter(|r| r.soil_zone.as_deref().is_some_and(|z| !z.trim().is_empty()))
         .collect();

@@ -14,7 +14,7 @@ use std::path::Path;
 use rusqlite::types::Value as Sql;
 use rusqlite::{Connection, OpenFlags};
 
-use super::table::{RawRow, RawTable};
+use super::table::{RawRow, RawTable, Rows};
 use super::{ColumnRef, ImportSource, RowError, SourceKind};
 use crate::db::wkt::LineString;
 
@@ -83,7 +83,7 @@ pub(super) fn read(
         SourceKind::Shapefile { dbf, prj } => {
             read_shapefile(&source.data, dbf.as_deref(), prj.as_deref(), &stem)
         }
-        SourceKind::Csv => Err("not a GIS layer".to_string()),
+        SourceKind::Csv | SourceKind::CsvFile(_) => Err("not a GIS layer".to_string()),
     };
     let layer = match layer {
         Ok(l) => l,
@@ -131,7 +131,7 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
     header.push("geometry_wkt".into());
     header.push("srid".into());
     let srid = layer.srid.map(|s| s.to_string()).unwrap_or_default();
-    let rows = layer
+    let rows: Vec<RawRow> = layer
         .features
         .into_iter()
         .map(|f| {
@@ -173,7 +173,7 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
         layer: Some(layer.name),
         header_line: 0,
         header,
-        rows,
+        rows: Rows::Loaded(rows.into_iter()),
     }
 }
 

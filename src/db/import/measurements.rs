@@ -1,11 +1,12 @@
 //! `measurements.csv`: field wavenumbers, one row per segment and frequency (docs/interface.md).
 
-use std::collections::BTreeMap;
 use std::f64::consts::TAU;
 
+use super::staging::{StagedMeasurement, Staging};
 use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, RowError};
 use crate::db::inventory::MeasurementRecord;
+use crate::db::DbError;
 
 /// The columns of `measurements.csv`. Exactly one of `frequency_hz` / `omega_rad_s` per row; the
 /// header needs at least one of them (checked separately).
@@ -54,21 +55,11 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
 /// field frequencies are never closer than about 1e-4 of each other.
 pub const SAME_FREQUENCY_REL_TOL: f64 = 1e-9;
 
-/// One data row of the file.
-#[derive(Debug)]
-pub(super) struct MeasurementRow {
-    pub line: u64,
-    /// The segment id, when the cell could be read.
-    pub segment_id: Option<String>,
-    /// The checked record, when the whole row is valid.
-    pub record: Option<MeasurementRecord>,
-}
-
-/// The file, checked (except that the segments exist: that needs the database).
+/// The file, checked (except that the segments exist: that needs the database); its valid rows
+/// are staged ([`Staging::measurement`]).
 #[derive(Debug)]
 pub(super) struct ParsedMeasurements {
     pub file: String,
-    pub rows: Vec<MeasurementRow>,
     pub errors: Vec<RowError>,
     pub fatal: bool,
     /// Field index of `segment_id`, for errors raised later.
@@ -77,21 +68,25 @@ pub(super) struct ParsedMeasurements {
     pub notes: Vec<String>,
 }
 
-/// Read and check `measurements.csv`.
-pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedMeasurements {
+/// Read and check `measurements.csv` a row at a time, staging the valid rows. `Err`: the
+/// staging tables failed.
+pub(super) fn parse(
+    source: &ImportSource,
+    options: &ImportOptions,
+    staging: &Staging<'_>,
+) -> Result<ParsedMeasurements, DbError> {
     let read = Table::read(source, COLUMNS, options);
     let mut errors = read.errors;
     let mut out = ParsedMeasurements {
         file: source.name.clone(),
-        rows: Vec::new(),
         errors: Vec::new(),
         fatal: read.fatal,
         segment_id_column: 0,
         notes: read.notes,
     };
-    let Some(table) = read.table else {
+    let Some(mut table) = read.table else {
         out.errors = errors;
-        return out;
+        return Ok(out);
     };
     if !table.has("frequency_hz") && !table.has("omega_rad_s") {
         errors.push(RowError::new(
@@ -102,82 +97,74 @@ pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedMea
         ));
         out.errors = errors;
         out.fatal = true;
-        return out;
+        return Ok(out);
     }
     out.segment_id_column = table.index_of("segment_id").unwrap_or(0);
-    let mut rows: Vec<MeasurementRow> = table
-        .rows
-        .iter()
-        .map(|raw| {
-            let mut c = table.check(raw);
-            let segment_id = c.text("segment_id").map(str::to_string);
-            let record = check_row(&mut c);
-            let ok = c.errors.is_empty();
-            errors.append(&mut c.errors);
-            MeasurementRow {
-                line: raw.line,
-                segment_id,
-                record: if ok { record } else { None },
+    for raw in table.take_rows() {
+        let raw = match raw {
+            Ok(raw) => raw,
+            Err(e) => {
+                errors.push(e);
+                continue;
             }
-        })
-        .collect();
+        };
+        let mut c = table.check(&raw);
+        let record = check_row(&mut c);
+        if let (Some(id), Some(m), true) = (c.text("segment_id"), &record, c.errors.is_empty()) {
+            staging.measurement(raw.line, id, c.text("omega_rad_s").is_some(), m)?;
+        }
+        errors.append(&mut c.errors);
+    }
+    staging.index_measurements()?;
 
     // One measurement per segment and frequency: every member of a group of rows at the same
-    // frequency is an error (we cannot tell which one is meant).
-    let mut by_segment: BTreeMap<&str, Vec<(f64, usize)>> = BTreeMap::new();
-    for (i, r) in rows.iter().enumerate() {
-        if let (Some(id), Some(m)) = (&r.segment_id, &r.record) {
-            by_segment.entry(id).or_default().push((m.omega_rad_s, i));
-        }
-    }
-    let mut duplicates: Vec<(usize, Vec<u64>)> = Vec::new();
-    for list in by_segment.values_mut() {
-        list.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut start = 0;
-        while start < list.len() {
-            let mut end = start + 1;
-            while end < list.len() && same_frequency(list[end - 1].0, list[end].0) {
-                end += 1;
+    // frequency is an error (we cannot tell which one is meant). The rows come by segment and
+    // ω, so a group is a run of neighbours each at the same frequency as the one before.
+    let mut group: Vec<StagedMeasurement> = Vec::new();
+    let mut duplicates: Vec<StagedMeasurement> = Vec::new();
+    let mut close = |group: &mut Vec<StagedMeasurement>| {
+        if group.len() > 1 {
+            for m in group.iter() {
+                let lines: Vec<String> = group
+                    .iter()
+                    .filter(|o| o.rowid != m.rowid)
+                    .map(|o| o.line.to_string())
+                    .collect();
+                let col = if m.omega_given {
+                    "omega_rad_s"
+                } else {
+                    "frequency_hz"
+                };
+                errors.push(table.error(
+                    m.line,
+                    col,
+                    format!(
+                        "segment '{}' already has a measurement at this frequency on line {}; give one row per segment and frequency",
+                        m.segment_id,
+                        lines.join(", ")
+                    ),
+                ));
             }
-            if end - start > 1 {
-                let group = &list[start..end];
-                for &(_, i) in group {
-                    let others = group
-                        .iter()
-                        .filter(|&&(_, j)| j != i)
-                        .map(|&(_, j)| rows[j].line)
-                        .collect();
-                    duplicates.push((i, others));
-                }
-            }
-            start = end;
+            duplicates.append(group);
         }
+        group.clear();
+    };
+    staging.measurements_by_frequency(|m| {
+        let joins = group.last().is_some_and(|prev| {
+            prev.segment_id == m.segment_id && same_frequency(prev.omega_rad_s, m.omega_rad_s)
+        });
+        if !joins {
+            close(&mut group);
+        }
+        group.push(m);
+        Ok(())
+    })?;
+    close(&mut group);
+    for m in &duplicates {
+        staging.invalidate_measurement(m.rowid)?;
     }
-    for (i, others) in duplicates {
-        let Some(raw) = table.rows.iter().find(|raw| raw.line == rows[i].line) else {
-            continue;
-        };
-        let mut c = table.check(raw);
-        let col = if c.text("omega_rad_s").is_some() {
-            "omega_rad_s"
-        } else {
-            "frequency_hz"
-        };
-        let lines: Vec<String> = others.iter().map(u64::to_string).collect();
-        c.err(
-            col,
-            format!(
-                "segment '{}' already has a measurement at this frequency on line {}; give one row per segment and frequency",
-                rows[i].segment_id.as_deref().unwrap_or(""),
-                lines.join(", ")
-            ),
-        );
-        errors.append(&mut c.errors);
-        rows[i].record = None;
-    }
-    out.rows = rows;
     out.errors = errors;
-    out
+    Ok(out)
 }
 
 /// Same frequency within [`SAME_FREQUENCY_REL_TOL`].

@@ -20,18 +20,20 @@ pub mod aliases;
 mod layer;
 mod measurements;
 mod segments;
+mod staging;
 mod table;
 
-use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use rusqlite::{Connection, TransactionBehavior};
+use rusqlite::{Connection, Transaction, TransactionBehavior};
 
 pub use measurements::SAME_FREQUENCY_REL_TOL;
 
-use super::inventory::{self, MeasurementRecord};
+use super::inventory;
 use super::DbError;
+use staging::Staging;
 
 /// One import file: its name for messages, its kind, and its bytes.
 #[derive(Debug, Clone)]
@@ -39,7 +41,8 @@ pub struct ImportSource {
     /// Name used in messages, e.g. `data/segments.csv`.
     pub name: String,
     /// The raw bytes (checked for UTF-8 cell by cell, so a bad byte names its line and column).
-    /// Empty for a GeoPackage, which is read from [`SourceKind::GeoPackage`]'s path.
+    /// Empty for a GeoPackage and a CSV file, which are read from their path
+    /// ([`SourceKind::GeoPackage`], [`SourceKind::CsvFile`]).
     pub data: Vec<u8>,
     /// CSV or which GIS layer format.
     pub kind: SourceKind,
@@ -48,8 +51,10 @@ pub struct ImportSource {
 /// What an import file is.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SourceKind {
-    /// `segments.csv` / `measurements.csv` (docs/interface.md).
+    /// `segments.csv` / `measurements.csv` (docs/interface.md), the bytes.
     Csv,
+    /// The same, in a file read a record at a time as it is imported (never whole in memory).
+    CsvFile(PathBuf),
     /// An OGC GeoPackage, read with SQLite from this path.
     GeoPackage(PathBuf),
     /// An RFC 7946 GeoJSON FeatureCollection (the bytes).
@@ -115,12 +120,28 @@ impl ImportSource {
                 kind,
             });
         }
+        if kind == SourceKind::Csv {
+            // Read now only the first bytes: whether it is readable, and whether it is a
+            // GeoPackage whatever its name.
+            let mut magic = Vec::with_capacity(SQLITE_MAGIC.len());
+            std::fs::File::open(path)
+                .and_then(|f| f.take(SQLITE_MAGIC.len() as u64).read_to_end(&mut magic))
+                .map_err(|source| DbError::ReadFile {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
+            let kind = if magic == SQLITE_MAGIC {
+                SourceKind::GeoPackage(path.to_path_buf())
+            } else {
+                SourceKind::CsvFile(path.to_path_buf())
+            };
+            return Ok(ImportSource {
+                name,
+                data: Vec::new(),
+                kind,
+            });
+        }
         let data = read(path)?;
-        let kind = if kind == SourceKind::Csv && data.starts_with(SQLITE_MAGIC) {
-            SourceKind::GeoPackage(path.to_path_buf())
-        } else {
-            kind
-        };
         Ok(ImportSource { name, data, kind })
     }
 
@@ -269,79 +290,74 @@ pub struct ImportReport {
 /// Import the given files into the database (see the module docs for the semantics). At least
 /// one file should be given; with none, nothing happens. Row problems are returned in the
 /// report, not as `Err`; `Err` means the database itself failed.
+///
+/// Memory does not grow with the files: a CSV is read a record at a time, and the checked rows
+/// are staged in temporary tables ([`staging`]) that the checks and the writes then query in
+/// order.
 pub fn import(
     conn: &mut Connection,
     segments: Option<&ImportSource>,
     measurements: Option<&ImportSource>,
     options: ImportOptions,
 ) -> Result<ImportReport, DbError> {
-    let segs = segments.map(|s| segments::parse(s, &options));
-    let meas = measurements.map(|m| measurements::parse(m, &options));
+    let conn: &Connection = conn;
+    let staging = Staging::create(conn)?;
+    // Read, check and stage both files. Only the temporary tables are written here, so the
+    // database is not locked yet.
+    let staged = Transaction::new_unchecked(conn, TransactionBehavior::Deferred)?;
+    let segs = segments
+        .map(|s| segments::parse(s, &options, &staging))
+        .transpose()?;
+    let meas = measurements
+        .map(|m| measurements::parse(m, &options, &staging))
+        .transpose()?;
+    staged.commit()?;
 
     // IMMEDIATE: take the write lock now, so the segments we check against cannot change.
-    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+    let tx = Transaction::new_unchecked(conn, TransactionBehavior::Immediate)?;
     let mut report = ImportReport::default();
     let mut fatal = false;
     let mut seg_errors = Vec::new();
     let mut meas_errors = Vec::new();
-
-    // Segments: valid ones, and the lines of invalid ones by id (for measurement messages).
-    let mut valid_segments = Vec::new();
-    let mut invalid_segment_lines: BTreeMap<String, u64> = BTreeMap::new();
     let mut segments_file_unusable = false;
     if let Some(mut p) = segs {
         report.notes.append(&mut p.notes);
         fatal |= p.fatal;
         segments_file_unusable = p.fatal;
         seg_errors = p.errors;
-        for r in p.rows {
-            match (r.record, r.segment_id) {
-                (Some(rec), _) => valid_segments.push(rec),
-                (None, Some(id)) => {
-                    invalid_segment_lines.entry(id).or_insert(r.line);
-                }
-                (None, None) => {}
-            }
-        }
     }
 
     // Measurements: their segment must be in the database or among the valid file rows.
-    let mut new_sets: BTreeMap<String, Vec<MeasurementRecord>> = BTreeMap::new();
     if let Some(mut p) = meas {
         report.notes.append(&mut p.notes);
         fatal |= p.fatal;
         meas_errors = p.errors;
-        let known_db = inventory::segment_ids(&tx)?;
-        let known_file: BTreeSet<&str> = valid_segments
-            .iter()
-            .map(|s| s.segment_id.as_str())
-            .collect();
         let seg_file = segments.map_or("segments file", |s| s.name.as_str());
-        for r in p.rows {
-            let (Some(id), Some(rec)) = (r.segment_id, r.record) else {
-                continue;
-            };
-            // When the segments file is unusable as a whole, whether a measurement's segment
-            // exists cannot be told; the import is rejected anyway, so do not add noise.
-            if known_db.contains(&id) || known_file.contains(id.as_str()) || segments_file_unusable
-            {
-                new_sets.entry(id).or_default().push(rec);
-                continue;
+        // When the segments file is unusable as a whole, whether a measurement's segment
+        // exists cannot be told; the import is rejected anyway, so do not add noise.
+        if !segments_file_unusable {
+            let mut unknown = Vec::new();
+            staging.measurements_of_unknown_segments(|rowid, id, line| {
+                let message = match staging.invalid_segment_line(&id)? {
+                    Some(at) => format!(
+                        "segment '{id}' cannot be imported: its row in {seg_file} (line {at}) is invalid"
+                    ),
+                    None => format!(
+                        "segment '{id}' is not in the inventory (neither in the database nor in the segments file); import its segment row first"
+                    ),
+                };
+                meas_errors.push(RowError::new(
+                    &p.file,
+                    line,
+                    Some(ColumnRef::new(p.segment_id_column, "segment_id")),
+                    message,
+                ));
+                unknown.push(rowid);
+                Ok(())
+            })?;
+            for rowid in unknown {
+                staging.invalidate_measurement(rowid)?;
             }
-            let message = match invalid_segment_lines.get(&id) {
-                Some(line) => format!(
-                    "segment '{id}' cannot be imported: its row in {seg_file} (line {line}) is invalid"
-                ),
-                None => format!(
-                    "segment '{id}' is not in the inventory (neither in the database nor in the segments file); import its segment row first"
-                ),
-            };
-            meas_errors.push(RowError::new(
-                &p.file,
-                r.line,
-                Some(ColumnRef::new(p.segment_id_column, "segment_id")),
-                message,
-            ));
         }
     }
     seg_errors.sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
@@ -356,35 +372,34 @@ pub fn import(
         return Ok(report);
     }
 
-    let mut touched = BTreeSet::new();
-    for rec in &valid_segments {
+    staging.valid_segments(|rec| {
         match inventory::load_segment(&tx, &rec.segment_id)? {
             None => {
-                inventory::insert_segment(&tx, rec)?;
+                inventory::insert_segment(&tx, &rec)?;
                 report.segments_inserted += 1;
             }
-            Some(old) if !old.same_inventory(rec) => {
-                inventory::update_segment(&tx, rec)?;
+            Some(old) if !old.same_inventory(&rec) => {
+                inventory::update_segment(&tx, &rec)?;
                 report.segments_updated += 1;
             }
             Some(_) => report.segments_unchanged += 1,
         }
-        touched.insert(rec.segment_id.clone());
-    }
-    for (id, mut set) in new_sets {
-        set.sort_by(|a, b| a.omega_rad_s.total_cmp(&b.omega_rad_s));
-        if inventory::load_measurements(&tx, &id)? != set {
-            inventory::replace_measurements(&tx, &id, &set)?;
+        Ok(())
+    })?;
+    staging.measurement_sets(|id, set| {
+        if inventory::load_measurements(&tx, id)? != set {
+            inventory::replace_measurements(&tx, id, &set)?;
             report.measurements_written += set.len();
             report.segments_with_changed_measurements += 1;
         }
-        touched.insert(id);
-    }
-    for id in &touched {
+        Ok(())
+    })?;
+    staging.touched_segments(|id| {
         if inventory::refresh_inputs_hash(&tx, id)? {
             report.segments_with_changed_inputs += 1;
         }
-    }
+        Ok(())
+    })?;
     tx.commit()?;
     Ok(report)
 }

@@ -1,12 +1,12 @@
 //! `segments.csv`: the inventory, one row per pipe segment (docs/interface.md).
 
-use std::collections::BTreeMap;
-
 use super::aliases;
+use super::staging::Staging;
 use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, RowError};
 use crate::db::inventory::SegmentRecord;
 use crate::db::wkt::LineString;
+use crate::db::DbError;
 use crate::physics::InputError;
 use crate::units::short;
 
@@ -92,94 +92,80 @@ use crate::physics::inputs::{
     SOIL_DENSITY_RANGE as SOIL_DENSITY,
 };
 
-/// One data row of the file.
-#[derive(Debug)]
-pub(super) struct SegmentRow {
-    pub line: u64,
-    /// The id, when the cell could be read.
-    pub segment_id: Option<String>,
-    /// The checked record (without measurements), when the whole row is valid.
-    pub record: Option<SegmentRecord>,
-}
-
-/// The file, checked.
+/// The file, checked; its rows are staged ([`Staging::segment`]).
 #[derive(Debug)]
 pub(super) struct ParsedSegments {
-    pub rows: Vec<SegmentRow>,
     pub errors: Vec<RowError>,
     pub fatal: bool,
     /// Things to tell the user that reject nothing (ignored columns).
     pub notes: Vec<String>,
 }
 
-/// Read and check `segments.csv`.
-pub(super) fn parse(source: &ImportSource, options: &ImportOptions) -> ParsedSegments {
+/// Read and check `segments.csv` a row at a time, staging every row whose id can be read (with
+/// its record when the whole row is valid). `Err`: the staging tables failed.
+pub(super) fn parse(
+    source: &ImportSource,
+    options: &ImportOptions,
+    staging: &Staging<'_>,
+) -> Result<ParsedSegments, DbError> {
     let read = Table::read(source, COLUMNS, options);
     let mut errors = read.errors;
     let notes = read.notes;
-    let Some(table) = read.table else {
-        return ParsedSegments {
-            rows: Vec::new(),
+    let Some(mut table) = read.table else {
+        return Ok(ParsedSegments {
             errors,
             fatal: read.fatal,
             notes,
-        };
+        });
     };
-    let mut rows: Vec<SegmentRow> = table
-        .rows
-        .iter()
-        .map(|raw| {
-            let mut c = table.check(raw);
-            let segment_id = c.text("segment_id").map(str::to_string);
-            let record = check_row(&mut c);
-            let ok = c.errors.is_empty();
-            errors.append(&mut c.errors);
-            SegmentRow {
-                line: raw.line,
-                segment_id,
-                record: if ok { record } else { None },
+    for raw in table.take_rows() {
+        let raw = match raw {
+            Ok(raw) => raw,
+            Err(e) => {
+                errors.push(e);
+                continue;
             }
-        })
-        .collect();
+        };
+        let mut c = table.check(&raw);
+        let record = check_row(&mut c);
+        let ok = c.errors.is_empty();
+        if let Some(id) = c.text("segment_id") {
+            staging.segment(raw.line, id, record.as_ref().filter(|_| ok))?;
+        }
+        errors.append(&mut c.errors);
+    }
+    staging.index_segments()?;
 
     // Each segment once: every occurrence of a repeated id is an error, since we cannot tell
     // which one is meant.
-    let mut lines_of: BTreeMap<String, Vec<u64>> = BTreeMap::new();
-    for r in &rows {
-        if let Some(id) = &r.segment_id {
-            lines_of.entry(id.clone()).or_default().push(r.line);
-        }
-    }
-    for r in &mut rows {
-        let Some(id) = &r.segment_id else { continue };
-        let Some(lines) = lines_of.get(id).filter(|l| l.len() > 1) else {
-            continue;
-        };
-        let others: Vec<String> = lines
-            .iter()
-            .filter(|&&l| l != r.line)
-            .map(u64::to_string)
-            .collect();
-        let raw = table.rows.iter().find(|raw| raw.line == r.line);
-        if let Some(raw) = raw {
-            let mut c = table.check(raw);
-            c.err(
+    let mut repeated: Vec<(String, Vec<u64>)> = Vec::new();
+    staging.repeated_segment_ids(|id, line| match repeated.last_mut() {
+        Some((last, lines)) if last == id => lines.push(line),
+        _ => repeated.push((id.to_string(), vec![line])),
+    })?;
+    for (id, lines) in repeated {
+        for &line in &lines {
+            let others: Vec<String> = lines
+                .iter()
+                .filter(|&&l| l != line)
+                .map(u64::to_string)
+                .collect();
+            errors.push(table.error(
+                line,
                 "segment_id",
                 format!(
                     "duplicate segment_id '{id}': it is also on line {}; each segment must appear once",
                     others.join(", ")
                 ),
-            );
-            errors.append(&mut c.errors);
+            ));
         }
-        r.record = None;
+        staging.invalidate_segment(&id)?;
     }
-    ParsedSegments {
-        rows,
+    Ok(ParsedSegments {
         errors,
         fatal: false,
         notes,
-    }
+    })
 }
 
 /// Check one row; `Some` only if every cell is valid (the caller also looks at `c.errors`).

@@ -2,6 +2,7 @@
 //! problem reported as a [`RowError`] naming file, line and column.
 
 use std::collections::HashMap;
+use std::io::{Cursor, Read};
 
 use super::{ColumnRef, ImportOptions, ImportSource, RowError, SourceKind};
 use crate::physics::inputs::ValidRange;
@@ -26,6 +27,107 @@ pub(super) struct RawRow {
     pub errors: Vec<RowError>,
 }
 
+/// The data rows of a file, handed out one at a time.
+pub(super) enum Rows {
+    /// Rows read whole (a GIS layer's features).
+    Loaded(std::vec::IntoIter<RawRow>),
+    /// A CSV, read a record at a time: a file is never whole in memory.
+    Csv(Box<CsvRows>),
+}
+
+impl Default for Rows {
+    fn default() -> Self {
+        Rows::Loaded(Vec::new().into_iter())
+    }
+}
+
+impl std::fmt::Debug for Rows {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Rows::Loaded(rows) => write!(f, "Rows::Loaded({} rows)", rows.len()),
+            Rows::Csv(c) => write!(f, "Rows::Csv({})", c.file),
+        }
+    }
+}
+
+impl Iterator for Rows {
+    /// A row, or a problem with a record that makes it no row (wrong number of cells, bytes that
+    /// are not UTF-8, a record the CSV reader cannot read).
+    type Item = Result<RawRow, RowError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        match self {
+            Rows::Loaded(rows) => rows.next().map(Ok),
+            Rows::Csv(c) => c.next_row(),
+        }
+    }
+}
+
+/// The records of a CSV after its header.
+pub(super) struct CsvRows {
+    file: String,
+    /// The header's names, for messages.
+    names: Vec<String>,
+    /// The first record, read ahead to tell a file without data rows.
+    first: Option<Result<csv::ByteRecord, csv::Error>>,
+    records: csv::ByteRecordsIntoIter<Box<dyn Read>>,
+}
+
+impl CsvRows {
+    fn next_row(&mut self) -> Option<Result<RawRow, RowError>> {
+        let rec = match self.first.take() {
+            Some(r) => r,
+            None => self.records.next()?,
+        };
+        Some(
+            rec.map_err(|e| csv_error(&self.file, &e))
+                .and_then(|rec| self.row(&rec)),
+        )
+    }
+
+    /// One record as a row of trimmed cells.
+    fn row(&self, rec: &csv::ByteRecord) -> Result<RawRow, RowError> {
+        let file = &self.file;
+        let width = self.names.len();
+        let name = |i: usize| self.names.get(i).map_or("?", String::as_str).to_string();
+        let line = rec.position().map_or(0, |p| p.line());
+        if rec.len() != width {
+            // Point at the first missing cell, or at the row when there are extra ones.
+            let col = (rec.len() < width).then(|| ColumnRef::new(rec.len(), &name(rec.len())));
+            return Err(RowError::new(
+                file,
+                line,
+                col,
+                format!(
+                    "the row has {} values but the header has {width} columns",
+                    rec.len()
+                ),
+            ));
+        }
+        let mut cells = Vec::with_capacity(width);
+        for (i, raw) in rec.iter().enumerate() {
+            match std::str::from_utf8(raw) {
+                // Our own CSV output neutralises formula-like text with a `'` (issue 17):
+                // read it back as written.
+                Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
+                Err(_) => {
+                    return Err(RowError::new(
+                        file,
+                        line,
+                        Some(ColumnRef::new(i, &name(i))),
+                        "the value is not valid UTF-8 text; save the file as UTF-8",
+                    ));
+                }
+            }
+        }
+        Ok(RawRow {
+            line,
+            cells,
+            errors: Vec::new(),
+        })
+    }
+}
+
 /// A file as read, before its header is checked: a CSV, or a GIS layer whose attributes and
 /// geometry (as `geometry_wkt` and `srid` cells) were turned into text cells.
 #[derive(Debug, Default)]
@@ -37,7 +139,7 @@ pub(super) struct RawTable {
     pub header_line: u64,
     /// The column or field names, as written.
     pub header: Vec<String>,
-    pub rows: Vec<RawRow>,
+    pub rows: Rows,
 }
 
 /// How to match a header against the known columns.
@@ -60,7 +162,8 @@ pub(super) struct Table {
     /// Canonical name -> the name to show in messages (`DIAM_MM (outer_diameter_mm)` when the
     /// file's field is mapped or named otherwise).
     labels: HashMap<&'static str, String>,
-    pub rows: Vec<RawRow>,
+    /// The data rows, taken once ([`Table::take_rows`]).
+    rows: Rows,
 }
 
 /// The outcome of reading a file: the table if its header was usable, and every problem found.
@@ -97,7 +200,20 @@ impl Table {
         options: &ImportOptions,
     ) -> ReadOutcome {
         let raw = match &source.kind {
-            SourceKind::Csv => read_csv(source, specs),
+            SourceKind::Csv => read_csv(
+                &source.name,
+                Box::new(Cursor::new(source.data.clone())),
+                specs,
+            ),
+            SourceKind::CsvFile(path) => match std::fs::File::open(path) {
+                Ok(f) => read_csv(&source.name, Box::new(std::io::BufReader::new(f)), specs),
+                Err(e) => Err(vec![RowError::new(
+                    &source.name,
+                    0,
+                    None,
+                    format!("the file cannot be read: {e}"),
+                )]),
+            },
             _ => super::layer::read(source, options.layer.as_deref()),
         };
         let (raw, mut errors) = match raw {
@@ -261,7 +377,7 @@ impl Table {
                 ..ReadOutcome::default()
             };
         }
-        if raw.layer.is_some() && raw.rows.is_empty() {
+        if raw.layer.is_some() && matches!(&raw.rows, Rows::Loaded(r) if r.len() == 0) {
             errors.push(raw_error(
                 &raw,
                 raw.header_line + 1,
@@ -299,6 +415,22 @@ impl Table {
         self.index.get(name).copied()
     }
 
+    /// The data rows, in file order (taken once; empty after).
+    pub fn take_rows(&mut self) -> Rows {
+        std::mem::take(&mut self.rows)
+    }
+
+    /// A problem with column `col` of the row at `line` (a feature id in a layer).
+    pub fn error(&self, line: u64, col: &'static str, message: impl Into<String>) -> RowError {
+        let column = self.index.get(col).map(|&i| {
+            let label = self.labels.get(col).map_or(col, String::as_str);
+            ColumnRef::new(i, label)
+        });
+        let mut e = RowError::new(&self.file, line, column, message);
+        e.layer.clone_from(&self.layer);
+        e
+    }
+
     /// A checker for one row.
     pub fn check<'t>(&'t self, row: &'t RawRow) -> RowCheck<'t> {
         RowCheck {
@@ -309,32 +441,64 @@ impl Table {
     }
 }
 
-/// Read a CSV into a [`RawTable`] and the row problems found on the way (wrong number of cells,
-/// bytes that are not UTF-8), or the errors that make the file unusable.
+/// The input without a leading UTF-8 byte-order mark, or `None` when it holds nothing but
+/// whitespace. Reads ahead only the leading whitespace.
+fn content(mut input: Box<dyn Read>) -> std::io::Result<Option<Box<dyn Read>>> {
+    let mut head = Vec::new();
+    (&mut input)
+        .take(UTF8_BOM.len() as u64)
+        .read_to_end(&mut head)?;
+    if head == UTF8_BOM {
+        head.clear();
+    }
+    let mut checked = 0;
+    while head[checked..].iter().all(u8::is_ascii_whitespace) {
+        checked = head.len();
+        if (&mut input).take(4096).read_to_end(&mut head)? == 0 {
+            return Ok(None);
+        }
+    }
+    Ok(Some(Box::new(Cursor::new(head).chain(input))))
+}
+
+/// Read a CSV's header into a [`RawTable`] whose rows are read as they are taken, or the
+/// errors that make the file unusable. The first record is read ahead, to tell a file without
+/// data rows.
 #[allow(clippy::type_complexity)]
 fn read_csv(
-    source: &ImportSource,
+    file: &str,
+    input: Box<dyn Read>,
     specs: &[ColumnSpec],
 ) -> Result<(RawTable, Vec<RowError>), Vec<RowError>> {
-    let file = source.name.clone();
+    let file = file.to_string();
     let mut errors = Vec::new();
-    let data = source.data.strip_prefix(UTF8_BOM).unwrap_or(&source.data);
-    if data.iter().all(u8::is_ascii_whitespace) {
-        return Err(vec![RowError::new(
-            &file,
-            1,
-            None,
-            format!(
-                "the file is empty; expected a header line naming the columns, such as: {}",
-                required_names(specs)
-            ),
-        )]);
-    }
-    let mut rdr = csv::ReaderBuilder::new()
+    let data = match content(input) {
+        Ok(Some(data)) => data,
+        Ok(None) => {
+            return Err(vec![RowError::new(
+                &file,
+                1,
+                None,
+                format!(
+                    "the file is empty; expected a header line naming the columns, such as: {}",
+                    required_names(specs)
+                ),
+            )])
+        }
+        Err(e) => {
+            return Err(vec![RowError::new(
+                &file,
+                0,
+                None,
+                format!("the file cannot be read: {e}"),
+            )])
+        }
+    };
+    let rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .from_reader(data);
-    let mut records = rdr.byte_records();
+    let mut records = rdr.into_byte_records();
     let header = match records.next() {
         Some(Ok(h)) => h,
         Some(Err(e)) => return Err(vec![csv_error(&file, &e)]),
@@ -366,70 +530,20 @@ fn read_csv(
     if !errors.is_empty() {
         return Err(errors);
     }
-    let width = names.len();
-    let name = |i: usize| names.get(i).map_or("?", String::as_str).to_string();
-    let mut rows = Vec::new();
-    let mut n_records = 0usize;
-    for rec in records {
-        n_records += 1;
-        let rec = match rec {
-            Ok(r) => r,
-            Err(e) => {
-                errors.push(csv_error(&file, &e));
-                continue;
-            }
-        };
-        let line = rec.position().map_or(0, |p| p.line());
-        if rec.len() != width {
-            // Point at the first missing cell, or at the row when there are extra ones.
-            let col = (rec.len() < width).then(|| ColumnRef::new(rec.len(), &name(rec.len())));
-            errors.push(RowError::new(
-                &file,
-                line,
-                col,
-                format!(
-                    "the row has {} values but the header has {width} columns",
-                    rec.len()
-                ),
-            ));
-            continue;
-        }
-        let mut cells = Vec::with_capacity(width);
-        let mut bad = false;
-        for (i, raw) in rec.iter().enumerate() {
-            match std::str::from_utf8(raw) {
-                // Our own CSV output neutralises formula-like text with a `'` (issue 17):
-                // read it back as written.
-                Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
-                Err(_) => {
-                    errors.push(RowError::new(
-                        &file,
-                        line,
-                        Some(ColumnRef::new(i, &name(i))),
-                        "the value is not valid UTF-8 text; save the file as UTF-8",
-                    ));
-                    bad = true;
-                    break;
-                }
-            }
-        }
-        if !bad {
-            rows.push(RawRow {
-                line,
-                cells,
-                errors: Vec::new(),
-            });
-        }
-    }
-    if n_records == 0 {
-        errors.push(RowError::new(
+    let Some(first) = records.next() else {
+        return Err(vec![RowError::new(
             &file,
             header_line + 1,
             None,
             "the file has a header but no data rows",
-        ));
-        return Err(errors);
-    }
+        )]);
+    };
+    let rows = Rows::Csv(Box::new(CsvRows {
+        file: file.clone(),
+        names: names.clone(),
+        first: Some(first),
+        records,
+    }));
     Ok((
         RawTable {
             file,
@@ -509,12 +623,7 @@ impl<'t> RowCheck<'t> {
 
     /// Record a problem with column `col`.
     pub fn err(&mut self, col: &'static str, message: impl Into<String>) {
-        let column = self.table.index.get(col).map(|&i| {
-            let label = self.table.labels.get(col).map_or(col, String::as_str);
-            ColumnRef::new(i, label)
-        });
-        let mut e = RowError::new(&self.table.file, self.row.line, column, message);
-        e.layer.clone_from(&self.table.layer);
+        let e = self.table.error(self.row.line, col, message);
         self.errors.push(e);
     }
 
