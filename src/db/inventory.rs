@@ -354,6 +354,33 @@ pub(crate) fn insert_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
     Ok(())
 }
 
+/// The inventory columns of `s` as SQL values: segment id, material, outside diameter, wall,
+/// soil density, the pipe and water overrides, length, soil type, install year, geometry, SRID
+/// and soil zone (the order of [`update_segment`]'s parameters ?1–?17 and of the import's staging
+/// table).
+pub(crate) fn inventory_values(s: &SegmentRecord) -> [rusqlite::types::Value; 17] {
+    use rusqlite::types::Value;
+    [
+        Value::from(s.segment_id.clone()),
+        Value::from(s.material.code().to_string()),
+        Value::from(s.outer_diameter_mm),
+        Value::from(s.wall_thickness_mm),
+        Value::from(s.soil_density_kg_m3),
+        Value::from(s.pipe_youngs_modulus_pa),
+        Value::from(s.pipe_poisson),
+        Value::from(s.pipe_density_kg_m3),
+        Value::from(s.pipe_loss_factor),
+        Value::from(s.fluid_density_kg_m3),
+        Value::from(s.fluid_bulk_modulus_pa),
+        Value::from(s.length_m),
+        Value::from(s.soil_type.clone()),
+        Value::from(s.install_year),
+        Value::from(s.geometry_wkt.clone()),
+        Value::from(s.srid),
+        Value::from(s.soil_zone.clone()),
+    ]
+}
+
 /// Overwrite the inventory columns of an existing segment and stamp `imported_at`.
 pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(), DbError> {
     conn.prepare_cached(
@@ -365,25 +392,7 @@ pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
          imported_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
          WHERE segment_id = ?1",
     )?
-    .execute(params![
-        s.segment_id,
-        s.material.code(),
-        s.outer_diameter_mm,
-        s.wall_thickness_mm,
-        s.soil_density_kg_m3,
-        s.pipe_youngs_modulus_pa,
-        s.pipe_poisson,
-        s.pipe_density_kg_m3,
-        s.pipe_loss_factor,
-        s.fluid_density_kg_m3,
-        s.fluid_bulk_modulus_pa,
-        s.length_m,
-        s.soil_type,
-        s.install_year,
-        s.geometry_wkt,
-        s.srid,
-        s.soil_zone,
-    ])?;
+    .execute(rusqlite::params_from_iter(inventory_values(s)))?;
     Ok(())
 }
 

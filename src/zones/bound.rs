@@ -12,8 +12,8 @@
 
 use statrs::distribution::{ContinuousCDF, Normal};
 
-use crate::invert::problem::{Problem, Weighting};
-use crate::invert::{Method, SegmentData};
+use crate::invert::problem::Weighting;
+use crate::invert::SegmentData;
 
 use super::member::soil_information;
 use super::FitSetup;
@@ -23,13 +23,7 @@ use super::FitSetup;
 /// `None` without measurement standard deviations (no likelihood), or where the model or its
 /// Jacobian cannot be evaluated.
 pub fn member_fisher(data: &SegmentData, setup: &FitSetup, x_true: &[f64]) -> Option<[f64; 4]> {
-    let problem = Problem::new(
-        data,
-        Method::Default,
-        setup.model,
-        setup.contact_mode,
-        &setup.effects,
-    );
+    let problem = setup.problem(data);
     if problem.weighting != Weighting::ChiSquare || x_true.len() != problem.specs.len() {
         return None;
     }

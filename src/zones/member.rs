@@ -26,6 +26,25 @@ pub struct FitSetup {
     pub effects: Vec<Effect>,
 }
 
+impl FitSetup {
+    /// The default method's problem for `data` with this setup.
+    pub fn problem<'a>(&self, data: &'a SegmentData) -> Problem<'a> {
+        Problem::new(
+            data,
+            Method::Default,
+            self.model,
+            self.contact_mode,
+            &self.effects,
+        )
+    }
+}
+
+/// Indices of E_m and ν_m among the search coordinates, `None` if either is not fitted.
+fn soil_indices(problem: &Problem<'_>) -> Option<(usize, usize)> {
+    let at = |p: Param| problem.specs.iter().position(|s| s.param == p);
+    Some((at(Param::SoilModulus)?, at(Param::SoilPoisson)?))
+}
+
 /// The member of a zone from its data and its single fit's optimum `x` in the default
 /// method's coordinates (log10 E_m, ν_m, ξ, effect coordinates…) and the single fit's own
 /// relative one-sigma errors of c_P and c_S (`speed_rstd`, P65; `None` where not known). `None`
@@ -37,25 +56,12 @@ pub fn member_from_fit(
     x: &[f64],
     speed_rstd: [Option<f64>; 2],
 ) -> Option<Member> {
-    let problem = Problem::new(
-        data,
-        Method::Default,
-        setup.model,
-        setup.contact_mode,
-        &setup.effects,
-    );
+    let problem = setup.problem(data);
     let n = problem.specs.len();
     if x.len() != n {
         return None;
     }
-    let ie = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::SoilModulus)?;
-    let inu = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::SoilPoisson)?;
+    let (ie, inu) = soil_indices(&problem)?;
     let bounds = problem.bounds().ok()?;
     let k = problem.predict(x)?;
     let ss = problem.sum_of_squares(&k);
@@ -179,14 +185,7 @@ pub fn soil_information(
     scale: f64,
 ) -> Option<[f64; 4]> {
     let n = problem.specs.len();
-    let ie = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::SoilModulus)?;
-    let inu = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::SoilPoisson)?;
+    let (ie, inu) = soil_indices(problem)?;
     let bounds = problem.bounds().ok()?;
     let m = problem.n_residuals();
     let mut r0 = vec![0.0; m];

@@ -4,11 +4,12 @@
 //! segments measurements refer to, and each segment's measurement set are then found by
 //! ordered queries.
 
-use rusqlite::{params, Connection};
+use rusqlite::types::Value;
+use rusqlite::{params, params_from_iter, Connection};
 
 use crate::db::inventory::{
-    measurement_from_row, segment_from_row, MeasurementRecord, SegmentRecord, MEASUREMENT_COLUMNS,
-    SEGMENT_COLUMNS,
+    inventory_values, measurement_from_row, segment_from_row, MeasurementRecord, SegmentRecord,
+    MEASUREMENT_COLUMNS, SEGMENT_COLUMNS,
 };
 use crate::db::DbError;
 
@@ -93,27 +94,12 @@ impl<'c> Staging<'c> {
                 None::<i64>,
                 None::<String>,
             ])?,
-            Some(s) => stmt.execute(params![
-                line,
-                true,
-                s.segment_id,
-                s.material.code(),
-                s.outer_diameter_mm,
-                s.wall_thickness_mm,
-                s.soil_density_kg_m3,
-                s.pipe_youngs_modulus_pa,
-                s.pipe_poisson,
-                s.pipe_density_kg_m3,
-                s.pipe_loss_factor,
-                s.fluid_density_kg_m3,
-                s.fluid_bulk_modulus_pa,
-                s.length_m,
-                s.soil_type,
-                s.install_year,
-                s.geometry_wkt,
-                s.srid,
-                s.soil_zone,
-            ])?,
+            Some(s) => {
+                let head = [Value::from(line), Value::from(true)];
+                stmt.execute(params_from_iter(
+                    head.into_iter().chain(inventory_values(s)),
+                ))?
+            }
         };
         Ok(())
     }
