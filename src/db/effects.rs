@@ -91,25 +91,35 @@ impl FitState {
     }
 }
 
+/// The columns of a [`FitState`] (read by [`FitState::from_row`]), over [`FIT_STATE_FROM`].
+pub(crate) const FIT_STATE_COLUMNS: &str = "s.segment_id, s.inputs_hash, f.inputs_hash, \
+    f.settings_hash, f.algorithm_version, \
+    EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id)";
+/// The tables [`FIT_STATE_COLUMNS`] come from: every segment with its latest fit, if any.
+pub(crate) const FIT_STATE_FROM: &str =
+    "segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id";
+
+impl FitState {
+    /// A fit state from the first six columns of `r`, selected as [`FIT_STATE_COLUMNS`].
+    pub(crate) fn from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<Self> {
+        Ok(FitState {
+            segment_id: r.get(0)?,
+            inputs_hash: r.get(1)?,
+            fit_inputs_hash: r.get(2)?,
+            fit_settings_hash: r.get(3)?,
+            fit_algorithm_version: r.get(4)?,
+            has_measurements: r.get(5)?,
+        })
+    }
+}
+
 /// The fit state of every segment, by id.
 pub fn fit_states(conn: &Connection) -> Result<Vec<FitState>, DbError> {
-    let mut stmt = conn.prepare(
-        "SELECT s.segment_id, s.inputs_hash, f.inputs_hash, f.settings_hash, \
-                f.algorithm_version, EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id) \
-         FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
-         ORDER BY s.segment_id",
-    )?;
+    let mut stmt = conn.prepare(&format!(
+        "SELECT {FIT_STATE_COLUMNS} FROM {FIT_STATE_FROM} ORDER BY s.segment_id"
+    ))?;
     let rows = stmt
-        .query_map([], |r| {
-            Ok(FitState {
-                segment_id: r.get(0)?,
-                inputs_hash: r.get(1)?,
-                fit_inputs_hash: r.get(2)?,
-                fit_settings_hash: r.get(3)?,
-                fit_algorithm_version: r.get(4)?,
-                has_measurements: r.get(5)?,
-            })
-        })?
+        .query_map([], FitState::from_row)?
         .collect::<Result<Vec<_>, _>>()?;
     Ok(rows)
 }

@@ -686,34 +686,21 @@ pub fn fit_states_page(
     after: Option<&str>,
     limit: usize,
 ) -> Result<Vec<(super::FitState, String)>, DbError> {
-    const SELECT: &str = "SELECT s.segment_id, s.inputs_hash, f.inputs_hash, f.settings_hash, \
-        f.algorithm_version, \
-        EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id), \
-        COALESCE(e.effects, '') \
-        FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
-        LEFT JOIN segment_effects e ON e.segment_id = s.segment_id";
+    use super::effects::{FIT_STATE_COLUMNS, FIT_STATE_FROM};
+    let select = format!(
+        "SELECT {FIT_STATE_COLUMNS}, COALESCE(e.effects, '') FROM {FIT_STATE_FROM} \
+         LEFT JOIN segment_effects e ON e.segment_id = s.segment_id"
+    );
     let limit = i64::try_from(limit.max(1)).unwrap_or(i64::MAX);
-    let row = |r: &Row<'_>| {
-        Ok((
-            super::FitState {
-                segment_id: r.get(0)?,
-                inputs_hash: r.get(1)?,
-                fit_inputs_hash: r.get(2)?,
-                fit_settings_hash: r.get(3)?,
-                fit_algorithm_version: r.get(4)?,
-                has_measurements: r.get(5)?,
-            },
-            r.get(6)?,
-        ))
-    };
+    let row = |r: &Row<'_>| Ok((super::FitState::from_row(r)?, r.get(6)?));
     let rows = match after {
         None => conn
-            .prepare_cached(&format!("{SELECT} ORDER BY s.segment_id LIMIT ?1"))?
+            .prepare_cached(&format!("{select} ORDER BY s.segment_id LIMIT ?1"))?
             .query_map([limit], row)?
             .collect::<Result<Vec<_>, _>>()?,
         Some(after) => conn
             .prepare_cached(&format!(
-                "{SELECT} WHERE s.segment_id > ?1 ORDER BY s.segment_id LIMIT ?2"
+                "{select} WHERE s.segment_id > ?1 ORDER BY s.segment_id LIMIT ?2"
             ))?
             .query_map(params![after, limit], row)?
             .collect::<Result<Vec<_>, _>>()?,

@@ -85,16 +85,22 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// Generate `zones × per_zone` segments with `seed` (no defects, the default mix, noise and
-/// scatter), fit them with the default settings and estimate the zones.
-pub fn run(seed: u64, zones: usize, per_zone: usize) -> ZonedRun {
-    let network = generate(&SynthOptions {
+/// The zoned network of `zones × per_zone` segments that [`run`] and [`network_bounds`] use:
+/// `synth --zones` with `seed`, no defects, the default mix, noise and scatter.
+fn zoned_network(seed: u64, zones: usize, per_zone: usize) -> Vec<SynthSegment> {
+    generate(&SynthOptions {
         segments: zones * per_zone,
         seed,
         defect_fraction: 0.0,
         zones,
         ..SynthOptions::default()
-    });
+    })
+}
+
+/// Generate `zones × per_zone` segments with `seed` (no defects, the default mix, noise and
+/// scatter), fit them with the default settings and estimate the zones.
+pub fn run(seed: u64, zones: usize, per_zone: usize) -> ZonedRun {
+    let network = zoned_network(seed, zones, per_zone);
     let settings = FitSettings::default();
     let t0 = Instant::now();
     let fits: Vec<FitResult> = network
@@ -260,13 +266,7 @@ pub fn network_bounds(
     per_zone: usize,
     tau: (f64, f64),
 ) -> Vec<(String, ZoneBound, (f64, f64))> {
-    let network = generate(&SynthOptions {
-        segments: zones * per_zone,
-        seed,
-        defect_fraction: 0.0,
-        zones,
-        ..SynthOptions::default()
-    });
+    let network = zoned_network(seed, zones, per_zone);
     let setup = default_setup(&FitSettings::default());
     let mut by_zone: std::collections::BTreeMap<String, Vec<&SynthSegment>> = Default::default();
     for s in &network {
