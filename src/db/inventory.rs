@@ -236,7 +236,8 @@ pub(crate) fn measurement_from_row(r: &Row<'_>) -> rusqlite::Result<MeasurementR
     })
 }
 
-fn finish_segment(
+/// Parse the material of a row read by [`segment_from_row`] and attach its measurements.
+pub(crate) fn finish_segment(
     conn: &Connection,
     (mut seg, material): (SegmentRecord, String),
 ) -> Result<SegmentRecord, DbError> {

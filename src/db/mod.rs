@@ -17,6 +17,7 @@ pub mod import;
 pub mod inventory;
 pub mod lock;
 pub mod migrate;
+pub mod pages;
 pub mod results;
 pub mod wkt;
 pub mod zones;

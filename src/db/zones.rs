@@ -211,17 +211,20 @@ pub fn latest_zone_fit(conn: &Connection, zone: &str) -> Result<Option<ZoneFitRo
 pub fn zone_members(conn: &Connection, zone_fit_id: i64) -> Result<Vec<ZoneMemberRow>, DbError> {
     let mut stmt =
         conn.prepare("SELECT * FROM zone_members WHERE zone_fit_id = ?1 ORDER BY segment_id")?;
-    let rows = stmt.query_map([zone_fit_id], |r| {
-        Ok(ZoneMemberRow {
-            segment_id: r.get("segment_id")?,
-            fit_id: r.get("fit_id")?,
-            shrunk_soil_youngs_modulus_pa: r.get("shrunk_soil_youngs_modulus_pa")?,
-            shrunk_soil_poisson: r.get("shrunk_soil_poisson")?,
-            statistic: r.get("statistic")?,
-            zone_outlier: r.get("zone_outlier")?,
-        })
-    })?;
+    let rows = stmt.query_map([zone_fit_id], member_from_row)?;
     Ok(rows.collect::<Result<_, _>>()?)
+}
+
+/// A `zone_members` row (`SELECT *`), read by column name.
+pub(crate) fn member_from_row(r: &Row<'_>) -> rusqlite::Result<ZoneMemberRow> {
+    Ok(ZoneMemberRow {
+        segment_id: r.get("segment_id")?,
+        fit_id: r.get("fit_id")?,
+        shrunk_soil_youngs_modulus_pa: r.get("shrunk_soil_youngs_modulus_pa")?,
+        shrunk_soil_poisson: r.get("shrunk_soil_poisson")?,
+        statistic: r.get("statistic")?,
+        zone_outlier: r.get("zone_outlier")?,
+    })
 }
 
 /// Every segment's place in its zone's newest estimate: segment id → (zone, member row).

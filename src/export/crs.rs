@@ -197,6 +197,11 @@ pub fn dominant_srid<'a>(srids: impl Iterator<Item = i64> + 'a) -> Option<i64> {
     for s in srids {
         *counts.entry(s).or_default() += 1;
     }
+    dominant_of_counts(counts)
+}
+
+/// [`dominant_srid`] from (system, number of segments) pairs, each system once.
+pub fn dominant_of_counts(counts: impl IntoIterator<Item = (i64, usize)>) -> Option<i64> {
     counts
         .into_iter()
         .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))

@@ -6,39 +6,72 @@
 
 use std::path::Path;
 
-use super::record::{Value, PROPERTIES};
+use super::record::{Records, Value, PROPERTIES};
 use super::spreadsheet::{spreadsheet_safe, writer};
-use super::{write_file_atomically, ExportError, ExportSummary, SegmentExport};
+use super::{write_streamed, ExportError, SegmentExport, Tally};
+
+/// Write the header row.
+fn header<W: std::io::Write>(w: &mut csv::Writer<W>) -> Result<(), csv::Error> {
+    w.write_record(PROPERTIES.iter().map(|p| p.name))
+}
+
+/// Write one record's row (`row`: a buffer reused between rows).
+fn row<W: std::io::Write>(
+    w: &mut csv::Writer<W>,
+    rec: &SegmentExport,
+    row: &mut Vec<String>,
+) -> Result<(), csv::Error> {
+    row.clear();
+    row.extend(PROPERTIES.iter().map(|p| match (p.get)(rec) {
+        Value::Null => String::new(),
+        Value::Text(s) => spreadsheet_safe(s).into_owned(),
+        Value::Real(x) => x.to_string(),
+        Value::Integer(i) => i.to_string(),
+    }));
+    w.write_record(row.iter())
+}
 
 /// The CSV text of `records`.
 pub fn to_bytes(records: &[SegmentExport]) -> Result<Vec<u8>, csv::Error> {
     let mut w = writer(Vec::new());
-    w.write_record(PROPERTIES.iter().map(|p| p.name))?;
-    let mut row: Vec<String> = Vec::with_capacity(PROPERTIES.len());
+    header(&mut w)?;
+    let mut buf: Vec<String> = Vec::with_capacity(PROPERTIES.len());
     for rec in records {
-        row.clear();
-        row.extend(PROPERTIES.iter().map(|p| match (p.get)(rec) {
-            Value::Null => String::new(),
-            Value::Text(s) => spreadsheet_safe(s).into_owned(),
-            Value::Real(x) => x.to_string(),
-            Value::Integer(i) => i.to_string(),
-        }));
-        w.write_record(&row)?;
+        row(&mut w, rec, &mut buf)?;
     }
     w.into_inner().map_err(|e| csv::Error::from(e.into_error()))
 }
 
-/// Write the CSV of `records` to `out`.
-pub fn write(records: &[SegmentExport], out: &Path) -> Result<ExportSummary, ExportError> {
-    let bytes = to_bytes(records).map_err(|e| ExportError::Encode {
-        path: out.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    write_file_atomically(out, &bytes)?;
-    Ok(ExportSummary {
-        segments: records.len(),
-        with_geometry: 0,
-        fitted: records.iter().filter(|r| r.fit.is_some()).count(),
-        warnings: Vec::new(),
+/// Write the CSV of the records to `out`, each row as it is read.
+pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportError> {
+    let encode = |e: csv::Error| {
+        let message = e.to_string();
+        match e.into_kind() {
+            csv::ErrorKind::Io(source) => ExportError::Write {
+                path: out.to_path_buf(),
+                source,
+            },
+            _ => ExportError::Encode {
+                path: out.to_path_buf(),
+                message,
+            },
+        }
+    };
+    write_streamed(out, |file| {
+        let mut tally = Tally::default();
+        let mut w = writer(file);
+        header(&mut w).map_err(encode)?;
+        let mut buf: Vec<String> = Vec::with_capacity(PROPERTIES.len());
+        let mut warnings = Vec::new();
+        records.for_each(&mut warnings, |rec| {
+            tally.add(&rec);
+            row(&mut w, &rec, &mut buf).map_err(encode)
+        })?;
+        w.flush().map_err(|source| ExportError::Write {
+            path: out.to_path_buf(),
+            source,
+        })?;
+        tally.summary.warnings = warnings;
+        Ok(tally)
     })
 }

@@ -3,13 +3,14 @@
 //! `"geometry": null` for segments without geometry. Properties as [`PROPERTIES`].
 
 use std::collections::HashMap;
+use std::io::Write as _;
 use std::path::Path;
 
 use serde_json::{json, Map, Number, Value as Json};
 
 use super::crs::{CrsError, Reprojector, WGS84};
-use super::record::{Value, PROPERTIES};
-use super::{write_file_atomically, ExportError, ExportSummary, SegmentExport};
+use super::record::{Records, Value, PROPERTIES};
+use super::{write_streamed, ExportError, SegmentExport, Tally};
 
 /// Decimals of the written longitudes and latitudes: 1e-7 degree is about 1 cm, as RFC 7946
 /// §11.2 suggests (more precision than that is noise).
@@ -30,81 +31,119 @@ pub(crate) fn json_value(v: Value<'_>) -> Json {
     }
 }
 
-/// The whole document.
-pub fn to_json(records: &[SegmentExport], warnings: &mut Vec<String>) -> Json {
-    let mut projectors: HashMap<i64, Result<Reprojector, CrsError>> = HashMap::new();
-    let mut features = Vec::with_capacity(records.len());
-    for rec in records {
-        let geometry = match (&rec.geometry, rec.segment.srid) {
-            (Some(line), Some(srid)) => {
-                let r = projectors
-                    .entry(srid)
-                    .or_insert_with(|| Reprojector::new(srid, WGS84));
-                let wgs = match r {
-                    Ok(r) => r.line(line).map_err(|e| e.to_string()),
-                    Err(e) => Err(e.to_string()),
-                };
-                match wgs.and_then(|l| {
-                    if l.points.iter().all(|&(lon, lat)| {
-                        (-180.0..=180.0).contains(&lon) && (-90.0..=90.0).contains(&lat)
-                    }) {
-                        Ok(l)
-                    } else {
-                        Err(format!(
-                            "its coordinates are not in EPSG:{srid}'s valid area"
-                        ))
-                    }
+/// The reprojector of each coordinate system met, built once.
+type Projectors = HashMap<i64, Result<Reprojector, CrsError>>;
+
+/// One record's Feature (its geometry `null`, with a warning, when it cannot be put in WGS 84).
+fn feature(rec: &SegmentExport, projectors: &mut Projectors, warnings: &mut Vec<String>) -> Json {
+    let geometry = match (&rec.geometry, rec.segment.srid) {
+        (Some(line), Some(srid)) => {
+            let r = projectors
+                .entry(srid)
+                .or_insert_with(|| Reprojector::new(srid, WGS84));
+            let wgs = match r {
+                Ok(r) => r.line(line).map_err(|e| e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            match wgs.and_then(|l| {
+                if l.points.iter().all(|&(lon, lat)| {
+                    (-180.0..=180.0).contains(&lon) && (-90.0..=90.0).contains(&lat)
                 }) {
-                    Ok(l) => {
-                        let coords: Vec<Json> = l
-                            .points
-                            .iter()
-                            .map(|&(lon, lat)| json!([round_coord(lon), round_coord(lat)]))
-                            .collect();
-                        json!({"type": "LineString", "coordinates": coords})
-                    }
-                    Err(e) => {
-                        warnings.push(format!(
-                            "segment {}: cannot convert its geometry to WGS 84 ({e}); exported \
-                             without geometry",
-                            rec.id()
-                        ));
-                        Json::Null
-                    }
+                    Ok(l)
+                } else {
+                    Err(format!(
+                        "its coordinates are not in EPSG:{srid}'s valid area"
+                    ))
+                }
+            }) {
+                Ok(l) => {
+                    let coords: Vec<Json> = l
+                        .points
+                        .iter()
+                        .map(|&(lon, lat)| json!([round_coord(lon), round_coord(lat)]))
+                        .collect();
+                    json!({"type": "LineString", "coordinates": coords})
+                }
+                Err(e) => {
+                    warnings.push(format!(
+                        "segment {}: cannot convert its geometry to WGS 84 ({e}); exported \
+                         without geometry",
+                        rec.id()
+                    ));
+                    Json::Null
                 }
             }
-            _ => Json::Null,
-        };
-        let mut props = Map::with_capacity(PROPERTIES.len());
-        for p in PROPERTIES {
-            props.insert(p.name.to_string(), json_value((p.get)(rec)));
         }
-        features.push(json!({
-            "type": "Feature",
-            "id": rec.id(),
-            "geometry": geometry,
-            "properties": Json::Object(props),
-        }));
+        _ => Json::Null,
+    };
+    let mut props = Map::with_capacity(PROPERTIES.len());
+    for p in PROPERTIES {
+        props.insert(p.name.to_string(), json_value((p.get)(rec)));
     }
+    json!({
+        "type": "Feature",
+        "id": rec.id(),
+        "geometry": geometry,
+        "properties": Json::Object(props),
+    })
+}
+
+/// The whole document.
+pub fn to_json(records: &[SegmentExport], warnings: &mut Vec<String>) -> Json {
+    let mut projectors = Projectors::new();
+    let features: Vec<Json> = records
+        .iter()
+        .map(|rec| feature(rec, &mut projectors, warnings))
+        .collect();
     json!({"type": "FeatureCollection", "features": features})
 }
 
-/// Write the GeoJSON of `records` to `out`.
-pub fn write(records: &[SegmentExport], out: &Path) -> Result<ExportSummary, ExportError> {
-    let mut warnings = Vec::new();
-    let doc = to_json(records, &mut warnings);
-    let with_geometry = doc["features"]
-        .as_array()
-        .map_or(0, |f| f.iter().filter(|f| !f["geometry"].is_null()).count());
-    let bytes = serde_json::to_vec(&doc).map_err(|e| ExportError::Encode {
+/// The document's text before and after its features: the FeatureCollection with no feature,
+/// split at its empty `features` array, so the streamed file is byte for byte what
+/// `serde_json` writes for the whole document.
+fn envelope() -> (String, String) {
+    let empty = json!({"type": "FeatureCollection", "features": []}).to_string();
+    let at = empty.find("[]").map_or(empty.len(), |i| i + 1);
+    (empty[..at].to_string(), empty[at..].to_string())
+}
+
+/// Write the GeoJSON of the records to `out`, each feature as it is read.
+pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportError> {
+    let io = |source| ExportError::Write {
         path: out.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    write_file_atomically(out, &bytes)?;
-    Ok(ExportSummary {
-        segments: records.len(),
-        with_geometry,
-        fitted: records.iter().filter(|r| r.fit.is_some()).count(),
-        warnings,
+        source,
+    };
+    write_streamed(out, |w| {
+        let mut tally = Tally::default();
+        let mut warnings = Vec::new();
+        let mut own_warnings = Vec::new();
+        let mut projectors = Projectors::new();
+        let (head, tail) = envelope();
+        w.write_all(head.as_bytes()).map_err(io)?;
+        records.for_each(&mut warnings, |rec| {
+            let f = feature(&rec, &mut projectors, &mut own_warnings);
+            if tally.summary.segments > 0 {
+                w.write_all(b",").map_err(io)?;
+            }
+            tally.add(&rec);
+            tally.summary.with_geometry += usize::from(!f["geometry"].is_null());
+            serde_json::to_writer(&mut *w, &f).map_err(|e| {
+                if e.is_io() {
+                    ExportError::Write {
+                        path: out.to_path_buf(),
+                        source: e.into(),
+                    }
+                } else {
+                    ExportError::Encode {
+                        path: out.to_path_buf(),
+                        message: e.to_string(),
+                    }
+                }
+            })
+        })?;
+        w.write_all(tail.as_bytes()).map_err(io)?;
+        warnings.append(&mut own_warnings);
+        tally.summary.warnings = warnings;
+        Ok(tally)
     })
 }

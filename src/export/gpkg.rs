@@ -11,7 +11,7 @@
 //! [`super::style`].
 //!
 //! The table has one coordinate system: the one most segments' geometries are in
-//! ([`crs::dominant_srid`]); geometries in another system are reprojected into it, and the few
+//! ([`crs::dominant_srid`], found by a first pass over the geometries alone); geometries in another system are reprojected into it, and the few
 //! that cannot be are written without geometry, with a warning.
 
 use std::path::Path;
@@ -19,9 +19,10 @@ use std::path::Path;
 use rusqlite::{params, params_from_iter, Connection};
 
 use super::crs::{self, ToCommonCrs};
-use super::record::{Value, PROPERTIES};
+use super::record::{Records, Value, PROPERTIES};
 use super::style;
-use super::{commit_temp, temp_path, ExportError, ExportSummary, SegmentExport};
+use super::zones::ZonePoints;
+use super::{commit_temp, temp_path, ExportError, Tally};
 use crate::db::wkt::LineString;
 
 /// The feature table.
@@ -83,41 +84,46 @@ pub fn envelope(line: &LineString) -> [f64; 4] {
     e
 }
 
-/// Geometries of the records in one system: the system (None when no segment has geometry) and
-/// each record's line in it. Shared with the audit map.
-pub(crate) fn common_geometries(
-    records: &[SegmentExport],
-    warnings: &mut Vec<String>,
-) -> (Option<i64>, Vec<Option<LineString>>) {
-    let srid = crs::dominant_srid(
-        records
-            .iter()
-            .filter(|r| r.geometry.is_some())
-            .filter_map(|r| r.segment.srid),
-    );
-    let Some(srid) = srid else {
-        return (None, records.iter().map(|_| None).collect());
-    };
-    let mut to = ToCommonCrs::new(srid);
-    let lines = records
-        .iter()
-        .map(|r| {
-            let (Some(line), Some(from)) = (&r.geometry, r.segment.srid) else {
-                return None;
-            };
-            match to.line(from, line) {
-                Ok(l) => Some(l),
-                Err(e) => {
-                    warnings.push(format!(
-                        "segment {}: {e}; exported without geometry",
-                        r.id()
-                    ));
-                    None
-                }
+/// Puts the records' lines into one coordinate system, as they stream past: the system most
+/// segments' geometries are in ([`Records::dominant_srid`]). Shared with the audit map.
+pub(crate) struct CommonGeometry {
+    to: Option<ToCommonCrs>,
+}
+
+impl CommonGeometry {
+    /// Lines into EPSG:`srid` (`None`: no segment has a geometry, so no record gets a line).
+    pub fn new(srid: Option<i64>) -> Self {
+        CommonGeometry {
+            to: srid.map(ToCommonCrs::new),
+        }
+    }
+
+    /// The common system.
+    pub fn srid(&self) -> Option<i64> {
+        self.to.as_ref().map(ToCommonCrs::target)
+    }
+
+    /// The line of a segment (`id`, its parsed geometry and its system) in the common system;
+    /// `None` without a geometry, or when it cannot be reprojected (then with a warning in
+    /// `warnings`).
+    pub fn line(
+        &mut self,
+        id: &str,
+        geometry: Option<&LineString>,
+        from: Option<i64>,
+        warnings: &mut Vec<String>,
+    ) -> Option<LineString> {
+        let (Some(to), Some(line), Some(from)) = (self.to.as_mut(), geometry, from) else {
+            return None;
+        };
+        match to.line(from, line) {
+            Ok(l) => Some(l),
+            Err(e) => {
+                warnings.push(format!("segment {id}: {e}; exported without geometry"));
+                None
             }
-        })
-        .collect();
-    (Some(srid), lines)
+        }
+    }
 }
 
 /// A `gpkg_spatial_ref_sys` row.
@@ -327,15 +333,16 @@ fn write_style(tx: &rusqlite::Transaction<'_>, qml: &str) -> rusqlite::Result<()
     Ok(())
 }
 
-/// Write the GeoPackage of `records` to `out` (through a temporary file).
-pub fn write(records: &[SegmentExport], out: &Path) -> Result<ExportSummary, ExportError> {
+/// Write the GeoPackage of the records to `out` (through a temporary file), each row as it
+/// is read.
+pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportError> {
     let tmp = temp_path(out);
     let _ = std::fs::remove_file(&tmp);
     let result = write_to(records, &tmp, out);
     match result {
-        Ok(summary) => {
+        Ok(tally) => {
             commit_temp(&tmp, out)?;
-            Ok(summary)
+            Ok(tally)
         }
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
@@ -344,17 +351,13 @@ pub fn write(records: &[SegmentExport], out: &Path) -> Result<ExportSummary, Exp
     }
 }
 
-fn write_to(
-    records: &[SegmentExport],
-    tmp: &Path,
-    out: &Path,
-) -> Result<ExportSummary, ExportError> {
+fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, ExportError> {
     let sql = |source| ExportError::Gpkg {
         path: out.to_path_buf(),
         source,
     };
-    let mut warnings = Vec::new();
-    let (srid, lines) = common_geometries(records, &mut warnings);
+    let mut common = CommonGeometry::new(records.dominant_srid()?);
+    let srid = common.srid();
     // -1: "undefined cartesian", when no segment has a geometry.
     let table_srs = srid.unwrap_or(-1);
     let srs_id = i32::try_from(table_srs).unwrap_or(-1);
@@ -366,7 +369,8 @@ fn write_to(
         .map_err(sql)?;
     let tx = conn.transaction().map_err(sql)?;
     tx.execute_batch(SCHEMA).map_err(sql)?;
-    for r in srs_rows(srid, &mut warnings) {
+    let mut srs_warnings = Vec::new();
+    for r in srs_rows(srid, &mut srs_warnings) {
         tx.execute(
             "INSERT INTO gpkg_spatial_ref_sys (srs_name, srs_id, organization, \
              organization_coordsys_id, definition, description) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
@@ -406,7 +410,10 @@ fn write_to(
         f64::INFINITY,
         f64::NEG_INFINITY,
     ];
-    let mut with_geometry = 0;
+    let mut tally = Tally::default();
+    let mut load_warnings = Vec::new();
+    let mut geometry_warnings = Vec::new();
+    let mut zones = ZonePoints::default();
     {
         let names: Vec<String> = PROPERTIES
             .iter()
@@ -423,22 +430,30 @@ fn write_to(
             ))
             .map_err(sql)?;
         // The R-tree is created after the rows (so its triggers, which need the GIS SQL
-        // functions, never fire here); its rows are collected meanwhile.
+        // functions, never fire here); its rows are collected meanwhile (40 bytes a segment).
         let mut index_rows: Vec<(i64, [f64; 4])> = Vec::new();
-        for (rec, line) in records.iter().zip(&lines) {
+        let mut values: Vec<rusqlite::types::Value> = Vec::with_capacity(PROPERTIES.len() + 1);
+        records.for_each(&mut load_warnings, |rec| {
+            tally.add(&rec);
+            let line = common.line(
+                rec.id(),
+                rec.geometry.as_ref(),
+                rec.segment.srid,
+                &mut geometry_warnings,
+            );
             let blob = line.as_ref().map(|l| linestring_blob(srs_id, l));
-            let mut values: Vec<rusqlite::types::Value> = Vec::with_capacity(PROPERTIES.len() + 1);
+            values.clear();
             values.push(blob.map_or(rusqlite::types::Value::Null, rusqlite::types::Value::Blob));
             for p in PROPERTIES {
-                values.push(match (p.get)(rec) {
+                values.push(match (p.get)(&rec) {
                     Value::Null => rusqlite::types::Value::Null,
                     Value::Text(s) => rusqlite::types::Value::Text(s.to_string()),
                     Value::Real(x) => rusqlite::types::Value::Real(x),
                     Value::Integer(i) => rusqlite::types::Value::Integer(i),
                 });
             }
-            ins.execute(params_from_iter(values)).map_err(sql)?;
-            if let Some(l) = line {
+            ins.execute(params_from_iter(values.drain(..))).map_err(sql)?;
+            if let Some(l) = &line {
                 let e = envelope(l);
                 bbox = [
                     bbox[0].min(e[0]),
@@ -447,9 +462,11 @@ fn write_to(
                     bbox[3].max(e[3]),
                 ];
                 index_rows.push((tx.last_insert_rowid(), e));
-                with_geometry += 1;
+                tally.summary.with_geometry += 1;
             }
-        }
+            zones.add(&rec, line.as_ref());
+            Ok(())
+        })?;
         tx.execute_batch(&rtree_sql(TABLE, GEOMETRY_COLUMN))
             .map_err(sql)?;
         let mut idx = tx
@@ -467,7 +484,7 @@ fn write_to(
         &tx,
         TABLE,
         "pipe segments with fitted soil parameters, wave speed and attenuation (pipewave)",
-        (with_geometry > 0).then_some(bbox),
+        (tally.summary.with_geometry > 0).then_some(bbox),
         GEOMETRY_COLUMN,
         "LINESTRING",
         table_srs,
@@ -480,16 +497,14 @@ fn write_to(
         params![TABLE, GEOMETRY_COLUMN],
     )
     .map_err(sql)?;
-    write_style(&tx, &style::qml(records)).map_err(sql)?;
-    super::zones::write_zone_layer(&tx, records, &lines, srs_id, table_srs).map_err(sql)?;
+    write_style(&tx, &style::qml(tally.speeds.iter().copied())).map_err(sql)?;
+    super::zones::write_zone_layer(&tx, zones, srs_id, table_srs).map_err(sql)?;
     tx.commit().map_err(sql)?;
     conn.close().map_err(|(_, e)| sql(e))?;
-    Ok(ExportSummary {
-        segments: records.len(),
-        with_geometry,
-        fitted: records.iter().filter(|r| r.fit.is_some()).count(),
-        warnings,
-    })
+    load_warnings.append(&mut geometry_warnings);
+    load_warnings.append(&mut srs_warnings);
+    tally.summary.warnings = load_warnings;
+    Ok(tally)
 }
 
 #[cfg(test)]

@@ -1,11 +1,15 @@
 //! GIS export of the calibration results: one record per segment of the inventory, with its
 //! latest fit, written as a GeoPackage, GeoJSON or CSV file.
 //!
-//! - [`record`]: the per-segment record shared by the three formats and the audit report, and
-//!   the list of exported properties ([`record::PROPERTIES`]).
+//! - [`record`]: the per-segment record shared by the three formats and the audit report, read
+//!   from the database a page at a time ([`Records`]), and the list of exported properties
+//!   ([`record::PROPERTIES`]).
 //! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
 //! - [`gpkg`], [`geojson`], [`csv`]: the writers.
 //! - [`spreadsheet`]: the rule every CSV writer follows so a cell never opens as a formula.
+//!
+//! Every writer streams: it writes each record as it is read, so an export of 100,000 segments
+//! holds one page of records, not the network.
 //!
 //! Every writer writes a temporary file beside the target and renames it over the target at the
 //! end, so a failed export never leaves a half-written file, and it refuses to replace the
@@ -26,7 +30,7 @@ use std::str::FromStr;
 
 use crate::db::{Database, DbError};
 
-pub use record::{load_records, SegmentExport, PROPERTIES};
+pub use record::{load_records, Records, SegmentExport, PAGE_SIZE, PROPERTIES};
 
 /// The output formats of `pipewave export`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -156,11 +160,25 @@ impl ExportError {
 }
 
 /// Write the export of every segment in `format` to `out_path` (replacing the file if it
-/// exists, unless it is a pipewave database).
+/// exists, unless it is a pipewave database), reading the database [`PAGE_SIZE`] segments at a
+/// time.
 pub fn write(
     db: &Database,
     format: ExportFormat,
     out_path: &Path,
+) -> Result<ExportSummary, ExportError> {
+    write_paged(db, format, out_path, PAGE_SIZE)
+}
+
+/// [`write`], reading the database `page_size` segments at a time: the file is the same for
+/// every page size; what the export holds is one page of records (with their curves) and a few
+/// numbers per segment (the leak-band speed for the style's classes, the GeoPackage's spatial
+/// index).
+pub fn write_paged(
+    db: &Database,
+    format: ExportFormat,
+    out_path: &Path,
+    page_size: usize,
 ) -> Result<ExportSummary, ExportError> {
     let suggested = match format {
         ExportFormat::Gpkg => "pipewave.gpkg",
@@ -168,20 +186,40 @@ pub fn write(
         ExportFormat::Csv => "pipewave.csv",
     };
     check_out_path(db, out_path, format.as_str(), suggested)?;
-    let mut warnings = Vec::new();
-    let records = load_records(db, &mut warnings)?;
-    let mut summary = match format {
+    let records = Records::new(db, page_size);
+    let _snapshot = records.snapshot()?;
+    let tally = match format {
         ExportFormat::Gpkg => gpkg::write(&records, out_path)?,
         ExportFormat::GeoJson => geojson::write(&records, out_path)?,
         ExportFormat::Csv => csv::write(&records, out_path)?,
     };
     if format != ExportFormat::Gpkg {
         // The default QGIS style beside the file (the GeoPackage holds its own).
-        write_file_atomically(&style::qml_path(out_path), style::qml(&records).as_bytes())?;
+        write_file_atomically(
+            &style::qml_path(out_path),
+            style::qml(tally.speeds.iter().copied()).as_bytes(),
+        )?;
     }
-    warnings.append(&mut summary.warnings);
-    summary.warnings = warnings;
-    Ok(summary)
+    Ok(tally.summary)
+}
+
+/// What a writer counts while the records stream past: the summary, and the leak-band speeds
+/// for the style's classes.
+#[derive(Debug, Default)]
+pub(crate) struct Tally {
+    /// Counts and warnings (those of reading the records first).
+    pub summary: ExportSummary,
+    /// The segments' leak-band speeds, m/s (those they have).
+    pub speeds: Vec<f64>,
+}
+
+impl Tally {
+    /// Count one record.
+    pub fn add(&mut self, rec: &SegmentExport) {
+        self.summary.segments += 1;
+        self.summary.fitted += usize::from(rec.fit.is_some());
+        self.speeds.extend(rec.leak_band_speed);
+    }
 }
 
 /// Refuse an output path that is a directory, the database being read, or any pipewave database.
@@ -255,6 +293,39 @@ pub(crate) fn commit_temp(tmp: &Path, out: &Path) -> Result<(), ExportError> {
             source,
         }
     })
+}
+
+/// Write `out` through a temporary file with `fill`, which writes the contents into a buffered
+/// writer; the file replaces `out` only when `fill` and the final flush succeed.
+pub(crate) fn write_streamed<T>(
+    out: &Path,
+    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> Result<T, ExportError>,
+) -> Result<T, ExportError> {
+    let tmp = temp_path(out);
+    let result = std::fs::File::create(&tmp)
+        .map_err(|source| ExportError::Write {
+            path: out.to_path_buf(),
+            source,
+        })
+        .and_then(|f| {
+            let mut w = std::io::BufWriter::new(f);
+            let t = fill(&mut w)?;
+            std::io::Write::flush(&mut w).map_err(|source| ExportError::Write {
+                path: out.to_path_buf(),
+                source,
+            })?;
+            Ok(t)
+        });
+    match result {
+        Ok(t) => {
+            commit_temp(&tmp, out)?;
+            Ok(t)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
 }
 
 /// Write bytes to `out` through a temporary file.

@@ -6,13 +6,11 @@
 //! columns, the GeoJSON properties and the CSV columns are all made from it, so the three
 //! formats cannot drift apart.
 
-use std::collections::HashMap;
-
 use crate::db::wkt::LineString;
-use crate::db::{self, CurvePoint, Database, FitRow, SegmentRecord};
+use crate::db::{self, pages, CurvePoint, Database, FitRow, SegmentRecord};
 use crate::physics::curves::{band_mean, LEAK_BAND_HZ};
 
-use super::ExportError;
+use super::{crs, ExportError};
 
 /// The standard export frequencies, Hz (issue 5). All are on
 /// [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ), so the values are stored
@@ -144,30 +142,124 @@ pub fn band_mean_speed(curve: &[CurvePoint], band_hz: (f64, f64)) -> Option<f64>
     band_mean(&pts, band_hz)
 }
 
-/// Every segment of the inventory, sorted by id, with its latest fit and that fit's curve.
-/// Segments without a fit are included (status [`UNFITTED`]). A stored geometry that cannot be
-/// parsed is exported without geometry, with a warning.
-pub fn load_records(
-    db: &Database,
-    warnings: &mut Vec<String>,
-) -> Result<Vec<SegmentExport>, ExportError> {
-    let conn = db.conn();
-    let err = ExportError::db(db);
-    let segments = db::load_segments(conn, None).map_err(&err)?;
-    let mut fits: HashMap<String, FitRow> = db::latest_fits(conn, None)
-        .map_err(&err)?
-        .into_iter()
-        .map(|f| (f.segment_id.clone(), f))
-        .collect();
-    let mut zones = db::zones::latest_zone_memberships(conn).map_err(&err)?;
-    let mut out = Vec::with_capacity(segments.len());
-    for seg in segments {
-        let fit = fits.remove(&seg.segment_id);
+/// Segments the exports and the audit report read from the database at a time: a page holds
+/// this many records with their measurements and curves (about 9 kB each, so about 2 MB), so
+/// what they hold does not grow with the network.
+pub const PAGE_SIZE: usize = 256;
+
+/// The records of a database, read a page of [`Records::page_size`] segments at a time in id
+/// order: every segment of the inventory with its latest fit, that fit's curve and its zone.
+/// Segments without a fit are included (status [`UNFITTED`]). Each writer walks them once or
+/// twice ([`Records::for_each`], [`Records::dominant_srid`]) inside one read transaction
+/// ([`Records::snapshot`]), so every pass sees the same database.
+#[derive(Debug, Clone, Copy)]
+pub struct Records<'a> {
+    db: &'a Database,
+    page_size: usize,
+}
+
+impl<'a> Records<'a> {
+    /// The records of `db`, read `page_size` segments at a time (at least one).
+    pub fn new(db: &'a Database, page_size: usize) -> Self {
+        Records {
+            db,
+            page_size: page_size.max(1),
+        }
+    }
+
+    /// The database.
+    pub fn db(&self) -> &'a Database {
+        self.db
+    }
+
+    /// Segments read per page.
+    pub fn page_size(&self) -> usize {
+        self.page_size
+    }
+
+    /// Start a read transaction, so the passes of one export see one state of the database even
+    /// while a calibrate run stores fits (WAL: the run is not blocked). `None` when the caller
+    /// is already in a transaction. Rolled back (nothing was written) when dropped.
+    pub fn snapshot(&self) -> Result<Option<rusqlite::Transaction<'a>>, ExportError> {
+        let conn = self.db.conn();
+        if !conn.is_autocommit() {
+            return Ok(None);
+        }
+        let tx = conn
+            .unchecked_transaction()
+            .map_err(|e| ExportError::db(self.db)(e.into()))?;
+        // The snapshot begins at the first read.
+        tx.query_row("SELECT COUNT(*) FROM sqlite_master", [], |r| r.get::<_, i64>(0))
+            .map_err(|e| ExportError::db(self.db)(e.into()))?;
+        Ok(Some(tx))
+    }
+
+    /// Call `f` on every record in id order, a page at a time. A stored geometry that cannot
+    /// be parsed is passed without geometry, with a warning in `warnings`.
+    pub fn for_each(
+        &self,
+        warnings: &mut Vec<String>,
+        mut f: impl FnMut(SegmentExport) -> Result<(), ExportError>,
+    ) -> Result<(), ExportError> {
+        let conn = self.db.conn();
+        let err = ExportError::db(self.db);
+        let zones = db::zones::latest_zone_fits(conn).map_err(&err)?;
+        let mut after: Option<String> = None;
+        loop {
+            let page = pages::segments_page(conn, after.as_deref(), self.page_size).map_err(&err)?;
+            let (Some(first), Some(last)) = (page.first(), page.last()) else {
+                break;
+            };
+            let mut members =
+                pages::zone_memberships_between(conn, &zones, &first.segment_id, &last.segment_id)
+                    .map_err(&err)?;
+            let full = page.len() >= self.page_size;
+            after = Some(last.segment_id.clone());
+            for seg in page {
+                let zone = members.remove(&seg.segment_id);
+                f(self.assemble(seg, zone, warnings)?)?;
+            }
+            if !full {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// One segment's record, or `None` when it is not in the inventory.
+    pub fn load(
+        &self,
+        segment_id: &str,
+        warnings: &mut Vec<String>,
+    ) -> Result<Option<SegmentExport>, ExportError> {
+        let conn = self.db.conn();
+        let err = ExportError::db(self.db);
+        let Some(seg) = db::load_segment(conn, segment_id).map_err(&err)? else {
+            return Ok(None);
+        };
+        let zones = db::zones::latest_zone_fits(conn).map_err(&err)?;
+        let zone = pages::zone_memberships_between(conn, &zones, segment_id, segment_id)
+            .map_err(&err)?
+            .remove(segment_id);
+        self.assemble(seg, zone, warnings).map(Some)
+    }
+
+    /// The record of one segment row: its latest fit, that fit's curve, its zone.
+    fn assemble(
+        &self,
+        seg: SegmentRecord,
+        zone: Option<(db::zones::ZoneFitRow, db::zones::ZoneMemberRow)>,
+        warnings: &mut Vec<String>,
+    ) -> Result<SegmentExport, ExportError> {
+        let conn = self.db.conn();
+        let err = ExportError::db(self.db);
+        let fit = db::latest_fits(conn, Some(std::slice::from_ref(&seg.segment_id)))
+            .map_err(&err)?
+            .pop();
         let curve = match &fit {
             Some(f) => db::curves_for(conn, &f.segment_id, f.run_id).map_err(&err)?,
             None => Vec::new(),
         };
-        let zone = zones.remove(&seg.segment_id);
         let mut rec = SegmentExport::new(seg, fit, curve);
         rec.set_zone(zone);
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
@@ -177,8 +269,38 @@ pub fn load_records(
                 rec.id()
             ));
         }
-        out.push(rec);
+        Ok(rec)
     }
+
+    /// The coordinate system most segments' readable geometries are in
+    /// ([`crs::dominant_srid`]), from one pass over the geometries alone; `None` when no
+    /// segment has a readable geometry with a system.
+    pub fn dominant_srid(&self) -> Result<Option<i64>, ExportError> {
+        let mut srids = std::collections::BTreeMap::<i64, usize>::new();
+        pages::for_each_geometry(self.db.conn(), |g| {
+            if let (Some(w), Some(srid)) = (g.geometry_wkt.as_deref(), g.srid) {
+                if LineString::parse_wkt(w).is_ok() {
+                    *srids.entry(srid).or_default() += 1;
+                }
+            }
+            Ok::<(), db::DbError>(())
+        })
+        .map_err(ExportError::db(self.db))?;
+        Ok(crs::dominant_of_counts(srids))
+    }
+}
+
+/// Every segment of the inventory, sorted by id, with its latest fit and that fit's curve
+/// ([`Records::for_each`] collected: for small databases and tests; the exports stream).
+pub fn load_records(
+    db: &Database,
+    warnings: &mut Vec<String>,
+) -> Result<Vec<SegmentExport>, ExportError> {
+    let mut out = Vec::new();
+    Records::new(db, PAGE_SIZE).for_each(warnings, |r| {
+        out.push(r);
+        Ok(())
+    })?;
     Ok(out)
 }
 

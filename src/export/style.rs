@@ -7,8 +7,6 @@
 
 use std::path::{Path, PathBuf};
 
-use super::SegmentExport;
-
 /// The field the style colours by (a property of [`super::PROPERTIES`]).
 pub const STYLE_FIELD: &str = "leak_band_speed_m_per_s";
 
@@ -74,16 +72,12 @@ pub fn qml_path(out: &Path) -> PathBuf {
     }
 }
 
-/// The class breaks (N + 1 increasing values, m/s) for the leak-band speeds of `records`:
+/// The class breaks (N + 1 increasing values, m/s) for the segments' leak-band speeds:
 /// quantiles of the finite speeds, rounded outward to [`BREAK_ROUNDING_M_PER_S`], repeated
 /// breaks merged (so fewer classes when the speeds are few or equal). The first break is at or
 /// below the slowest speed and the last at or above the fastest, so every speed is in a class.
-pub fn class_breaks(records: &[SegmentExport]) -> Vec<f64> {
-    let mut speeds: Vec<f64> = records
-        .iter()
-        .filter_map(|r| r.leak_band_speed)
-        .filter(|v| v.is_finite())
-        .collect();
+pub fn class_breaks(speeds: impl IntoIterator<Item = f64>) -> Vec<f64> {
+    let mut speeds: Vec<f64> = speeds.into_iter().filter(|v| v.is_finite()).collect();
     speeds.sort_by(f64::total_cmp);
     let r = BREAK_ROUNDING_M_PER_S;
     let (Some(&lo), Some(&hi)) = (speeds.first(), speeds.last()) else {
@@ -148,8 +142,9 @@ fn speed(v: f64) -> String {
 /// The QML document (QGIS 3.28 LTR and later): a `graduatedSymbol` renderer on [`STYLE_FIELD`]
 /// with the ranges of [`class_breaks`], labelled `LOW – HIGH m/s`, coloured by
 /// [`CLASS_COLOURS`] (interpolated down to fewer colours when there are fewer classes).
-pub fn qml(records: &[SegmentExport]) -> String {
-    let breaks = class_breaks(records);
+/// `speeds`: the segments' leak-band speeds, m/s (those they have).
+pub fn qml(speeds: impl IntoIterator<Item = f64>) -> String {
+    let breaks = class_breaks(speeds);
     let n = breaks.len().saturating_sub(1);
     let colour = |i: usize| {
         // Spread n classes over the 5 colours, ends kept.
@@ -213,59 +208,30 @@ symbollevels=\"0\" enableorderby=\"0\" forceraster=\"0\" referencescale=\"-1\">\
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::db::SegmentRecord;
-    use crate::physics::Material;
 
-    fn rec(speed: Option<f64>) -> SegmentExport {
-        let seg = SegmentRecord {
-            segment_id: "S".into(),
-            material: Material::DuctileIron,
-            outer_diameter_mm: 170.0,
-            wall_thickness_mm: 6.0,
-            soil_density_kg_m3: 1900.0,
-            pipe_youngs_modulus_pa: None,
-            pipe_poisson: None,
-            pipe_density_kg_m3: None,
-            pipe_loss_factor: None,
-            fluid_density_kg_m3: None,
-            fluid_bulk_modulus_pa: None,
-            length_m: None,
-            soil_type: None,
-            soil_zone: None,
-            install_year: None,
-            geometry_wkt: None,
-            srid: None,
-            inputs_hash: String::new(),
-            imported_at: String::new(),
-            measurements: Vec::new(),
-        };
-        let mut r = SegmentExport::new(seg, None, Vec::new());
-        r.leak_band_speed = speed;
-        r
+    /// 101 speeds 400, 410, ..., 1400.
+    fn speeds() -> Vec<f64> {
+        (0..=100).map(|i| 400.0 + 10.0 * f64::from(i)).collect()
     }
 
     #[test]
     fn breaks_are_rounded_quantiles_covering_every_speed() {
         // 101 speeds 400, 410, ..., 1400: quantiles at 600, 800, 1000, 1200.
-        let recs: Vec<SegmentExport> = (0..=100)
-            .map(|i| rec(Some(400.0 + 10.0 * f64::from(i))))
-            .collect();
         assert_eq!(
-            class_breaks(&recs),
+            class_breaks(speeds()),
             [400.0, 600.0, 800.0, 1000.0, 1200.0, 1400.0]
         );
         // Ends rounded outward: 433 -> 430, 1417 -> 1420.
-        let recs = [rec(Some(433.0)), rec(Some(1417.0)), rec(None)];
-        let b = class_breaks(&recs);
+        let b = class_breaks([433.0, 1417.0, f64::NAN]);
         assert_eq!((b[0], *b.last().unwrap()), (430.0, 1420.0));
         assert!(b.windows(2).all(|w| w[0] < w[1]), "{b:?}");
     }
 
     #[test]
     fn equal_or_missing_speeds_still_give_increasing_breaks() {
-        let b = class_breaks(&[rec(Some(1000.0)), rec(Some(1000.0))]);
+        let b = class_breaks([1000.0, 1000.0]);
         assert_eq!(b, [1000.0, 1010.0]);
-        let b = class_breaks(&[rec(None)]);
+        let b = class_breaks([]);
         assert_eq!(b, [0.0, 300.0, 600.0, 900.0, 1200.0, 1500.0]);
     }
 
@@ -282,10 +248,7 @@ mod tests {
 
     #[test]
     fn qml_names_the_field_and_labels_in_m_per_s() {
-        let recs: Vec<SegmentExport> = (0..=100)
-            .map(|i| rec(Some(400.0 + 10.0 * f64::from(i))))
-            .collect();
-        let q = qml(&recs);
+        let q = qml(speeds());
         assert!(q.contains("attr=\"leak_band_speed_m_per_s\""));
         assert!(q.contains("label=\"400 – 600 m/s\""), "{q}");
         assert!(q.contains("label=\"1200 – 1400 m/s\""));

@@ -104,28 +104,48 @@ pub fn polygon_blob(srs_id: i32, ring: &[(f64, f64)]) -> Vec<u8> {
     b
 }
 
-/// A zone's estimate and the vertices of its segments.
-type ZonePoints<'a> = (&'a ZoneFitRow, Vec<(f64, f64)>);
+/// Points a zone holds before they are reduced to their convex hull: the hull of a zone's
+/// points is the hull of its previous hull and the new points, so a zone of any size holds at
+/// most this many points plus its hull (1 MB), and a zone with fewer keeps every point.
+pub const HULL_COMPACT_POINTS: usize = 65_536;
 
-/// Write the zone layer into an open GeoPackage transaction: `lines` are the records' lines in
-/// the table's system `table_srs` (`srs_id` as in the blobs). Zones without any geometry get a
-/// NULL polygon. Returns the number of zones written.
-pub fn write_zone_layer(
-    tx: &Transaction<'_>,
-    records: &[SegmentExport],
-    lines: &[Option<LineString>],
-    srs_id: i32,
-    table_srs: i64,
-) -> rusqlite::Result<usize> {
-    let mut zones: BTreeMap<&str, ZonePoints<'_>> = BTreeMap::new();
-    for (rec, line) in records.iter().zip(lines) {
-        if let Some((z, _)) = &rec.zone {
-            let entry = zones.entry(z.soil_zone.as_str()).or_insert((z, Vec::new()));
-            if let Some(l) = line {
-                entry.1.extend(l.points.iter().copied());
+/// Each zone's newest estimate and the vertices of its segments' lines (in the GeoPackage's
+/// system), gathered while the records stream past.
+#[derive(Debug, Default)]
+pub(crate) struct ZonePoints {
+    zones: BTreeMap<String, (ZoneFitRow, Vec<(f64, f64)>)>,
+}
+
+impl ZonePoints {
+    /// Add a record (nothing when it has no zone estimate) with its line in the table's system.
+    pub fn add(&mut self, rec: &SegmentExport, line: Option<&LineString>) {
+        let Some((z, _)) = &rec.zone else { return };
+        if !self.zones.contains_key(&z.soil_zone) {
+            self.zones
+                .insert(z.soil_zone.clone(), (z.clone(), Vec::new()));
+        }
+        let Some((_, pts)) = self.zones.get_mut(&z.soil_zone) else {
+            return;
+        };
+        if let Some(l) = line {
+            pts.extend(l.points.iter().copied());
+            if pts.len() > HULL_COMPACT_POINTS {
+                *pts = convex_hull(pts);
             }
         }
     }
+}
+
+/// Write the zone layer into an open GeoPackage transaction: `zones` hold the points in the
+/// table's system `table_srs` (`srs_id` as in the blobs). Zones without any geometry get a
+/// NULL polygon. Returns the number of zones written.
+pub(crate) fn write_zone_layer(
+    tx: &Transaction<'_>,
+    zones: ZonePoints,
+    srs_id: i32,
+    table_srs: i64,
+) -> rusqlite::Result<usize> {
+    let zones = zones.zones;
     if zones.is_empty() {
         return Ok(0);
     }

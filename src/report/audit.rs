@@ -15,19 +15,22 @@
 //! [`svg::MAP_TOOLTIP_LIMIT`], [`charts::SCATTER_LIMIT`], [`WORST_FITS`], [`FAILED_LISTED`],
 //! [`LEAST_CERTAIN_LISTED`], [`SOIL_TYPES_SHOWN`].
 
+use std::cmp::Ordering;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::Path;
 
 use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
-use super::svg::{self, escape, ColourScale, MapLine, MapStyle};
+use super::svg::{self, escape, ColourScale, MapCanvas, MapLine, MapStyle};
 use super::{quantile, sorted_finite};
+use crate::db::wkt::LineString;
+use crate::db::zones::ZoneFitRow;
 use crate::db::{self, Database, FitStatus, RunRow};
-use crate::export::gpkg::common_geometries;
+use crate::export::gpkg::CommonGeometry;
 use crate::export::record::UNFITTED;
 use crate::export::{
-    check_out_path, crs, load_records, write_file_atomically, ExportError, ExportSummary,
-    SegmentExport,
+    check_out_path, crs, write_file_atomically, ExportError, ExportSummary, Records,
+    SegmentExport, PAGE_SIZE,
 };
 use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};
 use crate::invert::FlagCode;
@@ -55,45 +58,359 @@ font-variant-numeric:tabular-nums}.note{color:#555;font-size:.9em}.worst{display
 flex-wrap:wrap;gap:4px 16px}.worst figure{margin:8px 0;border:1px solid #ddd;padding:6px}\
 figcaption{font-size:.85em;max-width:730px}svg{max-width:100%;height:auto}.warn{color:#a33}";
 
-/// Write the audit report of the database to `out_path`.
+/// Write the audit report of the database to `out_path`, reading the database
+/// [`PAGE_SIZE`] segments at a time.
 pub fn write(db: &Database, out_path: &Path) -> Result<ExportSummary, ExportError> {
+    write_paged(db, out_path, PAGE_SIZE)
+}
+
+/// [`write`], reading the database `page_size` segments at a time: the page is the same for
+/// every page size. The report's figures come from one pass over the records that keeps a few
+/// numbers per segment ([`Tally`]: no curve, no measurement), the map from a second pass over
+/// the geometries alone, and the worst fits' curves are read again for those shown.
+pub fn write_paged(
+    db: &Database,
+    out_path: &Path,
+    page_size: usize,
+) -> Result<ExportSummary, ExportError> {
     check_out_path(db, out_path, "the audit report", "report.html")?;
+    let records = Records::new(db, page_size);
+    let _snapshot = records.snapshot()?;
     let mut warnings = Vec::new();
-    let records = load_records(db, &mut warnings)?;
-    let runs = load_runs(db, &records)?;
-    let html = render(
-        &db.path().display().to_string(),
-        &records,
-        &runs,
-        &mut warnings,
-    )
-    .map_err(|e| ExportError::Encode {
+    let mut map_warnings = Vec::new();
+    let mut t = Tally::new(CommonGeometry::new(records.dominant_srid()?));
+    records.for_each(&mut warnings, |rec| {
+        t.add(&rec, &mut map_warnings);
+        Ok(())
+    })?;
+    t.finish();
+    warnings.append(&mut map_warnings);
+    let runs = load_runs(db, &t.run_ids)?;
+    let (name, worst_ids) = t.worst();
+    let mut worst = Vec::with_capacity(worst_ids.len());
+    for (id, v) in worst_ids {
+        // Warnings about these records were given by the pass above.
+        if let Some(r) = records.load(&id, &mut Vec::new())? {
+            worst.push((r, v));
+        }
+    }
+    let map = map_section(&records, &mut t)?;
+    let encode = |e: ChartError| ExportError::Encode {
         path: out_path.to_path_buf(),
         message: e.to_string(),
-    })?;
+    };
+    let html = render(
+        &db.path().display().to_string(),
+        &t,
+        &runs,
+        &map,
+        (name, &worst),
+        &warnings,
+    )
+    .map_err(encode)?;
     write_file_atomically(out_path, html.as_bytes())?;
     Ok(ExportSummary {
-        segments: records.len(),
-        with_geometry: records.iter().filter(|r| r.geometry.is_some()).count(),
-        fitted: records.iter().filter(|r| r.fit.is_some()).count(),
+        segments: t.segments,
+        with_geometry: t.with_geometry,
+        fitted: t.fitted,
         warnings,
     })
 }
 
 /// The runs that produced the segments' latest fits, by id.
-fn load_runs(db: &Database, records: &[SegmentExport]) -> Result<Vec<RunRow>, ExportError> {
-    let ids: BTreeSet<i64> = records
-        .iter()
-        .filter_map(|r| r.fit.as_ref())
-        .map(|f| f.run_id)
-        .collect();
+fn load_runs(db: &Database, ids: &BTreeSet<i64>) -> Result<Vec<RunRow>, ExportError> {
     let mut runs = Vec::new();
-    for id in ids {
+    for &id in ids {
         if let Some(r) = db::load_run(db.conn(), id).map_err(ExportError::db(db))? {
             runs.push(r);
         }
     }
     Ok(runs)
+}
+
+/// The `k` first items by `cmp`, of all pushed, holding at most `2 k` at a time.
+struct Top<T> {
+    k: usize,
+    items: Vec<T>,
+    cmp: fn(&T, &T) -> Ordering,
+}
+
+impl<T> Top<T> {
+    fn new(k: usize, cmp: fn(&T, &T) -> Ordering) -> Self {
+        Top {
+            k,
+            items: Vec::new(),
+            cmp,
+        }
+    }
+
+    fn push(&mut self, item: T) {
+        self.items.push(item);
+        if self.items.len() >= 2 * self.k.max(1) {
+            self.finish();
+        }
+    }
+
+    /// Sort and keep the first `k`.
+    fn finish(&mut self) {
+        self.items.sort_by(self.cmp);
+        self.items.truncate(self.k);
+    }
+}
+
+/// Highest value first, then by segment id.
+fn worst_first(a: &(f64, String), b: &(f64, String)) -> Ordering {
+    b.0.total_cmp(&a.0).then(a.1.cmp(&b.1))
+}
+
+/// A segment of the least-certain table.
+struct LeastCertain {
+    id: String,
+    material: &'static str,
+    soil_type: String,
+    speed: f64,
+    std: f64,
+    rel: f64,
+    status: &'static str,
+    flags: String,
+}
+
+/// A segment drawn on the map: its leak-band speed ± σ ([`speed_with_std`]) and status.
+struct Drawn {
+    speed: Option<(f64, Option<f64>)>,
+    status: &'static str,
+}
+
+/// A soil zone of the zone section: its newest estimate and its members' single fits.
+pub(crate) struct ZoneTally {
+    /// The estimate.
+    pub zone: ZoneFitRow,
+    /// The members' fitted E_m, Pa.
+    pub e: Vec<f64>,
+    /// The members' fitted ν_m.
+    pub nu: Vec<f64>,
+}
+
+/// Everything the report shows, gathered in one pass over the records: counts, the values of
+/// the distributions (a few numbers per segment), and the few segments each table lists.
+struct Tally {
+    segments: usize,
+    with_geometry: usize,
+    fitted: usize,
+    status: BTreeMap<&'static str, usize>,
+    flags: BTreeMap<String, usize>,
+    notes: BTreeMap<String, usize>,
+    run_ids: BTreeSet<i64>,
+    /// Of the non-failed fits, sorted by [`Tally::finish`].
+    misfits: Vec<f64>,
+    /// Of the non-failed fits, sorted by [`Tally::finish`].
+    chi2: Vec<f64>,
+    /// Of every segment, sorted by [`Tally::finish`].
+    speeds: Vec<f64>,
+    any_non_failed: bool,
+    all_chi2: bool,
+    with_speed_error: usize,
+    above_speed_error: usize,
+    without_speed_error: usize,
+    least_certain: Top<LeastCertain>,
+    soil: BTreeMap<String, SoilTally>,
+    speed_points: Vec<SpeedPoint<'static>>,
+    zones: BTreeMap<String, ZoneTally>,
+    worst_chi2: Top<(f64, String)>,
+    worst_misfit: Top<(f64, String)>,
+    failed: usize,
+    failed_listed: Vec<(String, String)>,
+    common: CommonGeometry,
+    bbox: [f64; 4],
+    drawn: Vec<Drawn>,
+}
+
+impl Tally {
+    fn new(common: CommonGeometry) -> Self {
+        Tally {
+            segments: 0,
+            with_geometry: 0,
+            fitted: 0,
+            status: BTreeMap::new(),
+            flags: BTreeMap::new(),
+            notes: BTreeMap::new(),
+            run_ids: BTreeSet::new(),
+            misfits: Vec::new(),
+            chi2: Vec::new(),
+            speeds: Vec::new(),
+            any_non_failed: false,
+            all_chi2: true,
+            with_speed_error: 0,
+            above_speed_error: 0,
+            without_speed_error: 0,
+            least_certain: Top::new(LEAST_CERTAIN_LISTED, |a, b| {
+                b.rel.total_cmp(&a.rel).then(a.id.cmp(&b.id))
+            }),
+            soil: BTreeMap::new(),
+            speed_points: Vec::new(),
+            zones: BTreeMap::new(),
+            worst_chi2: Top::new(WORST_FITS, worst_first),
+            worst_misfit: Top::new(WORST_FITS, worst_first),
+            failed: 0,
+            failed_listed: Vec::new(),
+            common,
+            bbox: [
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ],
+            drawn: Vec::new(),
+        }
+    }
+
+    /// Count one record; `map_warnings` gets its geometry's, when it cannot go on the map.
+    fn add(&mut self, r: &SegmentExport, map_warnings: &mut Vec<String>) {
+        self.segments += 1;
+        self.with_geometry += usize::from(r.geometry.is_some());
+        self.fitted += usize::from(r.fit.is_some());
+        *self.status.entry(r.status()).or_default() += 1;
+        count_codes(&mut self.flags, r.flags.as_deref());
+        count_codes(&mut self.notes, r.fit.as_ref().map(|f| f.notes.as_str()));
+        self.speeds.extend(r.leak_band_speed.filter(|v| v.is_finite()));
+        if let Some(line) = self
+            .common
+            .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
+        {
+            for &(x, y) in &line.points {
+                self.bbox = [
+                    self.bbox[0].min(x),
+                    self.bbox[1].max(x),
+                    self.bbox[2].min(y),
+                    self.bbox[3].max(y),
+                ];
+            }
+            self.drawn.push(Drawn {
+                speed: speed_with_std(r),
+                status: r.status(),
+            });
+        }
+        if let Some((z, _)) = &r.zone {
+            let t = self
+                .zones
+                .entry(z.soil_zone.clone())
+                .or_insert_with(|| ZoneTally {
+                    zone: z.clone(),
+                    e: Vec::new(),
+                    nu: Vec::new(),
+                });
+            if let Some(f) = &r.fit {
+                t.e.extend(f.soil_youngs_modulus_pa);
+                t.nu.extend(f.soil_poisson);
+            }
+        }
+        let Some(f) = &r.fit else { return };
+        self.run_ids.insert(f.run_id);
+        if f.status == FitStatus::Failed {
+            self.failed += 1;
+            if self.failed_listed.len() < FAILED_LISTED {
+                self.failed_listed
+                    .push((r.id().to_string(), f.message.clone().unwrap_or_default()));
+            }
+            return;
+        }
+        // A non-failed fit.
+        self.any_non_failed = true;
+        self.all_chi2 &= f.chi2_per_dof.is_some_and(f64::is_finite);
+        self.misfits.extend(f.misfit.filter(|v| v.is_finite()));
+        self.chi2.extend(f.chi2_per_dof.filter(|v| v.is_finite()));
+        match speed_with_std(r) {
+            Some((v, Some(e))) => {
+                self.with_speed_error += 1;
+                self.above_speed_error += usize::from(e / v > SPEED_RSTD_MAX);
+                self.least_certain.push(LeastCertain {
+                    id: r.id().to_string(),
+                    material: r.segment.material.code(),
+                    soil_type: r.segment.soil_type.clone().unwrap_or_default(),
+                    speed: v,
+                    std: e,
+                    rel: e / v,
+                    status: r.status(),
+                    flags: r.flags.clone().unwrap_or_default(),
+                });
+            }
+            Some((_, None)) => self.without_speed_error += 1,
+            None => {}
+        }
+        let soil_type = r
+            .segment
+            .soil_type
+            .as_deref()
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .unwrap_or("(not recorded)");
+        if !self.soil.contains_key(soil_type) {
+            self.soil
+                .insert(soil_type.to_string(), SoilTally::default());
+        }
+        if let Some(g) = self.soil.get_mut(soil_type) {
+            g.fitted += 1;
+            g.c_p.extend(determined(
+                f.soil_p_wave_speed_m_per_s,
+                f.soil_p_wave_speed_std_m_per_s,
+            ));
+            g.c_s.extend(determined(
+                f.soil_s_wave_speed_m_per_s,
+                f.soil_s_wave_speed_std_m_per_s,
+            ));
+        }
+        if let Some(speed) = r.leak_band_speed {
+            self.speed_points.push(SpeedPoint {
+                material: r.segment.material.code(),
+                diameter_mm: r.segment.outer_diameter_mm,
+                speed,
+            });
+        }
+        if !r.curve.is_empty() {
+            let id = || r.id().to_string();
+            if let Some(v) = f.chi2_per_dof.filter(|v| v.is_finite()) {
+                self.worst_chi2.push((v, id()));
+            }
+            if let Some(v) = f.misfit.filter(|v| v.is_finite()) {
+                self.worst_misfit.push((v, id()));
+            }
+        }
+    }
+
+    /// Sort what the sections read sorted.
+    fn finish(&mut self) {
+        for v in [&mut self.misfits, &mut self.chi2, &mut self.speeds] {
+            v.sort_by(f64::total_cmp);
+        }
+        self.least_certain.finish();
+        self.worst_chi2.finish();
+        self.worst_misfit.finish();
+    }
+
+    /// The fit-quality figure the report ranks by: χ²/dof when every non-failed fit has it
+    /// (comparable across segments), the misfit otherwise; its sorted values over the
+    /// non-failed fits.
+    fn quality(&self) -> (&'static str, &[f64]) {
+        if self.any_non_failed && self.all_chi2 {
+            ("χ²/dof", &self.chi2)
+        } else {
+            ("misfit", &self.misfits)
+        }
+    }
+
+    /// The worst fits by [`Self::quality`]: its name, and the segments with their values.
+    fn worst(&self) -> (&'static str, Vec<(String, f64)>) {
+        let (name, _) = self.quality();
+        let top = if self.any_non_failed && self.all_chi2 {
+            &self.worst_chi2
+        } else {
+            &self.worst_misfit
+        };
+        (
+            name,
+            top.items.iter().map(|(v, id)| (id.clone(), *v)).collect(),
+        )
+    }
 }
 
 /// "v ± σ" (or "v" without σ, "–" without a value), m/s-like precision.
@@ -109,34 +426,18 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "–".to_string(), |x| sig(x, digits))
 }
 
-/// The fit-quality figure the report ranks by: χ²/dof when every non-failed fit has it
-/// (comparable across segments), the misfit otherwise.
-fn quality_key(records: &[SegmentExport]) -> (&'static str, fn(&SegmentExport) -> Option<f64>) {
-    let fitted = records
-        .iter()
-        .filter_map(|r| r.fit.as_ref())
-        .filter(|f| f.status != FitStatus::Failed);
-    let mut any = false;
-    let mut all_chi2 = true;
-    for f in fitted {
-        any = true;
-        all_chi2 &= f.chi2_per_dof.is_some_and(f64::is_finite);
-    }
-    if any && all_chi2 {
-        ("χ²/dof", |r| r.fit.as_ref().and_then(|f| f.chi2_per_dof))
-    } else {
-        ("misfit", |r| r.fit.as_ref().and_then(|f| f.misfit))
-    }
-}
-
-/// The HTML page.
-pub fn render(
+/// The HTML page: the tallied records `t`, the runs behind their fits, the map section, the
+/// worst fits (the name of the figure they are ranked by, each record with its value), and the
+/// warnings.
+fn render(
     db_name: &str,
-    records: &[SegmentExport],
+    t: &Tally,
     runs: &[RunRow],
-    warnings: &mut Vec<String>,
+    map: &str,
+    worst: (&str, &[(SegmentExport, f64)]),
+    warnings: &[String],
 ) -> Result<String, ChartError> {
-    let mut h = String::with_capacity(64 * 1024);
+    let mut h = String::with_capacity(64 * 1024 + map.len());
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
@@ -148,28 +449,20 @@ pub fn render(
         lo = crate::physics::curves::LEAK_BAND_HZ.0,
         hi = crate::physics::curves::LEAK_BAND_HZ.1,
     );
-    let non_failed: Vec<&SegmentExport> = records
-        .iter()
-        .filter(|r| {
-            r.fit
-                .as_ref()
-                .is_some_and(|f| f.status != FitStatus::Failed)
-        })
-        .collect();
-    trust(&mut h, records);
-    map(&mut h, records, warnings);
-    least_certain(&mut h, &non_failed);
-    soil_speeds(&mut h, &non_failed)?;
-    notes(&mut h, records);
-    summary(&mut h, records, &non_failed, runs);
-    misfit(&mut h, records, &non_failed)?;
-    speed_diameter(&mut h, &non_failed)?;
-    h.push_str(&super::zones::section(records));
-    worst_fits(&mut h, records)?;
-    failed(&mut h, records);
+    trust(&mut h, t);
+    h.push_str(map);
+    least_certain(&mut h, t);
+    soil_speeds(&mut h, t)?;
+    notes(&mut h, t);
+    summary(&mut h, t, runs);
+    misfit(&mut h, t)?;
+    speed_diameter(&mut h, t)?;
+    h.push_str(&super::zones::section(&t.zones));
+    worst_fits(&mut h, worst.0, worst.1)?;
+    failed(&mut h, t);
     if !warnings.is_empty() {
         h.push_str("<section id=\"warnings\"><h2>Warnings</h2><ul>");
-        for w in warnings.iter() {
+        for w in warnings {
             let _ = write!(h, "<li class=\"warn\">{}</li>", escape(w));
         }
         h.push_str("</ul></section>");
@@ -178,21 +471,9 @@ pub fn render(
     Ok(h)
 }
 
-fn summary(
-    h: &mut String,
-    records: &[SegmentExport],
-    non_failed: &[&SegmentExport],
-    runs: &[RunRow],
-) {
-    let misfits = sorted_finite(non_failed.iter().filter_map(|r| r.fit.as_ref()?.misfit));
-    let chi2 = sorted_finite(
-        non_failed
-            .iter()
-            .filter_map(|r| r.fit.as_ref()?.chi2_per_dof),
-    );
-    let speeds = sorted_finite(records.iter().filter_map(|r| r.leak_band_speed));
-    let with_geom = records.iter().filter(|r| r.geometry.is_some()).count();
-    let fitted = records.iter().filter(|r| r.fit.is_some()).count();
+fn summary(h: &mut String, t: &Tally, runs: &[RunRow]) {
+    let (misfits, chi2, speeds) = (&t.misfits, &t.chi2, &t.speeds);
+    let (with_geom, fitted) = (t.with_geometry, t.fitted);
     let _ = write!(
         h,
         "<section id=\"summary\"><h2>Summary</h2><table>\
@@ -203,15 +484,15 @@ fn summary(
          <tr><th>χ²/dof: median / 90th percentile ({} fits)</th><td class=\"n\">{} / {}</td></tr>\
          <tr><th>leak-band wave speed, m/s: 10th / median / 90th percentile</th>\
          <td class=\"n\">{} / {} / {}</td></tr></table>",
-        records.len(),
-        opt(quantile(&misfits, 0.5), 3),
-        opt(quantile(&misfits, 0.9), 3),
+        t.segments,
+        opt(quantile(misfits, 0.5), 3),
+        opt(quantile(misfits, 0.9), 3),
         chi2.len(),
-        opt(quantile(&chi2, 0.5), 3),
-        opt(quantile(&chi2, 0.9), 3),
-        opt(quantile(&speeds, 0.1), 4),
-        opt(quantile(&speeds, 0.5), 4),
-        opt(quantile(&speeds, 0.9), 4),
+        opt(quantile(chi2, 0.5), 3),
+        opt(quantile(chi2, 0.9), 3),
+        opt(quantile(speeds, 0.1), 4),
+        opt(quantile(speeds, 0.5), 4),
+        opt(quantile(speeds, 0.9), 4),
     );
     h.push_str(
         "<h3>Runs behind these fits</h3><table><tr><th>run</th><th>started</th><th>finished</th>\
@@ -267,18 +548,21 @@ fn advice(code: &str) -> &'static str {
         .unwrap_or("a code of an older pipewave version: `pipewave run` refits these fits")
 }
 
-/// Count each code over the records, most frequent first (then by code).
-fn count_codes(
-    records: &[SegmentExport],
-    list: fn(&SegmentExport) -> Option<&str>,
-) -> Vec<(&str, usize)> {
-    let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
-    for l in records.iter().filter_map(list) {
-        for c in codes(l) {
-            *counts.entry(c).or_default() += 1;
+/// Count each code of a comma-separated list into `counts`.
+fn count_codes(counts: &mut BTreeMap<String, usize>, list: Option<&str>) {
+    for c in list.into_iter().flat_map(codes) {
+        match counts.get_mut(c) {
+            Some(n) => *n += 1,
+            None => {
+                counts.insert(c.to_string(), 1);
+            }
         }
     }
-    let mut v: Vec<(&str, usize)> = counts.into_iter().collect();
+}
+
+/// The codes counted, most frequent first (then by code).
+fn by_frequency(counts: &BTreeMap<String, usize>) -> Vec<(&str, usize)> {
+    let mut v: Vec<(&str, usize)> = counts.iter().map(|(c, n)| (c.as_str(), *n)).collect();
     v.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
     v
 }
@@ -302,12 +586,8 @@ fn percent(part: usize, whole: usize) -> String {
     }
 }
 
-fn trust(h: &mut String, records: &[SegmentExport]) {
-    let mut status: BTreeMap<&str, usize> = BTreeMap::new();
-    for r in records {
-        *status.entry(r.status()).or_default() += 1;
-    }
-    let n = |s: &str| status.get(s).copied().unwrap_or(0);
+fn trust(h: &mut String, t: &Tally) {
+    let n = |s: &str| t.status.get(s).copied().unwrap_or(0);
     let _ = write!(
         h,
         "<section id=\"trust\"><h2>Trustworthy predictions</h2><p><b>{ok} of {all} segments \
@@ -316,8 +596,8 @@ fn trust(h: &mut String, records: &[SegmentExport]) {
          {flagged} are flagged for action, {failed} failed, {unfitted} are not fitted.</p><table>\
          <tr><th>status</th><th>segments</th><th></th></tr>",
         ok = n("ok"),
-        all = records.len(),
-        pct = percent(n("ok"), records.len()),
+        all = t.segments,
+        pct = percent(n("ok"), t.segments),
         lim = 100.0 * SPEED_RSTD_MAX,
         flagged = n("flagged"),
         failed = n("failed"),
@@ -334,14 +614,14 @@ fn trust(h: &mut String, records: &[SegmentExport]) {
             h,
             "<tr><td>{s}</td><td class=\"n\">{}</td><td>{}</td></tr>",
             n(s),
-            svg::bar(n(s), records.len(), colour)
+            svg::bar(n(s), t.segments, colour)
         );
     }
     h.push_str(
         "</table><h3 id=\"flags\">Flags that need action</h3><table><tr><th>flag</th>\
          <th>segments</th><th>what it means and what to do</th></tr>",
     );
-    let flags = count_codes(records, |r| r.flags.as_deref());
+    let flags = by_frequency(&t.flags);
     for (code, count) in &flags {
         let _ = write!(
             h,
@@ -367,46 +647,20 @@ fn error_scale() -> ColourScale {
     }
 }
 
-fn map(h: &mut String, records: &[SegmentExport], warnings: &mut Vec<String>) {
-    h.push_str("<section id=\"map\"><h2>Map: leak-band wave speed ± its error</h2>");
-    let (srid, lines) = common_geometries(records, warnings);
-    let drawn: Vec<(&SegmentExport, &crate::db::wkt::LineString)> = records
-        .iter()
-        .zip(&lines)
-        .filter_map(|(r, l)| l.as_ref().map(|line| (r, line)))
-        .collect();
-    let Some(srid) = srid.filter(|_| !drawn.is_empty()) else {
+/// The relative error of a drawn segment's leak-band speed, %.
+fn relative_error(d: &Drawn) -> Option<f64> {
+    d.speed.and_then(|(v, e)| Some(100.0 * e? / v))
+}
+
+/// The map section: the segments [`Tally::add`] put on the map, drawn from a second pass over
+/// the geometries alone (in the same order, so the k-th line drawn is the k-th tallied).
+fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportError> {
+    let mut h = String::from("<section id=\"map\"><h2>Map: leak-band wave speed ± its error</h2>");
+    let Some(srid) = t.common.srid().filter(|_| !t.drawn.is_empty()) else {
         h.push_str("<p class=\"note\">No segment has a geometry.</p></section>");
-        return;
+        return Ok(h);
     };
-    let speeds: Vec<Option<(f64, Option<f64>)>> =
-        drawn.iter().map(|(r, _)| speed_with_std(r)).collect();
-    let speed_lines: Vec<MapLine<'_>> = drawn
-        .iter()
-        .zip(&speeds)
-        .map(|((r, line), s)| MapLine {
-            id: r.id(),
-            line,
-            value: s.map(|s| s.0),
-            label: s.map(|(v, e)| match e {
-                Some(e) => format!("{v:.0} ± {} m/s ({})", sig(e, 2), r.status()),
-                None => format!("{v:.0} m/s, error unknown ({})", r.status()),
-            }),
-        })
-        .collect();
-    let error_lines: Vec<MapLine<'_>> = drawn
-        .iter()
-        .zip(&speeds)
-        .map(|((r, line), s)| {
-            let rel = s.and_then(|(v, e)| Some(100.0 * e? / v));
-            MapLine {
-                id: r.id(),
-                line,
-                value: rel,
-                label: rel.map(|p| format!("{} % of the speed", sig(p, 2))),
-            }
-        })
-        .collect();
+    let n = t.drawn.len();
     let name = crs::lookup(srid).map_or("unknown system", |d| d.name);
     let _ = write!(
         h,
@@ -415,64 +669,97 @@ fn map(h: &mut String, records: &[SegmentExport], warnings: &mut Vec<String>) {
          one-sigma error as a percentage of the speed; darker is less certain, the darkest class \
          is above the {:.0} % a trustworthy prediction allows. Grey: no value (not fitted, \
          failed, a curve that does not cover the band, or no error stored).{}</p>",
-        drawn.len(),
+        n,
         escape(name),
         100.0 * SPEED_RSTD_MAX,
-        if drawn.len() <= svg::MAP_TOOLTIP_LIMIT {
+        if n <= svg::MAP_TOOLTIP_LIMIT {
             " Hover a segment for its id, speed and error."
         } else {
             ""
         }
     );
     let geographic = crs::is_geographic(srid);
-    h.push_str(&svg::map(
-        &speed_lines,
-        geographic,
-        &MapStyle {
-            unit: "m/s",
-            decimals: 0,
-            scale: None,
-            reversed: false,
-            width: MAP_WIDTH_PX,
-        },
-    ));
+    let speed_values = sorted_finite(t.drawn.iter().filter_map(|d| d.speed.map(|s| s.0)));
+    let error_values = sorted_finite(t.drawn.iter().filter_map(relative_error));
+    let speed_style = MapStyle {
+        unit: "m/s",
+        decimals: 0,
+        scale: None,
+        reversed: false,
+        width: MAP_WIDTH_PX,
+    };
+    let error_style = MapStyle {
+        unit: "%",
+        decimals: 2,
+        scale: Some(error_scale()),
+        reversed: true,
+        width: ERROR_MAP_WIDTH_PX,
+    };
+    let mut speed_map = MapCanvas::new(t.bbox, n, &speed_values, geographic, &speed_style);
+    let mut error_map = MapCanvas::new(t.bbox, n, &error_values, geographic, &error_style);
+    let tooltips = n <= svg::MAP_TOOLTIP_LIMIT;
+    let (common, drawn) = (&mut t.common, &t.drawn);
+    let mut k = 0;
+    let mut seen = Vec::new();
+    let changed = || db::DbError::BadStoredValue {
+        what: "the segments' geometry changed while the audit report read it".to_string(),
+    };
+    db::pages::for_each_geometry(records.db().conn(), |g| {
+        let geometry = g
+            .geometry_wkt
+            .as_deref()
+            .and_then(|w| LineString::parse_wkt(w).ok());
+        // Its warning, if any, was given by the first pass.
+        seen.clear();
+        let Some(line) = common.line(&g.segment_id, geometry.as_ref(), g.srid, &mut seen) else {
+            return Ok(());
+        };
+        let d = drawn.get(k).ok_or_else(changed)?;
+        k += 1;
+        let rel = relative_error(d);
+        speed_map.add(&MapLine {
+            id: &g.segment_id,
+            line: &line,
+            value: d.speed.map(|s| s.0),
+            label: d.speed.filter(|_| tooltips).map(|(v, e)| match e {
+                Some(e) => format!("{v:.0} ± {} m/s ({})", sig(e, 2), d.status),
+                None => format!("{v:.0} m/s, error unknown ({})", d.status),
+            }),
+        });
+        error_map.add(&MapLine {
+            id: &g.segment_id,
+            line: &line,
+            value: rel,
+            label: rel
+                .filter(|_| tooltips)
+                .map(|p| format!("{} % of the speed", sig(p, 2))),
+        });
+        Ok(())
+    })
+    .map_err(ExportError::db(records.db()))?;
+    if k != drawn.len() {
+        return Err(ExportError::db(records.db())(changed()));
+    }
+    h.push_str(&speed_map.finish());
     let _ = write!(
         h,
         "<h3>Relative error of the leak-band speed (%)</h3>{}</section>",
-        svg::map(
-            &error_lines,
-            geographic,
-            &MapStyle {
-                unit: "%",
-                decimals: 2,
-                scale: Some(error_scale()),
-                reversed: true,
-                width: ERROR_MAP_WIDTH_PX,
-            },
-        )
+        error_map.finish()
     );
+    Ok(h)
 }
 
-fn least_certain(h: &mut String, non_failed: &[&SegmentExport]) {
-    let mut rows: Vec<(&SegmentExport, f64, f64, f64)> = Vec::new();
-    let mut without_error = 0usize;
-    for r in non_failed {
-        match speed_with_std(r) {
-            Some((v, Some(e))) => rows.push((r, v, e, e / v)),
-            Some((_, None)) => without_error += 1,
-            None => {}
-        }
-    }
-    rows.sort_by(|a, b| b.3.total_cmp(&a.3).then(a.0.id().cmp(b.0.id())));
-    let above = rows.iter().filter(|r| r.3 > SPEED_RSTD_MAX).count();
+fn least_certain(h: &mut String, t: &Tally) {
+    let rows = &t.least_certain.items;
+    let (above, without_error) = (t.above_speed_error, t.without_speed_error);
     let _ = write!(
         h,
         "<section id=\"least-certain\"><h2>The least certain wave speeds</h2><p>{} fitted \
          segments have a leak-band speed with an error; {above} of them are uncertain by more \
          than {:.0} % (one sigma). The {} with the largest relative error:</p>",
-        rows.len(),
+        t.with_speed_error,
         100.0 * SPEED_RSTD_MAX,
-        rows.len().min(LEAST_CERTAIN_LISTED),
+        t.with_speed_error.min(LEAST_CERTAIN_LISTED),
     );
     if without_error > 0 {
         let _ = write!(
@@ -485,18 +772,19 @@ fn least_certain(h: &mut String, non_failed: &[&SegmentExport]) {
         "<table><tr><th>segment</th><th>material</th><th>soil type</th>\
          <th>leak-band speed (m/s)</th><th>relative error</th><th>status</th><th>flags</th></tr>",
     );
-    for (r, v, e, rel) in rows.iter().take(LEAST_CERTAIN_LISTED) {
-        let flags = r.flags.as_deref().unwrap_or("");
+    for r in rows.iter().take(LEAST_CERTAIN_LISTED) {
+        let flags = r.flags.as_str();
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"n\">{v:.0} ± {}</td>\
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"n\">{:.0} ± {}</td>\
              <td class=\"n rel\">{:.2} %</td><td>{}</td><td>{}</td></tr>",
-            escape(r.id()),
-            r.segment.material.code(),
-            escape(r.segment.soil_type.as_deref().unwrap_or("")),
-            sig(*e, 2),
-            100.0 * rel,
-            r.status(),
+            escape(&r.id),
+            r.material,
+            escape(&r.soil_type),
+            r.speed,
+            sig(r.std, 2),
+            100.0 * r.rel,
+            r.status,
             escape(if flags.is_empty() { "none" } else { flags }),
         );
     }
@@ -537,14 +825,14 @@ pub fn weighted_mean(values: &[WithStd]) -> Option<(WithStd, Option<f64>)> {
 }
 
 /// The fitted segments of one soil type and their determined soil speeds.
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 struct SoilTally {
     fitted: usize,
     c_p: Vec<WithStd>,
     c_s: Vec<WithStd>,
 }
 
-fn soil_speeds(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), ChartError> {
+fn soil_speeds(h: &mut String, t: &Tally) -> Result<(), ChartError> {
     h.push_str(
         "<section id=\"soil-speeds\"><h2>The soil's wave speeds by soil type</h2><p>The data fix \
          the soil's compressional speed c_P (metal and plastic pipes) and, for plastic pipes, \
@@ -558,28 +846,11 @@ fn soil_speeds(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), Char
          the error says that soil type is not one material.</p>",
         100.0 * SPEED_DETERMINED_RSTD
     );
-    let mut by_type: BTreeMap<String, SoilTally> = BTreeMap::new();
-    for r in non_failed {
-        let Some(f) = r.fit.as_ref() else { continue };
-        let t = r
-            .segment
-            .soil_type
-            .as_deref()
-            .map(str::trim)
-            .filter(|s| !s.is_empty())
-            .unwrap_or("(not recorded)");
-        let g = by_type.entry(t.to_string()).or_default();
-        g.fitted += 1;
-        g.c_p.extend(determined(
-            f.soil_p_wave_speed_m_per_s,
-            f.soil_p_wave_speed_std_m_per_s,
-        ));
-        g.c_s.extend(determined(
-            f.soil_s_wave_speed_m_per_s,
-            f.soil_s_wave_speed_std_m_per_s,
-        ));
-    }
-    let mut groups: Vec<(String, SoilTally)> = by_type.into_iter().collect();
+    let mut groups: Vec<(String, SoilTally)> = t
+        .soil
+        .iter()
+        .map(|(k, g)| (k.clone(), g.clone()))
+        .collect();
     groups.sort_by(|a, b| b.1.fitted.cmp(&a.1.fitted).then(a.0.cmp(&b.0)));
     if groups.len() > SOIL_TYPES_SHOWN {
         let mut rest = SoilTally::default();
@@ -682,8 +953,8 @@ fn soil_speeds(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), Char
     Ok(())
 }
 
-fn notes(h: &mut String, records: &[SegmentExport]) {
-    let notes = count_codes(records, |r| r.fit.as_ref().map(|f| f.notes.as_str()));
+fn notes(h: &mut String, t: &Tally) {
+    let notes = by_frequency(&t.notes);
     h.push_str(
         "<section id=\"notes\"><h2>Notes</h2><p class=\"note\">What the data leave undetermined. \
          These are facts about the soil and the measurements, not defects of the fit.</p>",
@@ -705,14 +976,9 @@ fn notes(h: &mut String, records: &[SegmentExport]) {
     h.push_str("</section>");
 }
 
-fn misfit(
-    h: &mut String,
-    records: &[SegmentExport],
-    non_failed: &[&SegmentExport],
-) -> Result<(), ChartError> {
+fn misfit(h: &mut String, t: &Tally) -> Result<(), ChartError> {
     h.push_str("<section id=\"misfit\"><h2>Misfit distribution</h2>");
-    let (name, key) = quality_key(records);
-    let v = sorted_finite(non_failed.iter().filter_map(|r| key(r)));
+    let (name, v) = t.quality();
     if v.iter().any(|x| *x > 0.0) {
         let _ = write!(
             h,
@@ -720,15 +986,15 @@ fn misfit(
             v.len()
         );
         let markers: Vec<(&str, f64)> = [
-            ("median", quantile(&v, 0.5)),
-            ("90th percentile", quantile(&v, 0.9)),
+            ("median", quantile(v, 0.5)),
+            ("90th percentile", quantile(v, 0.9)),
         ]
         .into_iter()
         .filter_map(|(l, q)| q.map(|q| (l, q)))
         .collect();
         h.push_str(&charts::log_histogram(
             "misfit distribution",
-            &v,
+            v,
             name,
             &markers,
         )?);
@@ -739,23 +1005,14 @@ fn misfit(
     Ok(())
 }
 
-fn speed_diameter(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), ChartError> {
+fn speed_diameter(h: &mut String, t: &Tally) -> Result<(), ChartError> {
     h.push_str("<section id=\"speed-diameter\"><h2>Wave speed against diameter, by material</h2>");
-    let points: Vec<SpeedPoint<'_>> = non_failed
-        .iter()
-        .filter_map(|r| {
-            Some(SpeedPoint {
-                material: r.segment.material.code(),
-                diameter_mm: r.segment.outer_diameter_mm,
-                speed: r.leak_band_speed?,
-            })
-        })
-        .collect();
+    let points = &t.speed_points;
     if points.is_empty() {
         h.push_str("<p class=\"note\">No fitted segment with a wave speed.</p>");
     } else {
         let mut counts: BTreeMap<&str, usize> = BTreeMap::new();
-        for p in &points {
+        for p in points {
             *counts.entry(p.material).or_default() += 1;
         }
         let mut materials: Vec<(&str, usize)> = counts.into_iter().collect();
@@ -772,26 +1029,17 @@ fn speed_diameter(h: &mut String, non_failed: &[&SegmentExport]) -> Result<(), C
                 "Dots: one segment each."
             }
         );
-        h.push_str(&charts::speed_vs_diameter(&points, &names)?);
+        h.push_str(&charts::speed_vs_diameter(points, &names)?);
     }
     h.push_str("</section>");
     Ok(())
 }
 
-fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartError> {
-    let (name, key) = quality_key(records);
-    let mut cands: Vec<(&SegmentExport, f64)> = records
-        .iter()
-        .filter(|r| {
-            r.fit
-                .as_ref()
-                .is_some_and(|f| f.status != FitStatus::Failed)
-        })
-        .filter(|r| !r.curve.is_empty())
-        .filter_map(|r| key(r).filter(|v| v.is_finite()).map(|v| (r, v)))
-        .collect();
-    cands.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.id().cmp(b.0.id())));
-    cands.truncate(WORST_FITS);
+fn worst_fits(
+    h: &mut String,
+    name: &str,
+    cands: &[(SegmentExport, f64)],
+) -> Result<(), ChartError> {
     let _ = write!(
         h,
         "<section id=\"worst-fits\"><h2>The worst fits</h2><p class=\"note\">The {} fitted \
@@ -800,6 +1048,7 @@ fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartErro
         cands.len()
     );
     for (r, v) in cands {
+        let v = *v;
         let Some(fit) = r.fit.as_ref() else { continue };
         let speed: Vec<(f64, f64)> = r
             .curve
@@ -871,38 +1120,25 @@ fn worst_fits(h: &mut String, records: &[SegmentExport]) -> Result<(), ChartErro
     Ok(())
 }
 
-fn failed(h: &mut String, records: &[SegmentExport]) {
-    let failed: Vec<&SegmentExport> = records
-        .iter()
-        .filter(|r| {
-            r.fit
-                .as_ref()
-                .is_some_and(|f| f.status == FitStatus::Failed)
-        })
-        .collect();
+fn failed(h: &mut String, t: &Tally) {
     let _ = write!(
         h,
         "<section id=\"failed\"><h2>Failed segments</h2><p class=\"note\">{} segment(s) have no \
          fit{}.</p>",
-        failed.len(),
-        if failed.len() > FAILED_LISTED {
+        t.failed,
+        if t.failed > FAILED_LISTED {
             format!("; the first {FAILED_LISTED} by id")
         } else {
             String::new()
         }
     );
-    if !failed.is_empty() {
+    if t.failed > 0 {
         h.push_str("<table><tr><th>segment</th><th>reason</th></tr>");
-        for r in failed.iter().take(FAILED_LISTED) {
-            let msg = r
-                .fit
-                .as_ref()
-                .and_then(|f| f.message.as_deref())
-                .unwrap_or("");
+        for (id, msg) in &t.failed_listed {
             let _ = write!(
                 h,
                 "<tr><td>{}</td><td>{}</td></tr>",
-                escape(r.id()),
+                escape(id),
                 escape(msg)
             );
         }

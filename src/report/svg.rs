@@ -119,15 +119,6 @@ pub struct MapStyle<'a> {
 /// The network map: every segment as a polyline coloured by `value`, with a legend.
 /// `geographic`: the coordinates are degrees (x scaled by cos(latitude) to keep shapes).
 pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> String {
-    let width = style.width;
-    let dec = style.decimals;
-    let palette = |class: usize| {
-        if style.reversed {
-            VIRIDIS_9[VIRIDIS_9.len() - 1 - class]
-        } else {
-            VIRIDIS_9[class]
-        }
-    };
     let mut bbox = [
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -145,33 +136,113 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> Str
         }
     }
     let values = super::sorted_finite(lines.iter().filter_map(|l| l.value));
-    let scale = style.scale.or_else(|| ColourScale::from_sorted(&values));
-    let legend_h = 40.0;
-    let pad = 10.0;
-    let kx = if geographic {
-        ((bbox[2] + bbox[3]) / 2.0).to_radians().cos()
-    } else {
-        1.0
-    };
-    let dx = ((bbox[1] - bbox[0]) * kx).max(1e-9);
-    let dy = (bbox[3] - bbox[2]).max(1e-9);
-    let max_plot_h = 0.8 * width;
-    let s = ((width - 2.0 * pad) / dx).min(max_plot_h / dy);
-    let plot_w = dx * s;
-    let plot_h = dy * s;
-    let height = plot_h + 2.0 * pad + legend_h;
-    let ox = pad + (width - 2.0 * pad - plot_w) / 2.0;
-    let tx = |x: f64| ox + (x - bbox[0]) * kx * s;
-    let ty = |y: f64| pad + (bbox[3] - y) * s;
+    let mut canvas = MapCanvas::new(bbox, lines.len(), &values, geographic, style);
+    for l in lines {
+        canvas.add(l);
+    }
+    canvas.finish()
+}
 
-    let mut svg = String::new();
-    let _ = write!(
-        svg,
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" \
-         viewBox=\"0 0 {width:.0} {height:.0}\" class=\"map\">\
-         <rect width=\"100%\" height=\"100%\" fill=\"#ffffff\"/>"
-    );
-    let path_d = |line: &LineString, d: &mut String| {
+/// A [`map`] drawn one segment at a time, for networks too large to hold: made from what the
+/// whole map needs first (the bounding box `[min x, max x, min y, max y]` of every line, the
+/// number of lines, their sorted finite values), then given the lines in order
+/// ([`Self::add`]), then closed ([`Self::finish`]). The SVG is that of [`map`] on the same lines.
+pub struct MapCanvas<'s> {
+    style: MapStyle<'s>,
+    scale: Option<ColourScale>,
+    /// Tooltips: one path per segment; otherwise one path per colour class.
+    tooltips: bool,
+    bbox: [f64; 4],
+    kx: f64,
+    s: f64,
+    ox: f64,
+    height: f64,
+    svg: String,
+    by_colour: Vec<(&'static str, String)>,
+}
+
+const LEGEND_H: f64 = 40.0;
+const PAD: f64 = 10.0;
+
+impl<'s> MapCanvas<'s> {
+    /// A map of `n_lines` lines within `bbox`, coloured by the classes of `sorted_values` (or
+    /// `style.scale`).
+    pub fn new(
+        bbox: [f64; 4],
+        n_lines: usize,
+        sorted_values: &[f64],
+        geographic: bool,
+        style: &MapStyle<'s>,
+    ) -> Self {
+        let width = style.width;
+        let scale = style
+            .scale
+            .or_else(|| ColourScale::from_sorted(sorted_values));
+        let kx = if geographic {
+            ((bbox[2] + bbox[3]) / 2.0).to_radians().cos()
+        } else {
+            1.0
+        };
+        let dx = ((bbox[1] - bbox[0]) * kx).max(1e-9);
+        let dy = (bbox[3] - bbox[2]).max(1e-9);
+        let max_plot_h = 0.8 * width;
+        let s = ((width - 2.0 * PAD) / dx).min(max_plot_h / dy);
+        let plot_w = dx * s;
+        let plot_h = dy * s;
+        let height = plot_h + 2.0 * PAD + LEGEND_H;
+        let ox = PAD + (width - 2.0 * PAD - plot_w) / 2.0;
+        let mut svg = String::new();
+        let _ = write!(
+            svg,
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" \
+             viewBox=\"0 0 {width:.0} {height:.0}\" class=\"map\">\
+             <rect width=\"100%\" height=\"100%\" fill=\"#ffffff\"/>"
+        );
+        let _ = write!(
+            svg,
+            "<g fill=\"none\" stroke-width=\"1.5\" stroke-linecap=\"round\" stroke-linejoin=\"round\">"
+        );
+        let mut canvas = MapCanvas {
+            style: *style,
+            scale,
+            tooltips: n_lines <= MAP_TOOLTIP_LIMIT,
+            bbox,
+            kx,
+            s,
+            ox,
+            height,
+            svg,
+            by_colour: Vec::new(),
+        };
+        if !canvas.tooltips {
+            // Grey first, so coloured segments are drawn over it.
+            canvas.by_colour = std::iter::once(NO_VALUE_COLOUR)
+                .chain((0..VIRIDIS_9.len()).map(|c| canvas.palette(c)))
+                .map(|c| (c, String::new()))
+                .collect();
+        }
+        canvas
+    }
+
+    fn palette(&self, class: usize) -> &'static str {
+        if self.style.reversed {
+            VIRIDIS_9[VIRIDIS_9.len() - 1 - class]
+        } else {
+            VIRIDIS_9[class]
+        }
+    }
+
+    fn colour(&self, v: Option<f64>) -> &'static str {
+        match (v, self.scale) {
+            (Some(v), Some(sc)) => self.palette(sc.class(v)),
+            _ => NO_VALUE_COLOUR,
+        }
+    }
+
+    /// The path data of a line, appended to `d`.
+    fn path_d(&self, line: &LineString, d: &mut String) {
+        let tx = |x: f64| self.ox + (x - self.bbox[0]) * self.kx * self.s;
+        let ty = |y: f64| PAD + (self.bbox[3] - y) * self.s;
         let mut last: Option<(String, String)> = None;
         for (i, &(x, y)) in line.points.iter().enumerate() {
             let p = (format!("{:.1}", tx(x)), format!("{:.1}", ty(y)));
@@ -181,83 +252,78 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> Str
             let _ = write!(d, "{}{} {}", if i == 0 { "M" } else { "L" }, p.0, p.1);
             last = Some(p);
         }
-    };
-    let colour = |v: Option<f64>| match (v, scale) {
-        (Some(v), Some(sc)) => palette(sc.class(v)),
-        _ => NO_VALUE_COLOUR,
-    };
-    let _ = write!(
-        svg,
-        "<g fill=\"none\" stroke-width=\"1.5\" stroke-linecap=\"round\" stroke-linejoin=\"round\">"
-    );
-    if lines.len() <= MAP_TOOLTIP_LIMIT {
-        for l in lines {
+    }
+
+    /// Draw the next segment.
+    pub fn add(&mut self, l: &MapLine<'_>) {
+        let c = self.colour(l.value);
+        if self.tooltips {
             let mut d = String::new();
-            path_d(l.line, &mut d);
+            self.path_d(l.line, &mut d);
+            let dec = self.style.decimals;
             let v = match (&l.label, l.value) {
                 (Some(t), _) => t.clone(),
-                (None, Some(v)) => format!("{v:.dec$} {}", style.unit),
+                (None, Some(v)) => format!("{v:.dec$} {}", self.style.unit),
                 (None, None) => "no value".to_string(),
             };
             let _ = write!(
-                svg,
-                "<path stroke=\"{}\" d=\"{d}\"><title>{}: {}</title></path>",
-                colour(l.value),
+                self.svg,
+                "<path stroke=\"{c}\" d=\"{d}\"><title>{}: {}</title></path>",
                 escape(l.id),
                 escape(&v)
             );
+        } else if let Some(k) = self.by_colour.iter().position(|(k, _)| *k == c) {
+            let mut d = std::mem::take(&mut self.by_colour[k].1);
+            self.path_d(l.line, &mut d);
+            self.by_colour[k].1 = d;
         }
-    } else {
-        // Grey first, so coloured segments are drawn over it.
-        let mut by_colour: Vec<(&str, String)> = std::iter::once(NO_VALUE_COLOUR)
-            .chain((0..VIRIDIS_9.len()).map(palette))
-            .map(|c| (c, String::new()))
-            .collect();
-        for l in lines {
-            let c = colour(l.value);
-            if let Some((_, d)) = by_colour.iter_mut().find(|(k, _)| *k == c) {
-                path_d(l.line, d);
+    }
+
+    /// The SVG, with its legend.
+    pub fn finish(mut self) -> String {
+        for (c, d) in std::mem::take(&mut self.by_colour) {
+            if !d.is_empty() {
+                let _ = write!(self.svg, "<path stroke=\"{c}\" d=\"{d}\"/>");
             }
         }
-        for (c, d) in by_colour.into_iter().filter(|(_, d)| !d.is_empty()) {
-            let _ = write!(svg, "<path stroke=\"{c}\" d=\"{d}\"/>");
+        let mut svg = std::mem::take(&mut self.svg);
+        svg.push_str("</g>");
+        let (width, height, dec) = (self.style.width, self.height, self.style.decimals);
+        // Legend.
+        let ly = height - LEGEND_H + 8.0;
+        let _ = write!(svg, "<g font-family=\"sans-serif\" font-size=\"11\">");
+        if let Some(sc) = self.scale {
+            let box_w = (width - 2.0 * PAD) / (VIRIDIS_9.len() + 1) as f64;
+            for i in 0..VIRIDIS_9.len() {
+                let c = self.palette(i);
+                let x = PAD + i as f64 * box_w;
+                let label = match sc.bounds(i) {
+                    (None, Some(h)) => format!("< {h:.dec$}"),
+                    (Some(l), None) => format!("≥ {l:.dec$}"),
+                    (Some(l), Some(h)) => format!("{l:.dec$}–{h:.dec$}"),
+                    (None, None) => String::new(),
+                };
+                let _ = write!(
+                    svg,
+                    "<rect x=\"{x:.1}\" y=\"{ly:.1}\" width=\"{:.1}\" height=\"10\" fill=\"{c}\"/>\
+                     <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                    box_w - 2.0,
+                    x + box_w / 2.0,
+                    ly + 24.0,
+                    escape(&label)
+                );
+            }
         }
+        let x = PAD + VIRIDIS_9.len() as f64 * ((width - 2.0 * PAD) / (VIRIDIS_9.len() + 1) as f64);
+        let _ = write!(
+            svg,
+            "<rect x=\"{x:.1}\" y=\"{ly:.1}\" width=\"20\" height=\"10\" fill=\"{NO_VALUE_COLOUR}\"/>\
+             <text x=\"{:.1}\" y=\"{:.1}\">no value</text></g></svg>",
+            x,
+            ly + 24.0
+        );
+        svg
     }
-    svg.push_str("</g>");
-    // Legend.
-    let ly = height - legend_h + 8.0;
-    let _ = write!(svg, "<g font-family=\"sans-serif\" font-size=\"11\">");
-    if let Some(sc) = scale {
-        let box_w = (width - 2.0 * pad) / (VIRIDIS_9.len() + 1) as f64;
-        for i in 0..VIRIDIS_9.len() {
-            let c = palette(i);
-            let x = pad + i as f64 * box_w;
-            let label = match sc.bounds(i) {
-                (None, Some(h)) => format!("< {h:.dec$}"),
-                (Some(l), None) => format!("≥ {l:.dec$}"),
-                (Some(l), Some(h)) => format!("{l:.dec$}–{h:.dec$}"),
-                (None, None) => String::new(),
-            };
-            let _ = write!(
-                svg,
-                "<rect x=\"{x:.1}\" y=\"{ly:.1}\" width=\"{:.1}\" height=\"10\" fill=\"{c}\"/>\
-                 <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-                box_w - 2.0,
-                x + box_w / 2.0,
-                ly + 24.0,
-                escape(&label)
-            );
-        }
-    }
-    let x = pad + VIRIDIS_9.len() as f64 * ((width - 2.0 * pad) / (VIRIDIS_9.len() + 1) as f64);
-    let _ = write!(
-        svg,
-        "<rect x=\"{x:.1}\" y=\"{ly:.1}\" width=\"20\" height=\"10\" fill=\"{NO_VALUE_COLOUR}\"/>\
-         <text x=\"{:.1}\" y=\"{:.1}\">no value</text></g></svg>",
-        x,
-        ly + 24.0
-    );
-    svg
 }
 
 /// A horizontal bar of `value` out of `max`, for table cells.

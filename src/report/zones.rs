@@ -5,9 +5,8 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
+use super::audit::ZoneTally;
 use super::svg::escape;
-use crate::db::zones::ZoneFitRow;
-use crate::export::record::SegmentExport;
 
 fn sci(v: Option<f64>) -> String {
     v.filter(|x| x.is_finite())
@@ -27,18 +26,9 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     super::quantile(&v, 0.5)
 }
 
-/// The `<section id="zones">` of the audit report; empty when no zone has an estimate.
-pub fn section(records: &[SegmentExport]) -> String {
-    let mut zones: BTreeMap<&str, (&ZoneFitRow, Vec<&SegmentExport>)> = BTreeMap::new();
-    for r in records {
-        if let Some((z, _)) = &r.zone {
-            zones
-                .entry(z.soil_zone.as_str())
-                .or_insert((z, Vec::new()))
-                .1
-                .push(r);
-        }
-    }
+/// The `<section id="zones">` of the audit report, from each zone's estimate and its members'
+/// single fits; empty when no zone has an estimate.
+pub(crate) fn section(zones: &BTreeMap<String, ZoneTally>) -> String {
     if zones.is_empty() {
         return String::new();
     }
@@ -53,15 +43,7 @@ pub fn section(records: &[SegmentExport]) -> String {
          <th>ν<sub>m</sub> single fits</th><th>scatter (decade, ν)</th><th>χ²/dof</th>\
          <th>flags</th><th>outliers</th></tr>",
     );
-    for (name, (z, members)) in &zones {
-        let e: Vec<f64> = members
-            .iter()
-            .filter_map(|r| r.fit.as_ref()?.soil_youngs_modulus_pa)
-            .collect();
-        let nu: Vec<f64> = members
-            .iter()
-            .filter_map(|r| r.fit.as_ref()?.soil_poisson)
-            .collect();
+    for (name, ZoneTally { zone: z, e, nu }) in zones {
         let range = |v: &[f64], f: fn(Option<f64>) -> String| {
             let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -82,11 +64,11 @@ pub fn section(records: &[SegmentExport]) -> String {
             sci(z.soil_youngs_modulus_pa),
             sci(z.soil_youngs_modulus_lo_pa),
             sci(z.soil_youngs_modulus_hi_pa),
-            range(&e, sci),
+            range(e, sci),
             fixed(z.soil_poisson),
             fixed(z.soil_poisson_lo),
             fixed(z.soil_poisson_hi),
-            range(&nu, fixed),
+            range(nu, fixed),
             z.scatter_youngs_modulus_decades,
             z.scatter_poisson,
             escape(&z.scatter_source),
@@ -98,7 +80,7 @@ pub fn section(records: &[SegmentExport]) -> String {
     h.push_str("</table>");
     let reasons: Vec<&str> = zones
         .values()
-        .flat_map(|(z, _)| z.outlier_reasons.lines())
+        .flat_map(|t| t.zone.outlier_reasons.lines())
         .filter(|l| !l.trim().is_empty())
         .collect();
     if !reasons.is_empty() {
