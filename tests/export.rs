@@ -936,3 +936,151 @@ fn cli_export_and_audit_exit_codes() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// Every table of a GeoPackage, row by row, without the columns that hold the time of writing.
+fn gpkg_rows(path: &Path) -> Vec<String> {
+    let conn = Connection::open(path).unwrap();
+    let tables: Vec<String> = conn
+        .prepare("SELECT name FROM sqlite_master WHERE type = 'table' ORDER BY name")
+        .unwrap()
+        .query_map([], |r| r.get(0))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let mut out = Vec::new();
+    for t in tables {
+        let mut stmt = conn.prepare(&format!("SELECT * FROM \"{t}\"")).unwrap();
+        let names: Vec<String> = stmt.column_names().iter().map(|s| s.to_string()).collect();
+        let mut rows = stmt.query([]).unwrap();
+        while let Some(r) = rows.next().unwrap() {
+            let cells: Vec<String> = (0..names.len())
+                .filter(|&i| names[i] != "last_change" && names[i] != "update_time")
+                .map(|i| format!("{}={:?}", names[i], r.get::<_, Sql>(i).unwrap()))
+                .collect();
+            out.push(format!("{t}: {}", cells.join(" ")));
+        }
+    }
+    out
+}
+
+/// Streaming: the exports and the audit report read the database a page at a time. Pages of 1
+/// and 3 segments give the same files, byte for byte (the GeoPackage row for row), as one page
+/// holding the whole network, and the same warnings; the network has segments without a fit,
+/// failed fits, segments without geometry, one with an unreadable geometry, one in another
+/// system, one that cannot be reprojected, and two soil zones, one member an outlier.
+#[test]
+fn exports_and_audit_read_in_small_pages_equal_one_page() {
+    let (dir, mut database) = network(23);
+    {
+        let conn = database.conn();
+        for (id, wkt, srid) in [
+            ("S00001", "LINESTRING (441800 111900", 27700),
+            ("S00002", "LINESTRING (-1.404 50.909, -1.401 50.911)", 4326),
+            ("S00004", "LINESTRING (1 2, 3 4)", 99_999),
+        ] {
+            conn.execute(
+                "UPDATE segments SET geometry_wkt = ?1, srid = ?2 WHERE segment_id = ?3",
+                rusqlite::params![wkt, srid, id],
+            )
+            .unwrap();
+        }
+    }
+    let fits = latest_fits(database.conn(), None).unwrap();
+    for (zone, range, e) in [("north", 0..10, 4e7), ("south", 10..20, 9e7)] {
+        let members: Vec<db::zones::ZoneMemberRow> = fits
+            .iter()
+            .filter(|f| range.contains(&f.segment_id[1..].parse::<usize>().unwrap()))
+            .enumerate()
+            .map(|(k, f)| db::zones::ZoneMemberRow {
+                segment_id: f.segment_id.clone(),
+                fit_id: f.id.unwrap(),
+                shrunk_soil_youngs_modulus_pa: Some(e * (1.0 + 0.01 * k as f64)),
+                shrunk_soil_poisson: Some(0.3),
+                statistic: Some(if k == 2 { 41.5 } else { 1.0 + k as f64 }),
+                zone_outlier: k == 2,
+            })
+            .collect();
+        let z = db::zones::ZoneFitRow {
+            soil_zone: zone.to_string(),
+            n_segments: members.len() as i64,
+            n_outliers: 1,
+            soil_youngs_modulus_pa: Some(e),
+            soil_youngs_modulus_lo_pa: Some(0.8 * e),
+            soil_youngs_modulus_hi_pa: Some(1.2 * e),
+            soil_poisson: Some(0.3),
+            soil_p_wave_speed_m_per_s: Some(250.0),
+            scatter_youngs_modulus_decades: 0.04,
+            scatter_poisson: 0.01,
+            scatter_source: "prior".into(),
+            outliers: members[2].segment_id.clone(),
+            outlier_reasons: format!("{}: far from its zone", members[2].segment_id),
+            ..Default::default()
+        };
+        db::zones::insert_zone_fit(database.conn_mut(), &z, &members).unwrap();
+    }
+    let out = dir.path();
+    let mut files: Vec<BTreeMap<&str, Vec<u8>>> = Vec::new();
+    let mut layers = Vec::new();
+    let mut warnings = Vec::new();
+    for page in [1, 3, 10_000] {
+        let mut f = BTreeMap::new();
+        let mut w = Vec::new();
+        for (format, name) in [
+            (ExportFormat::GeoJson, "p.geojson"),
+            (ExportFormat::Csv, "p.csv"),
+            (ExportFormat::Gpkg, "p.gpkg"),
+        ] {
+            let s = export::write_paged(&database, format, &out.join(name), page).unwrap();
+            assert_eq!((s.segments, s.fitted), (23, 22), "{format} page {page}");
+            w.push(s);
+        }
+        let s = pipewave::report::audit::write_paged(&database, &out.join("p.html"), page).unwrap();
+        w.push(s);
+        for name in ["p.geojson", "p.csv", "p.qml", "p.html"] {
+            f.insert(name, std::fs::read(out.join(name)).unwrap());
+        }
+        files.push(f);
+        layers.push(gpkg_rows(&out.join("p.gpkg")));
+        warnings.push(w);
+    }
+    for k in 1..files.len() {
+        for (name, bytes) in &files[0] {
+            assert!(bytes == &files[k][name], "{name} differs between pages");
+        }
+        assert_eq!(layers[0], layers[k]);
+        assert_eq!(warnings[0], warnings[k]);
+    }
+    // What was compared holds what the network has.
+    let w = &warnings[0];
+    for s in w {
+        assert!(
+            s.warnings
+                .iter()
+                .any(|m| m.contains("S00001") && m.contains("cannot be read")),
+            "{:?}",
+            s.warnings
+        );
+    }
+    assert!(w[2]
+        .warnings
+        .iter()
+        .any(|m| m.starts_with("segment S00004:")));
+    assert!(w[3]
+        .warnings
+        .iter()
+        .any(|m| m.starts_with("segment S00004:")));
+    let zones = layers[0]
+        .iter()
+        .filter(|r| r.starts_with("soil_zones:"))
+        .count();
+    assert_eq!(zones, 2);
+    let html = String::from_utf8(files[0]["p.html"].clone()).unwrap();
+    assert!(html.contains("<section id=\"zones\">") && html.contains("zone_outlier"));
+    // And the streamed CSV and GeoJSON are those of the records held in memory.
+    let mut held_warnings = Vec::new();
+    let records = export::load_records(&database, &mut held_warnings).unwrap();
+    assert_eq!(records.len(), 23);
+    assert_eq!(export::csv::to_bytes(&records).unwrap(), files[0]["p.csv"]);
+    let doc = export::geojson::to_json(&records, &mut Vec::new());
+    assert_eq!(serde_json::to_vec(&doc).unwrap(), files[0]["p.geojson"]);
+}

@@ -452,7 +452,8 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
                     Value::Integer(i) => rusqlite::types::Value::Integer(i),
                 });
             }
-            ins.execute(params_from_iter(values.drain(..))).map_err(sql)?;
+            ins.execute(params_from_iter(values.drain(..)))
+                .map_err(sql)?;
             if let Some(l) = &line {
                 let e = envelope(l);
                 bbox = [

@@ -189,8 +189,10 @@ impl<'a> Records<'a> {
             .unchecked_transaction()
             .map_err(|e| ExportError::db(self.db)(e.into()))?;
         // The snapshot begins at the first read.
-        tx.query_row("SELECT COUNT(*) FROM sqlite_master", [], |r| r.get::<_, i64>(0))
-            .map_err(|e| ExportError::db(self.db)(e.into()))?;
+        tx.query_row("SELECT COUNT(*) FROM sqlite_master", [], |r| {
+            r.get::<_, i64>(0)
+        })
+        .map_err(|e| ExportError::db(self.db)(e.into()))?;
         Ok(Some(tx))
     }
 
@@ -206,7 +208,8 @@ impl<'a> Records<'a> {
         let zones = db::zones::latest_zone_fits(conn).map_err(&err)?;
         let mut after: Option<String> = None;
         loop {
-            let page = pages::segments_page(conn, after.as_deref(), self.page_size).map_err(&err)?;
+            let page =
+                pages::segments_page(conn, after.as_deref(), self.page_size).map_err(&err)?;
             let (Some(first), Some(last)) = (page.first(), page.last()) else {
                 break;
             };

@@ -11,6 +11,10 @@
 //! (the worst fits, each with its measured points over the fitted curves), `failed` (segments
 //! without a fit).
 //!
+//! The report streams: one pass over the records ([`Records`], a page at a time) tallies what
+//! the sections show, keeping a few numbers per segment and never a curve; a second pass over
+//! the geometries alone draws the map; the worst fits are read again for their curves.
+//!
 //! Everything aggregates, so the page reads the same for 200 or 20,000 segments: see
 //! [`svg::MAP_TOOLTIP_LIMIT`], [`charts::SCATTER_LIMIT`], [`WORST_FITS`], [`FAILED_LISTED`],
 //! [`LEAST_CERTAIN_LISTED`], [`SOIL_TYPES_SHOWN`].
@@ -29,8 +33,8 @@ use crate::db::{self, Database, FitStatus, RunRow};
 use crate::export::gpkg::CommonGeometry;
 use crate::export::record::UNFITTED;
 use crate::export::{
-    check_out_path, crs, write_file_atomically, ExportError, ExportSummary, Records,
-    SegmentExport, PAGE_SIZE,
+    check_out_path, crs, write_file_atomically, ExportError, ExportSummary, Records, SegmentExport,
+    PAGE_SIZE,
 };
 use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};
 use crate::invert::FlagCode;
@@ -272,10 +276,11 @@ impl Tally {
         *self.status.entry(r.status()).or_default() += 1;
         count_codes(&mut self.flags, r.flags.as_deref());
         count_codes(&mut self.notes, r.fit.as_ref().map(|f| f.notes.as_str()));
-        self.speeds.extend(r.leak_band_speed.filter(|v| v.is_finite()));
-        if let Some(line) = self
-            .common
-            .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
+        self.speeds
+            .extend(r.leak_band_speed.filter(|v| v.is_finite()));
+        if let Some(line) =
+            self.common
+                .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
         {
             for &(x, y) in &line.points {
                 self.bbox = [
@@ -846,11 +851,8 @@ fn soil_speeds(h: &mut String, t: &Tally) -> Result<(), ChartError> {
          the error says that soil type is not one material.</p>",
         100.0 * SPEED_DETERMINED_RSTD
     );
-    let mut groups: Vec<(String, SoilTally)> = t
-        .soil
-        .iter()
-        .map(|(k, g)| (k.clone(), g.clone()))
-        .collect();
+    let mut groups: Vec<(String, SoilTally)> =
+        t.soil.iter().map(|(k, g)| (k.clone(), g.clone())).collect();
     groups.sort_by(|a, b| b.1.fitted.cmp(&a.1.fitted).then(a.0.cmp(&b.0)));
     if groups.len() > SOIL_TYPES_SHOWN {
         let mut rest = SoilTally::default();
