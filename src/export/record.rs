@@ -1,6 +1,7 @@
 //! The per-segment record of the exports and the audit report, assembled in one place: the
 //! inventory row, its latest fit (view `latest_fits`), that fit's curve (same run), the speeds
-//! and attenuations at the standard frequencies and the leak-band mean speed.
+//! and attenuations at the standard frequencies and the leak-band mean speed. [`Records`] reads
+//! them from the database a page at a time, for the writers to stream.
 //!
 //! [`PROPERTIES`] lists the exported properties, in order, with their types: the GeoPackage
 //! columns, the GeoJSON properties and the CSV columns are all made from it, so the three
