@@ -102,8 +102,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// refits it on its own (issue 9). Version 1: pipewave 0.1.0. Version 2: what the data
 /// determine (soil speeds, intervals, curve errors), flags and notes re-derived. Version 3:
 /// no fit fails at grazing or for want of a Jacobian (issue 11; fits that failed under
-/// version 2 get an answer, the others are unchanged).
-pub const FIT_ALGORITHM_VERSION: i64 = 3;
+/// version 2 get an answer, the others are unchanged). Version 4: the answer is the optimum
+/// the reference path rates best, and the 95 % intervals reach every other optimum inside the
+/// 95 % region (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 4;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -468,53 +470,95 @@ fn run(
     start: Option<&[f64]>,
 ) -> Result<FitResult, String> {
     let bounds = problem.bounds().map_err(|e| e.to_string())?;
-    let optima = search(problem, settings, seed, &bounds, start)?;
-    let best_i = (0..optima.len())
-        .min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost))
-        .ok_or_else(|| no_root_anywhere(problem, &bounds))?;
-    let x = optima[best_i].x.clone();
-    let sys = problem
-        .system_at(&x)
-        .ok_or_else(|| "the best parameters give a non-physical input".to_string())?;
-    // The answer is reported on the reference path (spec §5.3–5.4); the search path must agree.
-    // If the reference path cannot solve where the fast search ended, the search tracked
-    // another root: the caller searches again on the safe path.
-    let reference = problem.reference_roots(&sys);
-    let (predicted, roots, path_checked) = match (reference, problem.predict_system(&sys)) {
-        (Some(roots), fast) => {
-            let r: Vec<Complex64> = roots.iter().map(|x| x.k1).collect();
-            let agree = fast.is_some_and(|k| {
-                k.iter()
-                    .zip(&r)
-                    .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
-            });
-            (r, roots, problem.path == SolvePath::Safe || agree)
-        }
-        (None, Some(f)) if problem.path == SolvePath::Fast => (f, Vec::new(), false),
-        _ => {
-            return Err(format!(
-                "forward solve failed at the optimum: {}",
-                problem
-                    .reference_failure(&sys)
-                    .unwrap_or_else(|| "no root on the search path".to_string())
-            ))
-        }
-    };
-    if !path_checked {
-        // Only the status matters: the caller searches again on the safe path.
-        let mut r = FitResult::failed(
-            settings,
-            problem.weighting,
-            problem.data.measurements.len(),
-            String::new(),
-        );
-        r.path_checked = false;
-        r.evaluations = problem.evaluations();
-        return Ok(r);
+    let mut optima = search(problem, settings, seed, &bounds, start)?;
+    let mut order: Vec<usize> = (0..optima.len()).collect();
+    order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
+    if order.is_empty() {
+        return Err(no_root_anywhere(problem, &bounds));
     }
-    assemble(
-        problem, settings, &bounds, &optima, best_i, sys, predicted, &roots,
-    )
+    // The answer is reported on the reference path (spec §5.3–5.4). Near grazing (P44) the
+    // search path can follow a root on the other side of the branch cut, so its misfit may not
+    // be the reference path's. The optima are checked best first, each taking the misfit the
+    // reference path gives it (infinite where it finds no root), up to the first on which the
+    // two paths agree; the answer is the checked optimum the reference path rates best.
+    let mut checked: Vec<Checked> = Vec::new();
+    let mut failure: Option<System> = None;
+    for &i in &order {
+        let Some(sys) = problem.system_at(&optima[i].x) else {
+            optima[i].cost = f64::INFINITY;
+            continue;
+        };
+        let Some(roots) = problem.reference_roots(&sys) else {
+            optima[i].cost = f64::INFINITY;
+            failure.get_or_insert(sys);
+            continue;
+        };
+        let predicted: Vec<Complex64> = roots.iter().map(|x| x.k1).collect();
+        let agree = problem.predict_system(&sys).is_some_and(|k| {
+            k.iter()
+                .zip(&predicted)
+                .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
+        });
+        optima[i].cost = problem.objective_of(&predicted);
+        checked.push(Checked {
+            i,
+            sys,
+            predicted,
+            roots,
+            agree,
+        });
+        if agree {
+            break;
+        }
+    }
+    let best = checked
+        .into_iter()
+        .filter(|c| optima[c.i].cost.is_finite())
+        .min_by(|a, b| optima[a.i].cost.total_cmp(&optima[b.i].cost));
+    match best {
+        // The fast path tracked another root at the best optimum: the caller searches again
+        // on the safe path (continuation ramp wherever the soil moves the root far from in
+        // vacuo), whose answer stands on the reference path's misfit.
+        Some(c) if c.agree || problem.path != SolvePath::Fast => assemble(
+            problem,
+            settings,
+            &bounds,
+            &optima,
+            c.i,
+            c.sys,
+            c.predicted,
+            &c.roots,
+        ),
+        None if problem.path != SolvePath::Fast => Err(format!(
+            "forward solve failed at the optimum: {}",
+            failure
+                .and_then(|sys| problem.reference_failure(&sys))
+                .unwrap_or_else(|| "no root on the search path".to_string())
+        )),
+        _ => {
+            let mut r = FitResult::failed(
+                settings,
+                problem.weighting,
+                problem.data.measurements.len(),
+                String::new(),
+            );
+            r.path_checked = false;
+            r.evaluations = problem.evaluations();
+            Ok(r)
+        }
+    }
+}
+
+/// An optimum checked on the reference path.
+struct Checked {
+    /// Its index among the optima.
+    i: usize,
+    sys: System,
+    /// The reference path's wavenumbers.
+    predicted: Vec<Complex64>,
+    roots: Vec<Root>,
+    /// The search path found the same roots.
+    agree: bool,
 }
 
 /// Why no soil in the search range gives an s = 1 root: the reference solver's reason (e.g.
@@ -570,7 +614,16 @@ fn assemble(
         Weighting::Relative if dof > 0 => ss / dof as f64,
         Weighting::Relative => 1.0,
     };
-    let determined = uncertainty(problem, bounds, x, &predicted, ss, scale);
+    let mut determined = uncertainty(problem, bounds, x, &predicted, ss, scale);
+    let (curve, mut leak_band_speed) = predicted_curve(problem, bounds, x, &sys, &determined.cov);
+    widen_to_rival_optima(
+        problem,
+        optima,
+        best_i,
+        scale,
+        &mut determined,
+        &mut leak_band_speed,
+    );
     let estimates: Vec<Estimate> = problem
         .specs
         .iter()
@@ -592,7 +645,6 @@ fn assemble(
             }
         })
         .collect();
-    let (curve, leak_band_speed) = predicted_curve(problem, bounds, x, &sys, &determined.cov);
     let separated = separated_minima(problem, optima, best_i, &determined);
     let findings = assess(&Evidence {
         problem,
@@ -905,6 +957,75 @@ fn polish(problem: &Problem<'_>, x0: &[f64], bounds: &crate::optimize::Bounds) -
     }
 }
 
+/// Mean phase speed over [`LEAK_BAND_HZ`] of the system at search point `x`, m/s.
+fn leak_band_speed_at(problem: &Problem<'_>, x: &[f64]) -> Option<f64> {
+    let sys = problem.system_at(x)?;
+    let pts: Vec<(f64, Option<f64>)> = curve(&sys, &STANDARD_GRID_HZ)
+        .into_iter()
+        .filter(|p| p.frequency_hz >= LEAK_BAND_HZ.0 && p.frequency_hz <= LEAK_BAND_HZ.1)
+        .map(|p| (p.frequency_hz, p.status.is_ok().then_some(p.phase_speed)))
+        .collect();
+    band_mean(&pts, LEAK_BAND_HZ)
+}
+
+/// The other optima inside the 95 % confidence region of the best (P66): the misfit's profile
+/// over any parameter is at most Δχ² = 3.84 (times `scale`, the variance factor of the
+/// covariance) above the best at their values, so the 95 % intervals must reach them, and the
+/// errors of c_P, c_S and the leak-band speed must put them within 1.96 σ. The quadratic
+/// model at the best optimum cannot see another basin.
+fn widen_to_rival_optima(
+    problem: &Problem<'_>,
+    optima: &[Optimum],
+    best_i: usize,
+    scale: f64,
+    determined: &mut Determined,
+    leak_band_speed: &mut Option<WithError>,
+) {
+    use super::uncertainty::{soil_speeds, DCHI2_95, Z_95};
+    let best = &optima[best_i];
+    let soil = |x: &[f64]| {
+        let e = problem
+            .specs
+            .iter()
+            .zip(x)
+            .find(|(s, _)| s.param == Param::SoilModulus);
+        let nu = problem
+            .specs
+            .iter()
+            .zip(x)
+            .find(|(s, _)| s.param == Param::SoilPoisson);
+        match (e, nu) {
+            (Some((se, &ce)), Some((sn, &cn))) => Some(soil_speeds(
+                se.value(ce),
+                sn.value(cn),
+                problem.data.soil_density,
+            )),
+            _ => None,
+        }
+    };
+    let speeds = soil(&best.x);
+    for (i, o) in optima.iter().enumerate() {
+        let inside = o.cost - best.cost <= DCHI2_95 * scale;
+        if i == best_i || !inside {
+            continue;
+        }
+        for (j, s) in problem.specs.iter().enumerate() {
+            determined.intervals[j].include(s, s.value(o.x[j]));
+        }
+        if let (Some((cp, cs)), Some((cp_o, cs_o))) = (speeds, soil(&o.x)) {
+            let p = &mut determined.p_wave_speed;
+            p.std = p.std.max((cp_o - cp).abs() / Z_95);
+            let q = &mut determined.s_wave_speed;
+            q.std = q.std.max((cs_o - cs).abs() / Z_95);
+        }
+        if let (Some(b), Some(other)) =
+            (leak_band_speed.as_mut(), leak_band_speed_at(problem, &o.x))
+        {
+            b.std = b.std.max((other - b.value).abs() / Z_95);
+        }
+    }
+}
+
 /// Whether another restart found an equally good optimum far from the best one (in units of
 /// the determined covariance), and the leak-band speed it predicts.
 fn separated_minima(
@@ -933,16 +1054,7 @@ fn separated_minima(
             let far = d > SEPARATION_RANGE_FRACTION * width
                 && (!sigma.is_finite() || d > SEPARATION_SIGMAS * sigma);
             if far {
-                let other_leak_band_speed = problem.system_at(&o.x).and_then(|sys| {
-                    let pts: Vec<(f64, Option<f64>)> = curve(&sys, &STANDARD_GRID_HZ)
-                        .into_iter()
-                        .filter(|p| {
-                            p.frequency_hz >= LEAK_BAND_HZ.0 && p.frequency_hz <= LEAK_BAND_HZ.1
-                        })
-                        .map(|p| (p.frequency_hz, p.status.is_ok().then_some(p.phase_speed)))
-                        .collect();
-                    band_mean(&pts, LEAK_BAND_HZ)
-                });
+                let other_leak_band_speed = leak_band_speed_at(problem, &o.x);
                 return Some(Separated {
                     description: format!(
                         "restarts found equally good fits (misfit {} and {}) with {} = {} and {}",
@@ -958,4 +1070,91 @@ fn separated_minima(
         }
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::invert::uncertainty::{soil_speeds, Z_95};
+
+    /// The 95 % intervals and the errors of the soil speeds and the leak-band speed reach an
+    /// optimum inside the 95 % region of the best (Δχ² ≤ 3.84 × scale), and only such one.
+    #[test]
+    fn intervals_reach_rival_optima_inside_the_95_percent_region() {
+        let data = crate::bench::paper_case_data();
+        let p = Problem::new(
+            &data,
+            Method::Default,
+            Model::Full,
+            ContactMode::Reciprocal,
+            &[],
+        );
+        let best = vec![7.5, 0.30, 0.40];
+        let inside = vec![8.5, 0.45, 0.70];
+        let outside = vec![5.0, 0.10, 0.95];
+        let scale = 2.0;
+        let optima = vec![
+            Optimum {
+                x: best.clone(),
+                cost: 10.0,
+            },
+            Optimum {
+                x: inside.clone(),
+                cost: 10.0 + 3.8 * scale,
+            },
+            Optimum {
+                x: outside.clone(),
+                cost: 10.0 + 3.9 * scale,
+            },
+        ];
+        let speeds = |x: &[f64]| soil_speeds(10f64.powf(x[0]), x[1], data.soil_density);
+        let (cp, cs) = speeds(&best);
+        let narrow = |v: f64| Interval {
+            lo: v * 0.99,
+            hi: v * 1.01,
+            reaches_lower_bound: false,
+            reaches_upper_bound: false,
+        };
+        let mut determined = Determined {
+            p_wave_speed: WithError {
+                value: cp,
+                std: 1.0,
+            },
+            s_wave_speed: WithError {
+                value: cs,
+                std: 1.0,
+            },
+            intervals: vec![
+                narrow(10f64.powf(best[0])),
+                narrow(best[1]),
+                narrow(best[2]),
+            ],
+            cov: vec![0.0; 9],
+            correlation: vec![0.0; 9],
+            condition_number: 1.0,
+            curvature_unknown: false,
+        };
+        let band_best = leak_band_speed_at(&p, &best).unwrap();
+        let band_inside = leak_band_speed_at(&p, &inside).unwrap();
+        let mut band = Some(WithError {
+            value: band_best,
+            std: 0.01,
+        });
+        widen_to_rival_optima(&p, &optima, 0, scale, &mut determined, &mut band);
+        let iv = &determined.intervals;
+        assert_eq!(iv[0].hi, 10f64.powf(inside[0]));
+        assert_eq!((iv[1].hi, iv[2].hi), (inside[1], inside[2]));
+        // The optimum outside the region leaves the lower ends alone.
+        assert_eq!(iv[0].lo, 10f64.powf(best[0]) * 0.99);
+        assert_eq!((iv[1].lo, iv[2].lo), (best[1] * 0.99, best[2] * 0.99));
+        assert!(iv
+            .iter()
+            .all(|i| !i.reaches_lower_bound && !i.reaches_upper_bound));
+        let (cp_in, cs_in) = speeds(&inside);
+        assert!((determined.p_wave_speed.std - (cp_in - cp).abs() / Z_95).abs() < 1e-9 * cp);
+        assert!((determined.s_wave_speed.std - (cs_in - cs).abs() / Z_95).abs() < 1e-9 * cs);
+        let b = band.unwrap();
+        assert!(band_inside != band_best);
+        assert!((b.std - (band_inside - band_best).abs() / Z_95).abs() < 1e-9 * band_best);
+    }
 }

@@ -452,6 +452,15 @@ impl<'a> Problem<'a> {
         })
     }
 
+    /// The method's objective for model wavenumbers `k` at the measured frequencies: the
+    /// paper's f (P52–P53) or the default method's sum of squared weighted residuals.
+    pub fn objective_of(&self, k: &[Complex64]) -> f64 {
+        match self.method {
+            Method::Paper => self.paper_objective(k),
+            Method::Default => self.sum_of_squares(k),
+        }
+    }
+
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.
     pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
         self.evaluations.set(self.evaluations.get() + 1);
@@ -578,9 +587,8 @@ impl Objective for Problem<'_> {
 
     fn value(&self, x: &[f64]) -> f64 {
         match (self.predict(x), self.method) {
-            (Some(k), Method::Paper) => self.paper_objective(&k),
+            (Some(k), _) => self.objective_of(&k),
             (None, Method::Paper) => FAILED_SOLVE_OBJECTIVE,
-            (Some(k), Method::Default) => self.sum_of_squares(&k),
             (None, Method::Default) => f64::INFINITY,
         }
     }

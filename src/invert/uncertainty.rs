@@ -82,6 +82,16 @@ impl Interval {
     pub fn contains(&self, v: f64) -> bool {
         self.lo <= v && v <= self.hi
     }
+
+    /// Widen to contain `v`, a physical value of the coordinate `spec`, noting an end that now
+    /// reaches its search bound.
+    pub fn include(&mut self, spec: &ParamSpec, v: f64) {
+        self.lo = self.lo.min(v);
+        self.hi = self.hi.max(v);
+        let reach = BOUND_REACH_FRACTION * (spec.upper - spec.lower);
+        self.reaches_lower_bound |= spec.coordinate(self.lo) <= spec.lower + reach;
+        self.reaches_upper_bound |= spec.coordinate(self.hi) >= spec.upper - reach;
+    }
 }
 
 /// A value with its one-sigma error.
