@@ -14,6 +14,17 @@ fn paper_data() -> SegmentData {
         .unwrap()
 }
 
+/// The case as the default method sees it (full model, reciprocal contact, no effects).
+fn default_problem(data: &SegmentData) -> Problem<'_> {
+    Problem::new(
+        data,
+        Method::Default,
+        Model::Full,
+        ContactMode::Reciprocal,
+        &[],
+    )
+}
+
 /// The paper's objective f (P52–P53) at (E_m, ν_m, ξ).
 fn paper_f(data: &SegmentData, model: Model, mode: ContactMode, x: [f64; 3]) -> f64 {
     let p = Problem::new(data, Method::Paper, model, mode, &[]);
@@ -102,13 +113,7 @@ fn paper_estimate_is_not_the_optimum() {
         soil.wave_speeds().0
     );
     // A local least-squares polish started at the estimate lowers the objective: not stationary.
-    let p = Problem::new(
-        &d,
-        Method::Default,
-        Model::Full,
-        ContactMode::Reciprocal,
-        &[],
-    );
+    let p = default_problem(&d);
     let x0 = [4.79e7f64.log10(), 0.3326, 0.0];
     let start = p.sum_of_squares(&p.predict(&x0).unwrap());
     let lm = pipewave::optimize::LevenbergMarquardt::new();
@@ -207,13 +212,7 @@ fn the_answer_is_the_optimum_the_reference_path_rates_best() {
     use pipewave::optimize::Objective;
     let d = paper_data();
     let grazing = [7.789145521056639, 0.49668626329253507, 0.0];
-    let p = Problem::new(
-        &d,
-        Method::Default,
-        Model::Full,
-        ContactMode::Reciprocal,
-        &[],
-    );
+    let p = default_problem(&d);
     let sys = p.system_at(&grazing).unwrap();
     let fast = p.value(&grazing);
     let reference = p.sum_of_squares(
