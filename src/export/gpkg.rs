@@ -22,7 +22,7 @@ use super::crs::{self, ToCommonCrs};
 use super::record::{Records, Value, PROPERTIES};
 use super::style;
 use super::zones::ZonePoints;
-use super::{commit_temp, temp_path, ExportError, Tally};
+use super::{finish_temp, temp_path, ExportError, Tally};
 use crate::db::wkt::LineString;
 
 /// The feature table.
@@ -339,16 +339,7 @@ pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportEr
     let tmp = temp_path(out);
     let _ = std::fs::remove_file(&tmp);
     let result = write_to(records, &tmp, out);
-    match result {
-        Ok(tally) => {
-            commit_temp(&tmp, out)?;
-            Ok(tally)
-        }
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    finish_temp(&tmp, out, result)
 }
 
 fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, ExportError> {

@@ -295,6 +295,25 @@ pub(crate) fn commit_temp(tmp: &Path, out: &Path) -> Result<(), ExportError> {
     })
 }
 
+/// Finish a write into the temporary file `tmp`: on success move it over `out`, on failure
+/// remove it.
+pub(crate) fn finish_temp<T>(
+    tmp: &Path,
+    out: &Path,
+    result: Result<T, ExportError>,
+) -> Result<T, ExportError> {
+    match result {
+        Ok(t) => {
+            commit_temp(tmp, out)?;
+            Ok(t)
+        }
+        Err(e) => {
+            let _ = std::fs::remove_file(tmp);
+            Err(e)
+        }
+    }
+}
+
 /// Write `out` through a temporary file with `fill`, which writes the contents into a buffered
 /// writer; the file replaces `out` only when `fill` and the final flush succeed.
 pub(crate) fn write_streamed<T>(
@@ -316,16 +335,7 @@ pub(crate) fn write_streamed<T>(
             })?;
             Ok(t)
         });
-    match result {
-        Ok(t) => {
-            commit_temp(&tmp, out)?;
-            Ok(t)
-        }
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    finish_temp(&tmp, out, result)
 }
 
 /// Write bytes to `out` through a temporary file.
