@@ -957,10 +957,9 @@ fn polish(problem: &Problem<'_>, x0: &[f64], bounds: &crate::optimize::Bounds) -
     }
 }
 
-/// Mean phase speed over [`LEAK_BAND_HZ`] of the system at search point `x`, m/s.
-fn leak_band_speed_at(problem: &Problem<'_>, x: &[f64]) -> Option<f64> {
-    let sys = problem.system_at(x)?;
-    let pts: Vec<(f64, Option<f64>)> = curve(&sys, &STANDARD_GRID_HZ)
+/// Mean phase speed over [`LEAK_BAND_HZ`] of `sys`, m/s.
+fn leak_band_speed_of(sys: &System) -> Option<f64> {
+    let pts: Vec<(f64, Option<f64>)> = curve(sys, &STANDARD_GRID_HZ)
         .into_iter()
         .filter(|p| p.frequency_hz >= LEAK_BAND_HZ.0 && p.frequency_hz <= LEAK_BAND_HZ.1)
         .map(|p| (p.frequency_hz, p.status.is_ok().then_some(p.phase_speed)))
@@ -971,8 +970,8 @@ fn leak_band_speed_at(problem: &Problem<'_>, x: &[f64]) -> Option<f64> {
 /// The other optima inside the 95 % confidence region of the best (P66): the misfit's profile
 /// over any parameter is at most Δχ² = 3.84 (times `scale`, the variance factor of the
 /// covariance) above the best at their values, so the 95 % intervals must reach them, and the
-/// errors of c_P, c_S and the leak-band speed must put them within 1.96 σ. The quadratic
-/// model at the best optimum cannot see another basin.
+/// errors of c_P, c_S (P63–P64) and the leak-band speed must put them within 1.96 σ. The
+/// quadratic model at the best optimum cannot see another basin.
 fn widen_to_rival_optima(
     problem: &Problem<'_>,
     optima: &[Optimum],
@@ -981,47 +980,25 @@ fn widen_to_rival_optima(
     determined: &mut Determined,
     leak_band_speed: &mut Option<WithError>,
 ) {
-    use super::uncertainty::{soil_speeds, DCHI2_95, Z_95};
-    let best = &optima[best_i];
-    let soil = |x: &[f64]| {
-        let e = problem
-            .specs
-            .iter()
-            .zip(x)
-            .find(|(s, _)| s.param == Param::SoilModulus);
-        let nu = problem
-            .specs
-            .iter()
-            .zip(x)
-            .find(|(s, _)| s.param == Param::SoilPoisson);
-        match (e, nu) {
-            (Some((se, &ce)), Some((sn, &cn))) => Some(soil_speeds(
-                se.value(ce),
-                sn.value(cn),
-                problem.data.soil_density,
-            )),
-            _ => None,
-        }
-    };
-    let speeds = soil(&best.x);
+    use super::uncertainty::{DCHI2_95, Z_95};
+    let widen = |e: &mut WithError, other: f64| e.std = e.std.max((other - e.value).abs() / Z_95);
+    let best = optima[best_i].cost;
     for (i, o) in optima.iter().enumerate() {
-        let inside = o.cost - best.cost <= DCHI2_95 * scale;
+        let inside = o.cost - best <= DCHI2_95 * scale;
         if i == best_i || !inside {
             continue;
         }
         for (j, s) in problem.specs.iter().enumerate() {
             determined.intervals[j].include(s, s.value(o.x[j]));
         }
-        if let (Some((cp, cs)), Some((cp_o, cs_o))) = (speeds, soil(&o.x)) {
-            let p = &mut determined.p_wave_speed;
-            p.std = p.std.max((cp_o - cp).abs() / Z_95);
-            let q = &mut determined.s_wave_speed;
-            q.std = q.std.max((cs_o - cs).abs() / Z_95);
-        }
-        if let (Some(b), Some(other)) =
-            (leak_band_speed.as_mut(), leak_band_speed_at(problem, &o.x))
-        {
-            b.std = b.std.max((other - b.value).abs() / Z_95);
+        let Some(sys) = problem.system_at(&o.x) else {
+            continue;
+        };
+        let (cp, cs) = sys.soil.wave_speeds();
+        widen(&mut determined.p_wave_speed, cp);
+        widen(&mut determined.s_wave_speed, cs);
+        if let (Some(b), Some(other)) = (leak_band_speed.as_mut(), leak_band_speed_of(&sys)) {
+            widen(b, other);
         }
     }
 }
@@ -1054,7 +1031,9 @@ fn separated_minima(
             let far = d > SEPARATION_RANGE_FRACTION * width
                 && (!sigma.is_finite() || d > SEPARATION_SIGMAS * sigma);
             if far {
-                let other_leak_band_speed = leak_band_speed_at(problem, &o.x);
+                let other_leak_band_speed = problem
+                    .system_at(&o.x)
+                    .and_then(|sys| leak_band_speed_of(&sys));
                 return Some(Separated {
                     description: format!(
                         "restarts found equally good fits (misfit {} and {}) with {} = {} and {}",
@@ -1134,8 +1113,8 @@ mod tests {
             condition_number: 1.0,
             curvature_unknown: false,
         };
-        let band_best = leak_band_speed_at(&p, &best).unwrap();
-        let band_inside = leak_band_speed_at(&p, &inside).unwrap();
+        let band_at = |x: &[f64]| leak_band_speed_of(&p.system_at(x).unwrap()).unwrap();
+        let (band_best, band_inside) = (band_at(&best), band_at(&inside));
         let mut band = Some(WithError {
             value: band_best,
             std: 0.01,

@@ -88,6 +88,12 @@ impl Interval {
     pub fn include(&mut self, spec: &ParamSpec, v: f64) {
         self.lo = self.lo.min(v);
         self.hi = self.hi.max(v);
+        self.note_bounds_reached(spec);
+    }
+
+    /// Note an end within [`BOUND_REACH_FRACTION`] of the search range from its bound of the
+    /// coordinate `spec`.
+    pub fn note_bounds_reached(&mut self, spec: &ParamSpec) {
         let reach = BOUND_REACH_FRACTION * (spec.upper - spec.lower);
         self.reaches_lower_bound |= spec.coordinate(self.lo) <= spec.lower + reach;
         self.reaches_upper_bound |= spec.coordinate(self.hi) >= spec.upper - reach;
@@ -324,11 +330,8 @@ pub fn determine(
         }
     }
     let (e_spec, nu_spec) = (&specs[ie], &specs[inu]);
-    let reach = |s: &ParamSpec| BOUND_REACH_FRACTION * (s.upper - s.lower);
-    e_int.reaches_lower_bound |= e_spec.coordinate(e_int.lo) <= e_spec.lower + reach(e_spec);
-    e_int.reaches_upper_bound |= e_spec.coordinate(e_int.hi) >= e_spec.upper - reach(e_spec);
-    nu_int.reaches_lower_bound |= nu_int.lo <= nu_spec.lower + reach(nu_spec);
-    nu_int.reaches_upper_bound |= nu_int.hi >= nu_spec.upper - reach(nu_spec);
+    e_int.note_bounds_reached(e_spec);
+    nu_int.note_bounds_reached(nu_spec);
     let intervals = specs
         .iter()
         .enumerate()
