@@ -47,12 +47,31 @@ pub fn principal_sqrt(w: Complex64) -> Complex64 {
     if x == 0.0 && y == 0.0 {
         return Complex64::new(0.0, y);
     }
-    let t = ((x.abs() + x.hypot(y)) * 0.5).sqrt();
+    let t = ((x.abs() + abs_xy(x, y)) * 0.5).sqrt();
     if x >= 0.0 {
         Complex64::new(t, y / (2.0 * t))
     } else {
         Complex64::new(y.abs() / (2.0 * t), t.copysign(y))
     }
+}
+
+/// √(x² + y²) without libm's `hypot` (which guards every call against overflow at several
+/// times the cost): the plain form is within 1 ulp of it wherever x² + y² neither overflows
+/// nor loses precision to subnormals, and `hypot` is used outside that range.
+#[inline]
+pub fn abs_xy(x: f64, y: f64) -> f64 {
+    let s = x * x + y * y;
+    if s > 1e-290 && s < 1e290 {
+        s.sqrt()
+    } else {
+        x.hypot(y)
+    }
+}
+
+/// |z| by [`abs_xy`]: the modulus used in the solver's hot loops.
+#[inline]
+pub fn abs(z: Complex64) -> f64 {
+    abs_xy(z.re, z.im)
 }
 
 /// P(z) = H₀(z)/H₀′(z) = −H₀⁽²⁾(z)/H₁⁽²⁾(z), eq. P16 (second kind, principal branch).
@@ -159,36 +178,79 @@ pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
     None
 }
 
+/// Terms of the ascending series of [`k1_over_k0_series`] at most: at |w| = 6, the largest
+/// |w| it is used at, the term y^k/(k!)² (y = w²/4) is below 1e-17 of the sum by k = 32.
+const K_SERIES_TERMS: usize = 40;
+
+/// The real coefficients of [`k1_over_k0_series`], built at compile time: with
+/// t_k = y^k/(k!)², K₀ and K₁ need Σ t_k·c_k for c_k = 1, ψ(k+1), 1/(k+1) and
+/// (2ψ(k+1) + 1/(k+1))/(k+1), and the step t_{k+1} = t_k·y/(k+1)².
+struct KSeriesTable {
+    /// 1/(k+1)², the step from t_k to t_{k+1}.
+    step: [f64; K_SERIES_TERMS],
+    /// ψ(k+1) = −γ + H_k (H_k the k-th harmonic number).
+    psi: [f64; K_SERIES_TERMS],
+    /// 1/(k+1): y^k/(k!(k+1)!) = t_k/(k+1).
+    inv: [f64; K_SERIES_TERMS],
+    /// (ψ(k+1) + ψ(k+2))/(k+1) = (2ψ(k+1) + 1/(k+1))/(k+1).
+    psi_pair: [f64; K_SERIES_TERMS],
+}
+
+/// Euler–Mascheroni constant γ.
+const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
+
+const K_SERIES: KSeriesTable = {
+    let mut t = KSeriesTable {
+        step: [0.0; K_SERIES_TERMS],
+        psi: [0.0; K_SERIES_TERMS],
+        inv: [0.0; K_SERIES_TERMS],
+        psi_pair: [0.0; K_SERIES_TERMS],
+    };
+    let mut psi = -EULER_GAMMA;
+    let mut k = 0;
+    while k < K_SERIES_TERMS {
+        if k > 0 {
+            psi += 1.0 / k as f64;
+        }
+        let k1 = (k + 1) as f64;
+        t.step[k] = 1.0 / (k1 * k1);
+        t.psi[k] = psi;
+        t.inv[k] = 1.0 / k1;
+        t.psi_pair[k] = (2.0 * psi + 1.0 / k1) / k1;
+        k += 1;
+    }
+    t
+};
+
 /// K₁(w)/K₀(w) by the ascending series, DLMF 10.31.1 (principal logarithm):
 /// K₀ = −ln(w/2)·I₀ + Σ ψ(k+1) y^k/(k!)², K₁ = 1/w + ln(w/2)·I₁ − (w/4) Σ (ψ(k+1) + ψ(k+2))
-/// y^k/(k!(k+1)!), with y = w²/4 and ψ the digamma function (ψ(1) = −γ).
+/// y^k/(k!(k+1)!), with y = w²/4 and ψ the digamma function (ψ(1) = −γ). Every sum is
+/// Σ t_k·c_k over t_k = y^k/(k!)² with the real coefficients of [`K_SERIES`], so a term costs
+/// one complex product and no division.
 fn k1_over_k0_series(w: Complex64) -> Complex64 {
-    /// Euler–Mascheroni constant γ.
-    const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
     let y = w * w * 0.25;
-    let lg = (w * 0.5).ln();
-    // t0 = y^k/(k!)², t1 = y^k/(k!(k+1)!); psi_k = ψ(k+1).
-    let (mut t0, mut t1) = (Complex64::new(1.0, 0.0), Complex64::new(1.0, 0.0));
-    let mut psi_k = -EULER_GAMMA;
-    let (mut i0, mut s0) = (t0, t0 * psi_k);
-    let (mut i1, mut s1) = (t1, t1 * (2.0 * psi_k + 1.0));
-    for k in 1..60 {
-        let kf = k as f64;
-        t0 *= y / (kf * kf);
-        t1 *= y / (kf * (kf + 1.0));
-        psi_k += 1.0 / kf;
-        i0 += t0;
-        s0 += t0 * psi_k;
-        i1 += t1;
-        s1 += t1 * (2.0 * psi_k + 1.0 / (kf + 1.0));
-        if t0.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i0.norm_sqr()
-            && t1.norm_sqr() <= K_RATIO_EPS * K_RATIO_EPS * i1.norm_sqr()
-        {
+    // ln(w/2) from |w/2|² (no hypot) and the argument.
+    let h = w * 0.5;
+    let lg = Complex64::new(0.5 * h.norm_sqr().ln(), h.im.atan2(h.re));
+    let tab = &K_SERIES;
+    let mut t = Complex64::new(1.0, 0.0);
+    let (mut i0, mut s0) = (t, t * tab.psi[0]);
+    let (mut i1, mut s1) = (t * tab.inv[0], t * tab.psi_pair[0]);
+    let eps2 = K_RATIO_EPS * K_RATIO_EPS;
+    for k in 1..K_SERIES_TERMS {
+        t *= y * tab.step[k - 1];
+        i0 += t;
+        s0 += t * tab.psi[k];
+        i1 += t * tab.inv[k];
+        s1 += t * tab.psi_pair[k];
+        // Stop once the terms of I₀ (t_k) and of I₁ (t_k/(k+1)) are below eps of their sums.
+        let tn = t.norm_sqr();
+        if tn <= eps2 * i0.norm_sqr() && tn * tab.step[k] <= eps2 * i1.norm_sqr() {
             break;
         }
     }
     let k0 = -lg * i0 + s0;
-    let k1 = 1.0 / w + lg * (w * 0.5) * i1 - w * 0.25 * s1;
+    let k1 = w.inv() + lg * h * i1 - w * 0.25 * s1;
     k1 / k0
 }
 
@@ -248,11 +310,19 @@ pub const PSI_CF_MAX_ABS: f64 = 1e4;
 /// caller has computed.
 fn psi_cf(w: Complex64, abs_w_squared: f64) -> (Complex64, Complex64) {
     let depth = 12 + (2.0 * abs_w_squared.sqrt().sqrt()) as usize;
-    let mut c = Complex64::new(2.0 * (depth + 1) as f64, 0.0);
+    // C_k = n_k/d_k: C_k = 2k − w/C_{k+1} gives n_k = 2k·n_{k+1} − w·d_{k+1}, d_k = n_{k+1},
+    // so the backward pass multiplies only and divides once at the end. The pair grows like
+    // Π 2k; it is scaled down (the ratio unchanged) before it could overflow.
+    let mut n = Complex64::new(2.0 * (depth + 1) as f64, 0.0);
+    let mut d = Complex64::new(1.0, 0.0);
     for k in (2..=depth).rev() {
-        c = 2.0 * k as f64 - w / c;
+        (n, d) = (n * (2.0 * k as f64) - w * d, n);
+        if n.re.abs() + n.im.abs() > 1e150 {
+            (n, d) = (n * 1e-150, d * 1e-150);
+        }
     }
-    let half_inv_c2 = 0.5 / c;
+    // 1/(2C₂) = d/(2n).
+    let half_inv_c2 = d * 0.5 / n;
     (1.0 - w * half_inv_c2, half_inv_c2)
 }
 

@@ -114,21 +114,25 @@ impl SoilWaves {
         let k1sq = k1 * k1;
         let qp = sqrt_plus(self.kp2 - k1sq);
         let qs = sqrt_plus(self.ks2 - k1sq);
-        let (dqp, dqs) = (-k1 / qp, -k1 / qs);
+        // One reciprocal each for q_P, q_S and D: complex divisions are the costly operation here.
+        let (inv_qp, inv_qs) = (qp.inv(), qs.inv());
+        let (dqp, dqs) = (-k1 * inv_qp, -k1 * inv_qs);
         let (p, p1) = hankel_ratio_d(qp * a)?;
         let (q, q1) = hankel_ratio_d(qs * a)?;
         let (dp, dq) = (p1 * a * dqp, q1 * a * dqs);
         let d = p * k1sq + q * qp * qs;
         let dd = dp * k1sq + p * 2.0 * k1 + dq * qp * qs + q * (dqp * qs + qp * dqs);
+        let inv_d = d.inv();
+        let dd_d = dd * inv_d;
         let (mu, ks2) = (self.mu, self.ks2);
-        let k11 = mu * qp * ks2 / d;
-        let dk11 = mu * ks2 * (dqp * d - qp * dd) / (d * d);
-        let t = 2.0 - ks2 * p / d;
-        let dt = -ks2 * (dp * d - p * dd) / (d * d);
+        let k11 = mu * qp * ks2 * inv_d;
+        let dk11 = mu * ks2 * (dqp - qp * dd_d) * inv_d;
+        let t = 2.0 - ks2 * p * inv_d;
+        let dt = -ks2 * (dp - p * dd_d) * inv_d;
         let k12 = -I * mu * k1 * t;
         let dk12 = -I * mu * (t + k1 * dt);
-        let u = qs * p * q / d;
-        let du = (dqs * p * q + qs * dp * q + qs * p * dq) / d - u * dd / d;
+        let u = qs * p * q * inv_d;
+        let du = (dqs * p * q + qs * dp * q + qs * p * dq) * inv_d - u * dd_d;
         let k22 = -(mu / a) * (2.0 + a * ks2 * u);
         let dk22 = -mu * ks2 * du;
         Ok(SoilStiffnessD {
@@ -311,9 +315,10 @@ impl Evaluator {
                 };
                 let n = c_ra * c_ax;
                 let dn = dc_ra * c_ax + c_ra * dc_ax;
+                let (n_d, inv_d_ax) = (n / d_ax, d_ax.inv());
                 (
-                    -kappa * keff + n / d_ax,
-                    -kappa * dkeff + dn / d_ax - n * dd_ax / (d_ax * d_ax),
+                    -kappa * keff + n_d,
+                    -kappa * dkeff + (dn - n_d * dd_ax) * inv_d_ax,
                 )
             }
             ContactMode::Printed => {
@@ -323,9 +328,10 @@ impl Evaluator {
                 let (f2, df2) = (nu * ka - I * xi * sv, nu * a - I * xi * dsv);
                 let n = f1 * f2;
                 let dn = df1 * f2 + f1 * df2;
+                let (n_d, inv_d_ax) = (n / d_ax, d_ax.inv());
                 (
-                    -kappa * k.k22 + n / d_ax,
-                    -kappa * dk.k22 + dn / d_ax - n * dd_ax / (d_ax * d_ax),
+                    -kappa * k.k22 + n_d,
+                    -kappa * dk.k22 + (dn - n_d * dd_ax) * inv_d_ax,
                 )
             }
         };
@@ -336,9 +342,10 @@ impl Evaluator {
             }
             Model::Seed => (Complex64::new(1.0, 0.0), zero),
         };
-        let den = 1.0 - self.omega2 + alpha;
-        let f = k1 * k1 / self.kf2 - 1.0 - self.beta * psi_v / den;
-        let df = 2.0 * k1 / self.kf2 - self.beta * (dpsi * den - psi_v * dalpha) / (den * den);
+        let inv_den = (1.0 - self.omega2 + alpha).inv();
+        let psi_den = psi_v * inv_den;
+        let f = k1 * k1 / self.kf2 - 1.0 - self.beta * psi_den;
+        let df = 2.0 * k1 / self.kf2 - self.beta * (dpsi - psi_den * dalpha) * inv_den;
         Ok((f, df))
     }
 

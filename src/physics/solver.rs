@@ -8,6 +8,7 @@ use num_complex::Complex64;
 
 use super::dispersion::Evaluator;
 use super::inputs::System;
+use crate::special::abs;
 
 /// Muller stops when |dx| ≤ tol·|x| (spec §5.5).
 pub const MULLER_STEP_RTOL: f64 = 1e-13;
@@ -295,7 +296,7 @@ fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
         if !(f.is_finite() && df.is_finite()) || df == Complex64::new(0.0, 0.0) {
             return Err(fail(f64::NAN));
         }
-        let r = f.norm();
+        let r = abs(f);
         if r <= tol.residual_stop {
             return Ok(MullerOut {
                 k1: x,
@@ -305,11 +306,12 @@ fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
         }
         let mut dx = -f / df;
         // A step longer than half the root is not trusted: shorten it (a damped Newton step).
-        if dx.norm() > 0.5 * x.norm() {
-            dx *= 0.5 * x.norm() / dx.norm();
+        let (dx_abs, x_abs) = (abs(dx), abs(x));
+        if dx_abs > 0.5 * x_abs {
+            dx *= 0.5 * x_abs / dx_abs;
         }
         let x_new = x + dx;
-        let step = dx.norm() / x_new.norm();
+        let step = abs(dx) / abs(x_new);
         let quadratic = it >= 2 && step <= tol.step_rtol.sqrt() && step <= 0.01 * prev_step;
         if step <= tol.step_rtol || quadratic {
             if r > RESIDUAL_ATOL.max(1e3 * step) {
