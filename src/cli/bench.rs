@@ -9,7 +9,7 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use pipewave::batch::throughput::calibrate_throughput;
+use pipewave::batch::throughput::{calibrate_throughput, Throughput};
 use pipewave::batch::CalibrateOptions;
 use pipewave::db;
 use pipewave::network::{read_truth, recovery, TRUTH_CSV};
@@ -27,7 +27,8 @@ pub struct BenchArgs {
     /// Seeds per case for the inversion figures (0 skips them).
     #[arg(long, default_value_t = 100)]
     fits: usize,
-    /// Time a calibrate run of N synthetic segments (in a temporary database).
+    /// Time a calibrate run of N synthetic segments (in a temporary database); without --jobs,
+    /// on every core between two runs on one core, with the speed-up.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     calibrate: Option<u32>,
     /// Compare the fits of a synthetic network directory with its truth.csv.
@@ -54,6 +55,40 @@ pub struct BenchArgs {
     run: RunArgs,
 }
 
+/// Print one calibrate throughput measurement of `n` segments.
+fn print_throughput(n: usize, t: &Throughput) {
+    println!(
+        "calibrate ({} synthetic segments, {} job{}):",
+        n,
+        t.jobs,
+        if t.jobs == 1 { "" } else { "s" }
+    );
+    println!(
+        "  {:>10.2} segments/s       wall clock, including the database writes",
+        t.segments_per_second()
+    );
+    println!(
+        "  {:>10.1} ms per segment   wall clock / segments",
+        t.wall_ms_per_segment()
+    );
+    println!(
+        "  {:>10.1} ms per segment   one worker's time (fit + curve), mean",
+        t.worker_ms_per_segment
+    );
+    match t.peak_rss_kb {
+        Some(kb) => println!(
+            "  {:>10.1} MB peak RSS      VmHWM of the whole process",
+            kb as f64 / 1024.0
+        ),
+        None => println!("           - peak RSS      (no /proc/self/status here)"),
+    }
+    println!(
+        "  {:>10.1} s  setup         generate + import (not timed above)",
+        t.setup_s
+    );
+    println!("  {}", t.summary.line());
+}
+
 /// Run the benchmarks and print them.
 pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
     if cfg!(debug_assertions) {
@@ -68,37 +103,34 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
     };
     let mut outcome = Outcome::Done;
     if let Some(n) = args.calibrate {
-        let t = calibrate_throughput(n as usize, &opts)?;
-        println!(
-            "calibrate ({} synthetic segments, {} job{}):",
-            n,
-            t.jobs,
-            if t.jobs == 1 { "" } else { "s" }
-        );
-        println!(
-            "  {:>10.2} segments/s       wall clock, including the database writes",
-            t.segments_per_second()
-        );
-        println!(
-            "  {:>10.1} ms per segment   wall clock / segments",
-            t.wall_ms_per_segment()
-        );
-        println!(
-            "  {:>10.1} ms per segment   one worker's time (fit + curve), mean",
-            t.worker_ms_per_segment
-        );
-        match t.peak_rss_kb {
-            Some(kb) => println!(
-                "  {:>10.1} MB peak RSS      VmHWM of the whole process",
-                kb as f64 / 1024.0
-            ),
-            None => println!("           - peak RSS      (no /proc/self/status here)"),
+        let n = n as usize;
+        // Without --jobs, the run on every core is bracketed by two on a single core, and the
+        // speed-up over their mean is printed: a ratio measured in one run, in which a drift
+        // of a shared machine's load between the runs mostly cancels.
+        let one = CalibrateOptions {
+            jobs: Some(1),
+            ..opts.clone()
+        };
+        let bracket = args.run.jobs.is_none() && opts.worker_count() > 1;
+        let before = if bracket {
+            let t = calibrate_throughput(n, &one)?;
+            print_throughput(n, &t);
+            Some(t)
+        } else {
+            None
+        };
+        let t = calibrate_throughput(n, &opts)?;
+        print_throughput(n, &t);
+        if let Some(before) = before {
+            let after = calibrate_throughput(n, &one)?;
+            print_throughput(n, &after);
+            let single = 0.5 * (before.segments_per_second() + after.segments_per_second());
+            println!(
+                "speed-up from 1 job to {} (same run, over the mean of the 1-job runs before and after): {:.2}x",
+                t.jobs,
+                t.segments_per_second() / single
+            );
         }
-        println!(
-            "  {:>10.1} s  setup         generate + import (not timed above)",
-            t.setup_s
-        );
-        println!("  {}", t.summary.line());
     }
     if let Some(dir) = &args.recovery {
         let db_path = args.db.clone().unwrap_or_else(|| dir.join(DEFAULT_DB));
