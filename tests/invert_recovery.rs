@@ -194,7 +194,7 @@ fn an_extended_fit_never_ends_worse_than_its_base() {
 fn the_nested_start_carries_the_guarantee_when_the_search_falls_short() {
     use pipewave::physics::effects::Effect;
     let net = generate(&SynthOptions {
-        segments: 12,
+        segments: 40,
         seed: 35,
         defect_fraction: 0.0,
         ..SynthOptions::default()
@@ -219,7 +219,10 @@ fn the_nested_start_carries_the_guarantee_when_the_search_falls_short() {
         .iter()
         .filter(|(b, p, _)| *p > b + 1e-3 * (1.0 + b))
         .count();
-    eprintln!("starved search: plain extended fit above the base on {plain_worse} of 12");
+    eprintln!(
+        "starved search: plain extended fit above the base on {plain_worse} of {}",
+        rows.len()
+    );
     assert!(
         plain_worse > 0,
         "the starved search is not starved: {rows:?}"

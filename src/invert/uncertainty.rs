@@ -135,6 +135,10 @@ pub struct Determined {
     /// The Jacobian could not be evaluated at the optimum: the quadratic model holds only the
     /// weak prior, so the intervals span the search range (the `unstable_root` flag).
     pub curvature_unknown: bool,
+    /// The valley points inside the 95 % profile region (Δχ² ≤ 3.84), in search coordinates,
+    /// each at its profile minimum: the caller widens what it derives from the soil (the
+    /// leak-band speed) to reach them.
+    pub valley: Vec<Vec<f64>>,
 }
 
 /// The linear map T = ∂u/∂x from the search coordinates x to u = (ln c_P, ln c_S, rest) at x,
@@ -223,7 +227,7 @@ pub fn coordinates_from_speeds(
 /// (1 for chi-square, σ̂² otherwise, at least 1 when the model does not explain the data),
 /// `cost0` the misfit at `x`, `cost_at` the misfit anywhere (for the curvature check: 2n
 /// evaluations) and `profile_at` the misfit minimised over every coordinate but E_m and ν_m,
-/// starting from the point given (for the valley scan). A weak prior, one search range wide on every coordinate, keeps the covariance
+/// starting from the point given, with the point where it is reached (for the valley scan). A weak prior, one search range wide on every coordinate, keeps the covariance
 /// finite where the data say nothing (the interval then spans the search range).
 #[allow(clippy::too_many_arguments)]
 pub fn determine(
@@ -236,7 +240,7 @@ pub fn determine(
     scale: f64,
     cost0: f64,
     mut cost_at: impl FnMut(&[f64]) -> Option<f64>,
-    mut profile_at: impl FnMut(&[f64]) -> Option<f64>,
+    mut profile_at: impl FnMut(&[f64]) -> Option<(f64, Vec<f64>)>,
 ) -> Determined {
     let n = specs.len();
     // Information in x, with the weak prior.
@@ -306,22 +310,25 @@ pub fn determine(
         scale,
         &mut profile_at,
     );
+    // Every valley point lies within 1.96 σ of the speed: the distance is taken in m/s, as the
+    // error is reported. (A floor in ln(speed) carried to m/s at the optimum covers a point a
+    // factor e^{1.96 σ} above by only 1.96 σ·c, much less than its distance.)
     let floor = |i: usize| {
         valley
             .iter()
-            .map(|p| (p[i] - u[i]).abs() / Z_95)
+            .map(|(p, _)| (p[i].exp() - u[i].exp()).abs() / Z_95)
             .fold(0.0, f64::max)
     };
     let p_wave_speed = WithError {
         value: cp,
-        std: cp * cov_u[ie * n + ie].max(0.0).sqrt().max(floor(ie)),
+        std: (cp * cov_u[ie * n + ie].max(0.0).sqrt()).max(floor(ie)),
     };
     let s_wave_speed = WithError {
         value: cs,
-        std: cs * cov_u[inu * n + inu].max(0.0).sqrt().max(floor(inu)),
+        std: (cs * cov_u[inu * n + inu].max(0.0).sqrt()).max(floor(inu)),
     };
     let (mut e_int, mut nu_int) = soil_intervals(specs, bounds, &u, &cov_u, n, ie, inu, rho, x);
-    for p in &valley {
+    for (p, _) in &valley {
         if let Some((e, nu)) = soil_from_speeds(p[ie].exp(), p[inu].exp(), rho) {
             e_int.lo = e_int.lo.min(e);
             e_int.hi = e_int.hi.max(e);
@@ -367,6 +374,7 @@ pub fn determine(
         correlation,
         condition_number,
         curvature_unknown: false,
+        valley: valley.into_iter().map(|(_, x)| x).collect(),
     }
 }
 
@@ -376,9 +384,10 @@ pub const VALLEY_POINTS: usize = 8;
 /// Scan the profile misfit along the two lines through the optimum on which the data are least
 /// informative (spec §7.10): c_P held at its fitted value with c_S varying (the valley of a
 /// metal pipe) and c_S held with c_P varying, each across the whole range of ν_m inside the
-/// box. Returns the points (in speed coordinates) whose profile misfit (`cost_at`: minimised
-/// over the other coordinates) is within Δχ² = 3.84 (in units of `scale`) of the optimum's:
-/// they lie inside the profile region P66, whatever the quadratic model says.
+/// box. Returns the points (in speed coordinates, with the search coordinates of their profile
+/// minimum) whose profile misfit (`cost_at`: minimised over the other coordinates) is within
+/// Δχ² = 3.84 (in units of `scale`) of the optimum's: they lie inside the profile region P66,
+/// whatever the quadratic model says.
 #[allow(clippy::too_many_arguments)]
 fn scan_valley(
     specs: &[ParamSpec],
@@ -389,8 +398,8 @@ fn scan_valley(
     rho: f64,
     cost0: f64,
     scale: f64,
-    cost_at: &mut impl FnMut(&[f64]) -> Option<f64>,
-) -> Vec<Vec<f64>> {
+    cost_at: &mut impl FnMut(&[f64]) -> Option<(f64, Vec<f64>)>,
+) -> Vec<(Vec<f64>, Vec<f64>)> {
     let ln_ratio = |nu: f64| {
         let (m, g) = soil_moduli(1.0, nu);
         0.5 * (g / m).ln()
@@ -416,9 +425,9 @@ fn scan_valley(
             let Some(x) = coordinates_from_speeds(specs, &p, rho, bounds) else {
                 continue;
             };
-            if let Some(c) = cost_at(&x) {
+            if let Some((c, at)) = cost_at(&x) {
                 if c - cost0 <= DCHI2_95 * scale {
-                    out.push(p);
+                    out.push((p, at));
                 }
             }
         }
@@ -656,7 +665,8 @@ mod tests {
             }
         }
         let cost = |p: &[f64]| Some(resid(p).iter().map(|v| v * v).sum::<f64>());
-        let d = determine(&specs, &bounds, &x, rho, &jac, 2, 1.0, 0.0, cost, cost);
+        let profile = |q: &[f64]| cost(q).map(|c| (c, q.to_vec()));
+        let d = determine(&specs, &bounds, &x, rho, &jac, 2, 1.0, 0.0, cost, profile);
         assert!((d.p_wave_speed.value / cp0 - 1.0).abs() < 1e-12);
         let rel = d.p_wave_speed.relative();
         assert!((rel - sig_lncp).abs() < 1e-2 * sig_lncp, "{rel}");
