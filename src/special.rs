@@ -79,7 +79,7 @@ pub fn abs(z: Complex64) -> f64 {
 /// In the sector the model uses (−π < arg z ≤ π/4 and a little beyond, see
 /// [`in_modified_bessel_sector`]) P comes from the modified Bessel functions of w = iz:
 /// H_ν⁽²⁾(z) = (2i/π)·e^{iνπ/2}·K_ν(iz) (DLMF 10.27.8), so P(z) = i·K₀(w)/K₁(w), computed by
-/// [`k1_over_k0`] without any Amos call. Elsewhere, and if that fails, [`hankel_ratio_amos`].
+/// [`k0_over_k1`] without any Amos call. Elsewhere, and if that fails, [`hankel_ratio_amos`].
 pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
         return Err(SpecialError::BadArgument(z));
@@ -89,8 +89,8 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     }
     let w = Complex64::new(-z.im, z.re);
     if in_modified_bessel_sector(w) {
-        if let Some(r) = k1_over_k0(w) {
-            let p = Complex64::new(0.0, 1.0) / r;
+        if let Some(r) = k0_over_k1(w) {
+            let p = Complex64::new(-r.im, r.re);
             if p.re.is_finite() && p.im.is_finite() {
                 return Ok(p);
             }
@@ -144,31 +144,32 @@ pub const K_RATIO_EPS: f64 = 1e-17;
 /// Terms of the continued fraction beyond which it is declared not converged (then Amos).
 pub const K_CF_MAX_TERMS: usize = 400;
 
-/// K₁(w)/K₀(w) for −π/2 < arg w ≤ 3π/4, `None` if the continued fraction did not converge.
+/// K₀(w)/K₁(w) for −π/2 < arg w ≤ 3π/4, `None` if the continued fraction did not converge.
+/// (The ratio P needs, so that it costs one complex division.)
 ///
 /// |w| < [`K_SERIES_MAX_ABS`] (or up to [`K_SERIES_MAX_ABS_NEAR_IMAGINARY`] near the imaginary
 /// axis): the ascending series of K₀ and K₁ (DLMF 10.31.1 with n = 0, 1). Otherwise the
-/// continued fraction of Temme's method with order μ = 0 ([`k1_over_k0_cf`]); the
+/// continued fraction of Temme's method with order μ = 0 ([`k0_over_k1_cf`]); the
 /// normalisation sum of that method is not needed for a ratio.
-pub fn k1_over_k0(w: Complex64) -> Option<Complex64> {
+pub fn k0_over_k1(w: Complex64) -> Option<Complex64> {
     let r2 = w.norm_sqr();
     if r2 < K_SERIES_MAX_ABS * K_SERIES_MAX_ABS
         || (r2 < K_SERIES_MAX_ABS_NEAR_IMAGINARY * K_SERIES_MAX_ABS_NEAR_IMAGINARY
             && w.re < K_SERIES_MAX_RE)
     {
-        return Some(k1_over_k0_series(w));
+        return Some(k0_over_k1_series(w));
     }
-    k1_over_k0_cf(w)
+    k0_over_k1_cf(w)
 }
 
-/// K₁(w)/K₀(w) by Temme's continued fraction for order 0, h = 1/(b₁ + a₂/(b₂ + a₃/(b₃ + ⋯)))
+/// K₀(w)/K₁(w) by Temme's continued fraction for order 0, h = 1/(b₁ + a₂/(b₂ + a₃/(b₃ + ⋯)))
 /// with b_i = 2(w + i), a_i = −(i − ½)², and K₁/K₀ = (w + ½ − h/4)/w (Numerical Recipes
 /// §6.7, `bessik`). The convergents h_n = A_n/B_n come from Wallis' recurrences
 /// A_n = b_n A_{n−1} + a_n A_{n−2} (B likewise), which multiply only: Steed's form, whose
 /// every term waits on a complex division, takes 1.6× as long for the same terms. It stops
 /// where Steed's does: |h_n − h_{n−1}| = |a₁⋯a_n|/|B_n B_{n−1}| ≤ ε|h_n|, i.e.
 /// |a₁⋯a_n| ≤ ε|A_n||B_{n−1}|. `None` if that takes more than [`K_CF_MAX_TERMS`] terms.
-fn k1_over_k0_cf(w: Complex64) -> Option<Complex64> {
+fn k0_over_k1_cf(w: Complex64) -> Option<Complex64> {
     let one = Complex64::new(1.0, 0.0);
     let mut b = 2.0 * (one + w);
     // A_0 = 0, A_1 = 1, B_0 = 1, B_1 = b₁; p = |a₁⋯a_n| with a₁ = 1.
@@ -185,7 +186,7 @@ fn k1_over_k0_cf(w: Complex64) -> Option<Complex64> {
         p *= half * half;
         if p * p <= eps2 * a2.norm_sqr() * b1.norm_sqr() {
             let h = 0.25 * (a2 / b2);
-            return Some((w + 0.5 - h) / w);
+            return Some(w / (w + 0.5 - h));
         }
         (a0, a1, b0, b1) = (a1, a2, b1, b2);
         // The convergents' numerators and denominators grow like the partial products of b_i;
@@ -198,11 +199,11 @@ fn k1_over_k0_cf(w: Complex64) -> Option<Complex64> {
     None
 }
 
-/// Terms of the ascending series of [`k1_over_k0_series`] at most: at |w| = 6, the largest
+/// Terms of the ascending series of [`k0_over_k1_series`] at most: at |w| = 6, the largest
 /// |w| it is used at, the term y^k/(k!)² (y = w²/4) is below 1e-17 of the sum by k = 32.
 const K_SERIES_TERMS: usize = 40;
 
-/// The real coefficients of [`k1_over_k0_series`], built at compile time: with
+/// The real coefficients of [`k0_over_k1_series`], built at compile time: with
 /// t_k = y^k/(k!)², K₀ and K₁ need Σ t_k·c_k for c_k = 1, ψ(k+1), 1/(k+1) and
 /// (2ψ(k+1) + 1/(k+1))/(k+1), and the step t_{k+1} = t_k·y/(k+1)².
 struct KSeriesTable {
@@ -242,12 +243,12 @@ const K_SERIES: KSeriesTable = {
     t
 };
 
-/// K₁(w)/K₀(w) by the ascending series, DLMF 10.31.1 (principal logarithm):
+/// K₀(w)/K₁(w) by the ascending series, DLMF 10.31.1 (principal logarithm):
 /// K₀ = −ln(w/2)·I₀ + Σ ψ(k+1) y^k/(k!)², K₁ = 1/w + ln(w/2)·I₁ − (w/4) Σ (ψ(k+1) + ψ(k+2))
 /// y^k/(k!(k+1)!), with y = w²/4 and ψ the digamma function (ψ(1) = −γ). Every sum is
 /// Σ t_k·c_k over t_k = y^k/(k!)² with the real coefficients of [`K_SERIES`], so a term costs
 /// one complex product and no division.
-fn k1_over_k0_series(w: Complex64) -> Complex64 {
+fn k0_over_k1_series(w: Complex64) -> Complex64 {
     let y = w * w * 0.25;
     // ln(w/2) from |w/2|² (no hypot) and the argument.
     let h = w * 0.5;
@@ -271,7 +272,7 @@ fn k1_over_k0_series(w: Complex64) -> Complex64 {
     }
     let k0 = -lg * i0 + s0;
     let k1 = w.inv() + lg * h * i1 - w * 0.25 * s1;
-    k1 / k0
+    k0 / k1
 }
 
 /// P(z) of eq. P16 from one Amos call for the scaled pair H₀⁽²⁾, H₁⁽²⁾·e^{iz} (the scale

@@ -105,8 +105,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// no fit fails at grazing or for want of a Jacobian (issue 11; fits that failed under
 /// version 2 get an answer, the others are unchanged). Version 4: the answer is the optimum
 /// the reference path rates best, and the 95 % intervals reach every other optimum inside the
-/// 95 % region (issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 4;
+/// 95 % region (issue 10). Version 5: the best optimum polished to the bottom of a flat
+/// valley, and the errors of the soil speeds and of the leak-band speed reach every valley
+/// point inside the 95 % region (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 5;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
