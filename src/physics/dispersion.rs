@@ -7,7 +7,7 @@
 use num_complex::Complex64;
 
 use super::inputs::{ContactMode, Model, System};
-use crate::special::{hankel_ratio, hankel_ratio_d, psi, psi_d, sqrt_plus, SpecialError};
+use crate::special::{hankel_ratio, principal_sqrt, psi, psi_d, sqrt_plus, SpecialError};
 
 const I: Complex64 = Complex64::new(0.0, 1.0);
 
@@ -117,8 +117,11 @@ impl SoilWaves {
         // One reciprocal each for q_P, q_S and D: complex divisions are the costly operation here.
         let (inv_qp, inv_qs) = (qp.inv(), qs.inv());
         let (dqp, dqs) = (-k1 * inv_qp, -k1 * inv_qs);
-        let (p, p1) = hankel_ratio_d(qp * a)?;
-        let (q, q1) = hankel_ratio_d(qs * a)?;
+        // P′(z) = 1 + P² + P/z (as `hankel_ratio_d`), with 1/z = 1/(q a) from the reciprocals.
+        let (p, q) = (hankel_ratio(qp * a)?, hankel_ratio(qs * a)?);
+        let inv_a = 1.0 / a;
+        let p1 = 1.0 + p * p + p * inv_qp * inv_a;
+        let q1 = 1.0 + q * q + q * inv_qs * inv_a;
         let (dp, dq) = (p1 * a * dqp, q1 * a * dqs);
         let d = p * k1sq + q * qp * qs;
         let dd = dp * k1sq + p * 2.0 * k1 + dq * qp * qs + q * (dqp * qs + qp * dqs);
@@ -315,7 +318,8 @@ impl Evaluator {
                 };
                 let n = c_ra * c_ax;
                 let dn = dc_ra * c_ax + c_ra * dc_ax;
-                let (n_d, inv_d_ax) = (n / d_ax, d_ax.inv());
+                let inv_d_ax = d_ax.inv();
+                let n_d = n * inv_d_ax;
                 (
                     -kappa * keff + n_d,
                     -kappa * dkeff + (dn - n_d * dd_ax) * inv_d_ax,
@@ -328,7 +332,8 @@ impl Evaluator {
                 let (f2, df2) = (nu * ka - I * xi * sv, nu * a - I * xi * dsv);
                 let n = f1 * f2;
                 let dn = df1 * f2 + f1 * df2;
-                let (n_d, inv_d_ax) = (n / d_ax, d_ax.inv());
+                let inv_d_ax = d_ax.inv();
+                let n_d = n * inv_d_ax;
                 (
                     -kappa * k.k22 + n_d,
                     -kappa * dk.k22 + (dn - n_d * dd_ax) * inv_d_ax,
@@ -355,7 +360,7 @@ impl Evaluator {
         let one_nu2 = 1.0 - self.nu_p * self.nu_p;
         let beta0 = self.beta / one_nu2;
         let omega0_2 = self.omega2 / one_nu2;
-        let k = (self.kf2 * (1.0 + beta0 / (1.0 - omega0_2))).sqrt();
+        let k = principal_sqrt(self.kf2 * (1.0 + beta0 / (1.0 - omega0_2)));
         if k.re < 0.0 {
             -k
         } else {

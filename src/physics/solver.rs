@@ -348,7 +348,7 @@ fn classify(system: &System, ev: &Evaluator, out: MullerOut) -> Result<Root, Sol
     }
     let c = ev.omega / k1.re;
     let mut flags = RootFlags {
-        growing_wave: k1.im > GROWING_RTOL * k1.norm(),
+        growing_wave: k1.im > GROWING_RTOL * abs(k1),
         faster_than_fluid: c > system.fluid.sound_speed(),
         ..RootFlags::default()
     };
@@ -667,9 +667,9 @@ fn step_to(
         match attempt {
             Ok(root) => {
                 // Skipped when the step moved the root by less than rounding can resolve.
-                let moved = (root.k1 - prev.k1).norm();
-                ratio = if hist.len() >= 2 && moved > RATIO_MIN_STEP_RTOL * root.k1.norm() {
-                    (root.k1 - guess).norm() / moved
+                let moved = abs(root.k1 - prev.k1);
+                ratio = if hist.len() >= 2 && moved > RATIO_MIN_STEP_RTOL * abs(root.k1) {
+                    abs(root.k1 - guess) / moved
                 } else {
                     0.0
                 };
