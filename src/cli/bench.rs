@@ -75,6 +75,13 @@ fn print_throughput(n: usize, t: &Throughput) {
         "  {:>10.1} ms per segment   one worker's time (fit + curve), mean",
         t.worker_ms_per_segment
     );
+    // The workers' time over the wall clock of all of them: what the batch machinery (feed,
+    // writer, the last fits' tail) leaves unused, whatever the machine's load.
+    println!(
+        "  {:>10.1} % busy fitting  workers' time / ({} × wall clock)",
+        100.0 * t.worker_ms_per_segment * t.segments_per_second() / (1e3 * t.jobs as f64),
+        t.jobs
+    );
     match t.peak_rss_kb {
         Some(kb) => println!(
             "  {:>10.1} MB peak RSS      VmHWM of the whole process",
