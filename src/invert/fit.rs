@@ -1035,36 +1035,34 @@ fn widen_band_to_valley(
     let Some(band) = leak_band_speed.as_mut() else {
         return;
     };
-    let speeds: Vec<(usize, f64, f64)> = determined
+    // (c_P, c_S, system) of each valley point.
+    let points: Vec<(f64, f64, System)> = determined
         .valley
         .iter()
-        .enumerate()
-        .filter_map(|(i, x)| {
-            let (cp, cs) = problem.system_at(x)?.soil.wave_speeds();
-            Some((i, cp, cs))
+        .filter_map(|x| {
+            let sys = problem.system_at(x)?;
+            let (cp, cs) = sys.soil.wave_speeds();
+            Some((cp, cs, sys))
         })
         .collect();
-    let mut extremes: Vec<usize> = Vec::with_capacity(4);
-    let by_cp = |a: &&(usize, f64, f64), b: &&(usize, f64, f64)| a.1.total_cmp(&b.1);
-    let by_cs = |a: &&(usize, f64, f64), b: &&(usize, f64, f64)| a.2.total_cmp(&b.2);
+    let by_cp = |a: &&(f64, f64, System), b: &&(f64, f64, System)| a.0.total_cmp(&b.0);
+    let by_cs = |a: &&(f64, f64, System), b: &&(f64, f64, System)| a.1.total_cmp(&b.1);
+    let mut extremes: Vec<&(f64, f64, System)> = Vec::with_capacity(4);
     for pick in [
-        speeds.iter().min_by(by_cp),
-        speeds.iter().max_by(by_cp),
-        speeds.iter().min_by(by_cs),
-        speeds.iter().max_by(by_cs),
+        points.iter().min_by(by_cp),
+        points.iter().max_by(by_cp),
+        points.iter().min_by(by_cs),
+        points.iter().max_by(by_cs),
     ]
     .into_iter()
     .flatten()
     {
-        if !extremes.contains(&pick.0) {
-            extremes.push(pick.0);
+        if !extremes.iter().any(|e| std::ptr::eq(*e, pick)) {
+            extremes.push(pick);
         }
     }
-    for i in extremes {
-        let other = problem
-            .system_at(&determined.valley[i])
-            .and_then(|sys| leak_band_speed_of(&sys));
-        if let Some(other) = other {
+    for (_, _, sys) in extremes {
+        if let Some(other) = leak_band_speed_of(sys) {
             band.std = band
                 .std
                 .max((other - band.value).abs() / super::uncertainty::Z_95);
