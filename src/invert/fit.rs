@@ -1063,9 +1063,7 @@ fn widen_band_to_valley(
     }
     for (_, _, sys) in extremes {
         if let Some(other) = leak_band_speed_of(sys) {
-            band.std = band
-                .std
-                .max((other - band.value).abs() / super::uncertainty::Z_95);
+            band.reach(other);
         }
     }
 }
@@ -1083,8 +1081,7 @@ fn widen_to_rival_optima(
     determined: &mut Determined,
     leak_band_speed: &mut Option<WithError>,
 ) {
-    use super::uncertainty::{DCHI2_95, Z_95};
-    let widen = |e: &mut WithError, other: f64| e.std = e.std.max((other - e.value).abs() / Z_95);
+    use super::uncertainty::DCHI2_95;
     let best = optima[best_i].cost;
     for (i, o) in optima.iter().enumerate() {
         let inside = o.cost - best <= DCHI2_95 * scale;
@@ -1098,10 +1095,10 @@ fn widen_to_rival_optima(
             continue;
         };
         let (cp, cs) = sys.soil.wave_speeds();
-        widen(&mut determined.p_wave_speed, cp);
-        widen(&mut determined.s_wave_speed, cs);
+        determined.p_wave_speed.reach(cp);
+        determined.s_wave_speed.reach(cs);
         if let (Some(b), Some(other)) = (leak_band_speed.as_mut(), leak_band_speed_of(&sys)) {
-            widen(b, other);
+            b.reach(other);
         }
     }
 }

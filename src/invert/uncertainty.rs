@@ -114,6 +114,13 @@ impl WithError {
     pub fn relative(&self) -> f64 {
         self.std / self.value.abs()
     }
+
+    /// Widen σ so that `other`, the value at a point inside the 95 % region (P66), lies within
+    /// 1.96 σ: the quadratic model at the optimum does not see how far a flat valley or
+    /// another basin reaches.
+    pub fn reach(&mut self, other: f64) {
+        self.std = self.std.max((other - self.value).abs() / Z_95);
+    }
 }
 
 /// What the data determine about the soil and the fitted parameters.
@@ -310,23 +317,21 @@ pub fn determine(
         scale,
         &mut profile_at,
     );
-    // Every valley point lies within 1.96 σ of the speed: the distance is taken in m/s, as the
+    let mut p_wave_speed = WithError {
+        value: cp,
+        std: cp * cov_u[ie * n + ie].max(0.0).sqrt(),
+    };
+    let mut s_wave_speed = WithError {
+        value: cs,
+        std: cs * cov_u[inu * n + inu].max(0.0).sqrt(),
+    };
+    // Every valley point lies within 1.96 σ of the speeds, the distance taken in m/s as the
     // error is reported. (A floor in ln(speed) carried to m/s at the optimum covers a point a
     // factor e^{1.96 σ} above by only 1.96 σ·c, much less than its distance.)
-    let floor = |i: usize| {
-        valley
-            .iter()
-            .map(|(p, _)| (p[i].exp() - u[i].exp()).abs() / Z_95)
-            .fold(0.0, f64::max)
-    };
-    let p_wave_speed = WithError {
-        value: cp,
-        std: (cp * cov_u[ie * n + ie].max(0.0).sqrt()).max(floor(ie)),
-    };
-    let s_wave_speed = WithError {
-        value: cs,
-        std: (cs * cov_u[inu * n + inu].max(0.0).sqrt()).max(floor(inu)),
-    };
+    for (p, _) in &valley {
+        p_wave_speed.reach(p[ie].exp());
+        s_wave_speed.reach(p[inu].exp());
+    }
     let (mut e_int, mut nu_int) = soil_intervals(specs, bounds, &u, &cov_u, n, ie, inu, rho, x);
     for (p, _) in &valley {
         if let Some((e, nu)) = soil_from_speeds(p[ie].exp(), p[inu].exp(), rho) {
