@@ -566,8 +566,9 @@ fn run(
     // two paths agree; the answer is the checked optimum the reference path rates best.
     let mut checked: Vec<Checked> = Vec::new();
     let mut failure: Option<System> = None;
-    // A better optimum of the search that the reference path found no root at: the fast path
-    // followed another root there, so its ranking is not to be trusted.
+    // Whether an optimum checked before the answer (a better one, by the search's misfit) had
+    // no root on the reference path: the fast path followed another root there, so its
+    // ranking of the optima is not to be trusted.
     let mut unconfirmed = false;
     for &i in &order {
         let Some(sys) = problem.system_at(&optima[i].x) else {
@@ -609,8 +610,9 @@ fn run(
         // (continuation ramp wherever the soil moves the root far from in vacuo), whose answer
         // stands on the reference path's misfit. Otherwise a worse basin could stand in for a
         // better one the fast path saw wrongly: on the stress network's HDPE segment WM10951
-        // (tests/stress.rs) the two DE optima (χ² 33.7) have no reference root on the fast
-        // path's ranking, and the contact probe's optimum (χ² 1532) would be the answer.
+        // (tests/stress.rs) the reference path finds no root at the two DE optima of the fast
+        // search (χ² 33.7 there), and the contact probe's optimum (χ² 1532) would be the
+        // answer; the safe path's is χ² 33.7.
         Some(c) if (c.agree && !unconfirmed) || problem.path != SolvePath::Fast => assemble(
             problem,
             settings,
