@@ -152,10 +152,16 @@ fn sample_network_recovery() {
         5,
         "{r}"
     );
-    // What the data determine (issue 9): most predictions trusted, c_P to 5 % (median), and
-    // the stated uncertainties cover the truth.
+    // What the data determine (issue 9): most predictions trusted; where the fit states c_P
+    // determined (about half the segments), c_P to 5 % (median) and 15 % (p90); and the stated
+    // uncertainties cover the truth everywhere. Over all segments the median error is about
+    // 5 % and the p90 several hundred per cent: some metal pipes' data fit a nearly
+    // incompressible soil with c_P past grazing as well as the true one, the fit's global
+    // optimum may be that soil, and its c_P error then says so (σ of the order of c_P).
     assert!(r.n_ok >= 160, "{r}");
-    assert!(r.p_speed_rel_err.median <= 0.05, "{r}");
+    let determined = &r.p_speed_rel_err_determined;
+    assert!(determined.n >= 80, "{r}");
+    assert!(determined.median <= 0.05 && determined.p90 <= 0.15, "{r}");
     for (k, c) in r.coverage().iter().enumerate() {
         assert!(*c >= 0.9, "coverage {k}: {c:.2}\n{r}");
     }
