@@ -529,9 +529,11 @@ fn contact_probe(
 /// * the fluid-like end of the c_P valley of a metal pipe: the same c_P, c_S → 0
 ///   (`bench --verify 200 --network-seed 848484`, WM10095: χ² 10.41 at ν_m = 0.499 against the
 ///   search's 10.63 at ν_m = 0);
-/// * a soil whose c_P lies above the pipe's wave speed, so that the pipe radiates compressional
-///   waves: a basin just past the grazing cliff (P44), e.g. WM10101 of that network, χ² 1.14
-///   at c_P = 2,540 m/s against 2.08 at c_P = 166 m/s.
+/// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
+///   off (spec §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
+///   network, χ² 1.14 at c_P ≈ 2,500 m/s against 2.08 at c_P = 166 m/s. Water-saturated soils
+///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
+///   per segment the data cannot tell, and the fit reports its c_P as undetermined.
 ///
 /// The probe evaluates candidates: the best optimum's soil moved to the upper bound of ν_m at
 /// its own c_S and at its own c_P, and a grid of ν_m ∈ [`INCOMPRESSIBLE_PROBE_NU`] (capped at
