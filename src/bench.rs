@@ -499,14 +499,7 @@ impl Distribution {
     pub fn of(v: &[f64]) -> Self {
         let mut s: Vec<f64> = v.to_vec();
         s.sort_by(f64::total_cmp);
-        let q = |p: f64| -> f64 {
-            if s.is_empty() {
-                return f64::NAN;
-            }
-            let h = p * (s.len() - 1) as f64;
-            let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
-            s[lo] + (h - lo as f64) * (s[hi] - s[lo])
-        };
+        let q = |p: f64| crate::network::recovery::quantile(&s, p);
         Distribution {
             median: q(0.5),
             p90: q(0.9),

@@ -75,14 +75,7 @@ pub fn optimum(r: &FitResult) -> Vec<f64> {
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    crate::network::recovery::quantile(&v, 0.5)
 }
 
 /// The zoned network of `zones × per_zone` segments that [`run`] and [`network_bounds`] use:
