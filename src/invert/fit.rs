@@ -568,10 +568,8 @@ fn incompressible_probe(
         x
     };
     let rho = problem.data.soil_density;
-    let c_p_of = |x: &[f64]| {
-        let (e, nu) = (e_spec.value(x[je]), x[jn]);
-        (e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho).sqrt()
-    };
+    let c_p_of =
+        |x: &[f64]| crate::invert::uncertainty::soil_speeds(e_spec.value(x[je]), x[jn], rho).0;
     let phase_speed = problem
         .data
         .measurements
@@ -582,10 +580,7 @@ fn incompressible_probe(
     // The best soil at the upper bound of ν_m, at its own c_S (G = E/2(1 + ν) kept) and at its
     // own c_P (M = E(1 − ν)/((1 + ν)(1 − 2ν)) kept), eqs. P63–P64; then the grid, past
     // grazing only (c_P above the measured phase speed).
-    let e = e_spec.value(best.x[je]);
-    let nu = best.x[jn];
-    let g = e / (2.0 * (1.0 + nu));
-    let m = e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let (m, g) = crate::invert::uncertainty::soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
     let mut starts = vec![
         candidate((g * 2.0 * (1.0 + nu_hi)).log10(), nu_hi, None),
         candidate(
@@ -635,6 +630,7 @@ pub const FAR_PAST_GRAZING: f64 = 2.0;
 pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
 /// log10 E_m (Pa) of the incompressible probe's grid: half decades over the moduli of soils.
 pub const INCOMPRESSIBLE_PROBE_LOG10_E: [f64; 8] = [6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5];
+
 /// An optimum whose ξ is within this fraction of its range from a bound lies on that face.
 pub const CONTACT_FACE_RTOL: f64 = 1e-9;
 
