@@ -48,7 +48,10 @@ fn soil_indices(problem: &Problem<'_>) -> Option<(usize, usize)> {
 /// The member of a zone from its data and its single fit's optimum `x` in the default
 /// method's coordinates (log10 E_m, ν_m, ξ, effect coordinates…) and the single fit's own
 /// relative one-sigma errors of c_P and c_S (`speed_rstd`, P65; `None` where not known). `None`
-/// if the model cannot be evaluated there or the information is not positive definite.
+/// if the model cannot be evaluated there or the model's information is not positive definite.
+/// A speed the single fit knows only loosely gives the member no information along it
+/// ([`MEMBER_SPEED_RSTD_MAX`]), so a member may inform its zone along one axis of
+/// (ln c_P, ln c_S) or, with both speeds loosely known, along none (its axes have λ = 0).
 pub fn member_from_fit(
     segment_id: &str,
     data: &SegmentData,
