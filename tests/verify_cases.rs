@@ -50,3 +50,40 @@ fn the_incompressible_probe_finds_the_fluid_like_end_of_the_cp_valley() {
     let r = verify_one(848484, "WM10095");
     assert!(r.chi2 < 10.5, "χ² {} (the ν_m = 0 end is at 10.63)", r.chi2);
 }
+
+/// A thin MDPE segment whose soil's c_P lies among the measured phase speeds (506–538 m/s):
+/// χ² jumps as c_P crosses each of them, and both DE runs ended in the piece just below
+/// 507.3 m/s at χ² 9.50, while the piece above reaches 9.10. The grazing probe starts from the
+/// best soil moved to the middle of each gap between the phase speeds.
+#[test]
+fn the_grazing_probe_crosses_a_cliff_in_c_p() {
+    let r = verify_one(848709, "WM10039");
+    assert!(r.chi2 < 9.3, "χ² {} (the piece below is at 9.50)", r.chi2);
+}
+
+/// An MDPE segment whose better piece lies across a cliff in ξ (the contact moves the model's
+/// phase speeds across c_P): the search ended at χ² 5.58 with ξ = 0.81, while the same soil at
+/// ξ = 1 has 4.00. The grazing probe's scan of ξ at the best soil finds it.
+#[test]
+fn the_grazing_probe_crosses_a_cliff_in_the_contact_coefficient() {
+    let r = verify_one(848613, "WM10148");
+    assert!(
+        r.chi2 < 4.5,
+        "χ² {} (the search's piece is at 5.58)",
+        r.chi2
+    );
+}
+
+/// A PVC segment whose optimum sits on the edge of a grazing cliff (c_P = 493.5 m/s, next to
+/// the phase speed 492 m/s): there the search path gives χ² 5.02 and the reference path 10.8,
+/// so the answer fell to the next optimum the paths agreed on, χ² 9.11. Just off the cliff
+/// (c_P × (1 − 1e-4)) both paths give 5.02.
+#[test]
+fn an_optimum_on_a_cliff_edge_is_confirmed_just_off_the_cliff() {
+    let r = verify_one(848717, "WM10080");
+    assert!(
+        r.chi2 < 5.5,
+        "χ² {} (the next agreed optimum is at 9.11)",
+        r.chi2
+    );
+}

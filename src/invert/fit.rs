@@ -10,6 +10,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::flags::{assess, Evidence, Flag, Separated, Severity};
+use super::probes;
 use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
@@ -110,8 +111,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// point inside the 95 % region (issue 10). Version 6: that continued polish with central
 /// differences (issue 10). Version 7: the contact probe, a polish from the opposite face of
 /// ξ's range when the best optimum lies on one (issue 10). Version 8: the incompressible
-/// probe, polishes from the best of a set of soils near ν_m = ½ (issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 8;
+/// probe, polishes from the best of a set of soils near ν_m = ½ (issue 10). Version 9: the
+/// grazing probe, polishes from soils across a grazing cliff, and an optimum on a cliff's
+/// edge confirmed just off it (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 9;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -319,9 +322,9 @@ pub fn restart_seed(seed: u64, r: usize) -> u64 {
 }
 
 /// One optimum found by one restart (or by the nested start).
-struct Optimum {
-    x: Vec<f64>,
-    cost: f64,
+pub(super) struct Optimum {
+    pub(super) x: Vec<f64>,
+    pub(super) cost: f64,
 }
 
 /// Fit one segment. Deterministic for a given `seed`.
@@ -459,11 +462,15 @@ fn search(
         }
     }
     if settings.method == Method::Default {
-        if let Some((o, c)) = contact_probe(problem, bounds, &optima) {
+        if let Some((o, c)) = probes::contact_probe(problem, bounds, &optima) {
             optima.push(o);
             capped.push(c);
         }
-        for (o, c) in incompressible_probe(problem, bounds, &optima) {
+        for (o, c) in probes::incompressible_probe(problem, bounds, &optima) {
+            optima.push(o);
+            capped.push(c);
+        }
+        for (o, c) in probes::grazing_probe(problem, bounds, &optima) {
             optima.push(o);
             capped.push(c);
         }
@@ -489,150 +496,6 @@ fn search(
     }
     Ok(optima)
 }
-
-/// The contact probe: when the best optimum lies on a face of the contact coefficient's range
-/// (ξ = 0 or ξ = 1), a polish from the same soil at the opposite face. ξ enters the soil's
-/// stiffness as a weight (§4.10), so a misfit that falls towards one face from one side can
-/// have a deeper basin towards the other: on the paper's case (bench) both DE runs of seed 15
-/// end at ξ = 0 with f = 0.770, while the global optimum, at ξ = 0.72 and nearly the same
-/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`).
-/// Returns the probe's optimum, if its polish improved on its start, and whether that polish
-/// was capped.
-fn contact_probe(
-    problem: &Problem<'_>,
-    bounds: &crate::optimize::Bounds,
-    optima: &[Optimum],
-) -> Option<(Optimum, bool)> {
-    let best = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost))?;
-    let j = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::Contact)?;
-    let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
-    let on_face = CONTACT_FACE_RTOL * (hi - lo);
-    let opposite = if best.x[j] <= lo + on_face {
-        hi
-    } else if best.x[j] >= hi - on_face {
-        lo
-    } else {
-        return None;
-    };
-    let mut x = best.x.clone();
-    x[j] = opposite;
-    polish(problem, &x, bounds, POLISH_ITERATIONS)
-}
-
-/// The incompressible probe: whether a deeper basin lies towards ν_m → ½, the end of the
-/// soil's range that no DE population samples well (saturated, nearly incompressible soils).
-/// Two kinds of basin lie there, both narrow in (log E_m, ν_m) because c_P² ∝ 1/(1 − 2ν_m):
-///
-/// * the fluid-like end of the c_P valley of a metal pipe: the same c_P, c_S → 0
-///   (`bench --verify 200 --network-seed 848484`, WM10095: χ² 10.41 at ν_m = 0.499 against the
-///   search's 10.63 at ν_m = 0);
-/// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
-///   off (spec §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
-///   network, χ² 1.14 at c_P ≈ 2,500 m/s against 2.08 at c_P = 166 m/s. Water-saturated soils
-///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
-///   per segment the data cannot tell, and the fit reports its c_P as undetermined.
-///
-/// The probe evaluates candidates: the best optimum's soil moved to the upper bound of ν_m at
-/// its own c_S and at its own c_P, and a grid of ν_m ∈ [`INCOMPRESSIBLE_PROBE_NU`] (capped at
-/// the upper bound) by log10 E_m ∈ [`INCOMPRESSIBLE_PROBE_LOG10_E`] by ξ ∈ {the best's, 0, 1},
-/// kept where c_P lies above the measured phase speed. It polishes the best candidate of each
-/// class of c_P: below the phase speed, between it and [`FAR_PAST_GRAZING`] times it, and
-/// above. On the README's verify networks (`bench --verify 200 --network-seed S`) the segments
-/// more than 0.1 in χ² above the exhaustive search go from 3 / 11 / 6 to 0 / 0 / 0 (seeds
-/// 848484 / 848531 / 848561), for about 260 more evaluations a fit (1,355 → 1,616 on
-/// `bench --network 200 --network-seed 848601`).
-fn incompressible_probe(
-    problem: &Problem<'_>,
-    bounds: &crate::optimize::Bounds,
-    optima: &[Optimum],
-) -> Vec<(Optimum, bool)> {
-    let Some(best) = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
-        return Vec::new();
-    };
-    let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
-    let (Some(je), Some(jn)) = (position(Param::SoilModulus), position(Param::SoilPoisson)) else {
-        return Vec::new();
-    };
-    let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
-    let jx = position(Param::Contact);
-    let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
-        let mut x = best.x.clone();
-        x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
-        x[jn] = nu.min(nu_hi);
-        if let (Some(j), Some(xi)) = (jx, xi) {
-            x[j] = xi;
-        }
-        x
-    };
-    let rho = problem.data.soil_density;
-    let c_p_of =
-        |x: &[f64]| crate::invert::uncertainty::soil_speeds(e_spec.value(x[je]), x[jn], rho).0;
-    let phase_speed = problem
-        .data
-        .measurements
-        .iter()
-        .map(|m| m.phase_speed())
-        .sum::<f64>()
-        / problem.data.measurements.len().max(1) as f64;
-    // The best soil at the upper bound of ν_m, at its own c_S (G = E/2(1 + ν) kept) and at its
-    // own c_P (M = E(1 − ν)/((1 + ν)(1 − 2ν)) kept), eqs. P63–P64; then the grid, past
-    // grazing only (c_P above the measured phase speed).
-    let (m, g) = crate::invert::uncertainty::soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
-    let mut starts = vec![
-        candidate((g * 2.0 * (1.0 + nu_hi)).log10(), nu_hi, None),
-        candidate(
-            (m * (1.0 + nu_hi) * (1.0 - 2.0 * nu_hi) / (1.0 - nu_hi)).log10(),
-            nu_hi,
-            None,
-        ),
-    ];
-    let xis = jx.map_or(vec![None], |j| vec![Some(best.x[j]), Some(0.0), Some(1.0)]);
-    for &nu1 in &INCOMPRESSIBLE_PROBE_NU {
-        for &log10_e in &INCOMPRESSIBLE_PROBE_LOG10_E {
-            for &xi in &xis {
-                let x = candidate(log10_e, nu1, xi);
-                if c_p_of(&x) > phase_speed {
-                    starts.push(x);
-                }
-            }
-        }
-    }
-    // The best candidate of each class: c_P below the measured phase speed, above it (past
-    // grazing), above twice it (far past). The grazing cliff separates their basins, so the
-    // best of all candidates would often lie in the search's own basin.
-    let mut best_of: [Option<(f64, Vec<f64>)>; 3] = [None, None, None];
-    for x in starts {
-        let c_p = c_p_of(&x);
-        let class = if c_p > FAR_PAST_GRAZING * phase_speed {
-            2
-        } else {
-            usize::from(c_p > phase_speed)
-        };
-        let f = problem.value(&x);
-        if f.is_finite() && best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
-            best_of[class] = Some((f, x));
-        }
-    }
-    best_of
-        .into_iter()
-        .flatten()
-        .filter_map(|(_, x)| polish(problem, &x, bounds, POLISH_ITERATIONS))
-        .collect()
-}
-
-/// The incompressible probe's classes of c_P: far past grazing above this multiple of the
-/// measured phase speed.
-pub const FAR_PAST_GRAZING: f64 = 2.0;
-/// Poisson's ratios of the incompressible probe's grid (each capped at the upper bound).
-pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
-/// log10 E_m (Pa) of the incompressible probe's grid: half decades over the moduli of soils.
-pub const INCOMPRESSIBLE_PROBE_LOG10_E: [f64; 8] = [6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5];
-
-/// An optimum whose ξ is within this fraction of its range from a bound lies on that face.
-pub const CONTACT_FACE_RTOL: f64 = 1e-9;
 
 /// Levenberg–Marquardt iterations of the polish of each optimum of the search.
 pub const POLISH_ITERATIONS: usize = 30;
@@ -685,33 +548,43 @@ fn run(
     // ranking of the optima is not to be trusted.
     let mut unconfirmed = false;
     for &i in &order {
-        let Some(sys) = problem.system_at(&optima[i].x) else {
-            optima[i].cost = f64::INFINITY;
-            unconfirmed = true;
-            continue;
-        };
-        let Some(roots) = problem.reference_roots(&sys) else {
-            optima[i].cost = f64::INFINITY;
-            unconfirmed = true;
-            failure.get_or_insert(sys);
-            continue;
-        };
-        let predicted: Vec<Complex64> = roots.iter().map(|x| x.k1).collect();
-        let agree = problem.predict_system(&sys).is_some_and(|k| {
-            k.iter()
-                .zip(&predicted)
-                .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
-        });
-        optima[i].cost = problem.objective_of(&predicted);
-        checked.push(Checked {
-            i,
-            sys,
-            predicted,
-            roots,
-            agree,
-        });
-        if agree {
-            break;
+        let mut check = check_at(problem, i, &optima[i].x);
+        if !matches!(&check, Check::Roots(c) if c.agree) {
+            // Off the cliff: the optimum may sit on a grazing cliff, where the two paths take
+            // roots on either side of it; a point just off the cliff on the low side may
+            // agree (see [`probes::off_cliff`]).
+            let cost = match &check {
+                Check::Roots(c) => c.cost,
+                _ => f64::INFINITY,
+            };
+            for x in probes::off_cliff(problem, &optima[i].x) {
+                if let Check::Roots(c) = check_at(problem, i, &x) {
+                    if c.agree && c.cost < cost {
+                        optima[i].x = x;
+                        check = Check::Roots(c);
+                        break;
+                    }
+                }
+            }
+        }
+        match check {
+            Check::NoSystem => {
+                optima[i].cost = f64::INFINITY;
+                unconfirmed = true;
+            }
+            Check::NoRoot(sys) => {
+                optima[i].cost = f64::INFINITY;
+                unconfirmed = true;
+                failure.get_or_insert(sys);
+            }
+            Check::Roots(c) => {
+                optima[i].cost = c.cost;
+                let agree = c.agree;
+                checked.push(c);
+                if agree {
+                    break;
+                }
+            }
         }
     }
     let best = checked
@@ -764,9 +637,44 @@ struct Checked {
     sys: System,
     /// The reference path's wavenumbers.
     predicted: Vec<Complex64>,
+    /// The reference path's misfit.
+    cost: f64,
     roots: Vec<Root>,
     /// The search path found the same roots.
     agree: bool,
+}
+
+/// What the reference path makes of a point.
+enum Check {
+    /// The parameters give no system.
+    NoSystem,
+    /// The reference path finds no root.
+    NoRoot(System),
+    Roots(Checked),
+}
+
+/// The check on the reference path of optimum `i` at `x`.
+fn check_at(problem: &Problem<'_>, i: usize, x: &[f64]) -> Check {
+    let Some(sys) = problem.system_at(x) else {
+        return Check::NoSystem;
+    };
+    let Some(roots) = problem.reference_roots(&sys) else {
+        return Check::NoRoot(sys);
+    };
+    let predicted: Vec<Complex64> = roots.iter().map(|x| x.k1).collect();
+    let agree = problem.predict_system(&sys).is_some_and(|k| {
+        k.iter()
+            .zip(&predicted)
+            .all(|(a, b)| (a - b).norm() <= PATH_AGREEMENT_RTOL * b.norm())
+    });
+    Check::Roots(Checked {
+        i,
+        cost: problem.objective_of(&predicted),
+        sys,
+        predicted,
+        roots,
+        agree,
+    })
 }
 
 /// Why no soil in the search range gives an s = 1 root: the reference solver's reason (e.g.
@@ -1157,7 +1065,7 @@ fn de_for(
 }
 
 /// Levenberg–Marquardt polish of a DE optimum inside the bounds.
-fn polish(
+pub(super) fn polish(
     problem: &Problem<'_>,
     x0: &[f64],
     bounds: &crate::optimize::Bounds,

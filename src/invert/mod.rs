@@ -10,10 +10,12 @@
 //!   95 % intervals of every parameter, the predicted curve with errors;
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
-//! `fit` searches and builds the result once; `uncertainty` and `flags` are pure functions of
+//! `fit` searches and builds the result once; `probes` looks for the basins a search leaves
+//! unvisited (across a grazing cliff, towards ν_m → ½, at the other face of ξ); `uncertainty` and `flags` are pure functions of
 //! what the search found.
 pub mod fit;
 pub mod flags;
+pub mod probes;
 pub mod problem;
 pub mod uncertainty;
 

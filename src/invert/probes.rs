@@ -1,0 +1,405 @@
+//! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
+//! candidates built from the best optimum so far and polished (the contact, incompressible and
+//! grazing probes), and the step off a grazing cliff that lets the reference path confirm an
+//! optimum on its edge.
+
+use num_complex::Complex64;
+
+use super::fit::{polish, Optimum, POLISH_ITERATIONS};
+use super::problem::{Param, Problem};
+use super::uncertainty::{soil_from_speeds, soil_moduli, soil_speeds};
+use crate::optimize::{Bounds, Objective};
+
+/// The contact probe: when the best optimum lies on a face of the contact coefficient's range
+/// (ξ = 0 or ξ = 1), a polish from the same soil at the opposite face. ξ enters the soil's
+/// stiffness as a weight (§4.10), so a misfit that falls towards one face from one side can
+/// have a deeper basin towards the other: on the paper's case (bench) both DE runs of seed 15
+/// end at ξ = 0 with f = 0.770, while the global optimum, at ξ = 0.72 and nearly the same
+/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`).
+/// Returns the probe's optimum, if its polish improved on its start, and whether that polish
+/// was capped.
+pub(super) fn contact_probe(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    optima: &[Optimum],
+) -> Option<(Optimum, bool)> {
+    let best = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost))?;
+    let j = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::Contact)?;
+    let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
+    let on_face = CONTACT_FACE_RTOL * (hi - lo);
+    let opposite = if best.x[j] <= lo + on_face {
+        hi
+    } else if best.x[j] >= hi - on_face {
+        lo
+    } else {
+        return None;
+    };
+    let mut x = best.x.clone();
+    x[j] = opposite;
+    polish(problem, &x, bounds, POLISH_ITERATIONS)
+}
+
+/// The incompressible probe: whether a deeper basin lies towards ν_m → ½, the end of the
+/// soil's range that no DE population samples well (saturated, nearly incompressible soils).
+/// Two kinds of basin lie there, both narrow in (log E_m, ν_m) because c_P² ∝ 1/(1 − 2ν_m):
+///
+/// * the fluid-like end of the c_P valley of a metal pipe: the same c_P, c_S → 0
+///   (`bench --verify 200 --network-seed 848484`, WM10095: χ² 10.41 at ν_m = 0.499 against the
+///   search's 10.63 at ν_m = 0);
+/// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
+///   off (spec §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
+///   network, χ² 1.14 at c_P ≈ 2,500 m/s against 2.08 at c_P = 166 m/s. Water-saturated soils
+///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
+///   per segment the data cannot tell, and the fit reports its c_P as undetermined.
+///
+/// The probe evaluates candidates: the best optimum's soil moved to the upper bound of ν_m at
+/// its own c_S and at its own c_P, and a grid of ν_m ∈ [`INCOMPRESSIBLE_PROBE_NU`] (capped at
+/// the upper bound) by log10 E_m ∈ [`INCOMPRESSIBLE_PROBE_LOG10_E`] by ξ ∈ {the best's, 0, 1},
+/// kept where c_P lies above the measured phase speed. It polishes the best candidate of each
+/// class of c_P: below the phase speed, between it and [`FAR_PAST_GRAZING`] times it, and
+/// above. On the README's verify networks (`bench --verify 200 --network-seed S`) the segments
+/// more than 0.1 in χ² above the exhaustive search go from 3 / 11 / 6 to 0 / 0 / 0 (seeds
+/// 848484 / 848531 / 848561), for about 260 more evaluations a fit (1,355 → 1,616 on
+/// `bench --network 200 --network-seed 848601`).
+pub(super) fn incompressible_probe(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    optima: &[Optimum],
+) -> Vec<(Optimum, bool)> {
+    let Some(best) = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
+        return Vec::new();
+    };
+    let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
+    let (Some(je), Some(jn)) = (position(Param::SoilModulus), position(Param::SoilPoisson)) else {
+        return Vec::new();
+    };
+    let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
+    let jx = position(Param::Contact);
+    let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
+        let mut x = best.x.clone();
+        x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
+        x[jn] = nu.min(nu_hi);
+        if let (Some(j), Some(xi)) = (jx, xi) {
+            x[j] = xi;
+        }
+        x
+    };
+    let rho = problem.data.soil_density;
+    let c_p_of = |x: &[f64]| soil_speeds(e_spec.value(x[je]), x[jn], rho).0;
+    let phase_speed = problem
+        .data
+        .measurements
+        .iter()
+        .map(|m| m.phase_speed())
+        .sum::<f64>()
+        / problem.data.measurements.len().max(1) as f64;
+    // The best soil at the upper bound of ν_m, at its own c_S (G = E/2(1 + ν) kept) and at its
+    // own c_P (M = E(1 − ν)/((1 + ν)(1 − 2ν)) kept), eqs. P63–P64; then the grid, past
+    // grazing only (c_P above the measured phase speed).
+    let (m, g) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
+    let mut starts = vec![
+        candidate((g * 2.0 * (1.0 + nu_hi)).log10(), nu_hi, None),
+        candidate(
+            (m * (1.0 + nu_hi) * (1.0 - 2.0 * nu_hi) / (1.0 - nu_hi)).log10(),
+            nu_hi,
+            None,
+        ),
+    ];
+    let xis = jx.map_or(vec![None], |j| vec![Some(best.x[j]), Some(0.0), Some(1.0)]);
+    for &nu1 in &INCOMPRESSIBLE_PROBE_NU {
+        for &log10_e in &INCOMPRESSIBLE_PROBE_LOG10_E {
+            for &xi in &xis {
+                let x = candidate(log10_e, nu1, xi);
+                if c_p_of(&x) > phase_speed {
+                    starts.push(x);
+                }
+            }
+        }
+    }
+    // The best candidate of each class: c_P below the measured phase speed, above it (past
+    // grazing), above twice it (far past). The grazing cliff separates their basins, so the
+    // best of all candidates would often lie in the search's own basin.
+    let mut best_of: [Option<(f64, Vec<f64>)>; 3] = [None, None, None];
+    for x in starts {
+        let c_p = c_p_of(&x);
+        let class = if c_p > FAR_PAST_GRAZING * phase_speed {
+            2
+        } else {
+            usize::from(c_p > phase_speed)
+        };
+        let f = problem.value(&x);
+        if f.is_finite() && best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
+            best_of[class] = Some((f, x));
+        }
+    }
+    best_of
+        .into_iter()
+        .flatten()
+        .filter_map(|(_, x)| polish(problem, &x, bounds, POLISH_ITERATIONS))
+        .collect()
+}
+
+/// Which measured frequencies radiate compressional waves into the soil at a point: those whose
+/// model phase speed lies above the soil's c_P (§7.8 item 3). χ² jumps where one of them
+/// crosses c_P (P44), so the landscape falls into pieces, each with its own pattern.
+pub(super) struct Pieces<'p, 'a> {
+    problem: &'p Problem<'a>,
+    /// Index of log10 E_m among the parameters.
+    je: usize,
+    /// Index of ν_m.
+    jn: usize,
+}
+
+impl<'p, 'a> Pieces<'p, 'a> {
+    /// `None` when the problem does not fit the soil's E_m and ν_m.
+    pub(super) fn new(problem: &'p Problem<'a>) -> Option<Self> {
+        let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
+        Some(Self {
+            problem,
+            je: position(Param::SoilModulus)?,
+            jn: position(Param::SoilPoisson)?,
+        })
+    }
+
+    /// The soil's (c_P, c_S) at x, m/s.
+    fn speeds(&self, x: &[f64]) -> (f64, f64) {
+        let e = self.problem.specs[self.je].value(x[self.je]);
+        soil_speeds(e, x[self.jn], self.problem.data.soil_density)
+    }
+
+    /// x with the soil moved to speeds (c_P, c_S), everything else kept; `None` outside the
+    /// search box or where no soil has those speeds.
+    fn with_speeds(&self, x: &[f64], c_p: f64, c_s: f64) -> Option<Vec<f64>> {
+        let (e, nu) = soil_from_speeds(c_p, c_s, self.problem.data.soil_density)?;
+        let (e_spec, n_spec) = (&self.problem.specs[self.je], &self.problem.specs[self.jn]);
+        let log_e = e_spec.coordinate(e);
+        let inside = (e_spec.lower..=e_spec.upper).contains(&log_e)
+            && (n_spec.lower..=n_spec.upper).contains(&nu);
+        inside.then(|| {
+            let mut y = x.to_vec();
+            y[self.je] = log_e;
+            y[self.jn] = nu;
+            y
+        })
+    }
+
+    fn pattern_of(&self, x: &[f64], k: &[Complex64]) -> Vec<bool> {
+        let (c_p, _) = self.speeds(x);
+        k.iter()
+            .zip(&self.problem.data.measurements)
+            .map(|(k, m)| m.omega / k.re > c_p)
+            .collect()
+    }
+
+    /// The misfit and the pattern at x (one evaluation).
+    fn at(&self, x: &[f64]) -> Option<(f64, Vec<bool>)> {
+        let k = self.problem.predict(x)?;
+        Some((self.problem.objective_of(&k), self.pattern_of(x, &k)))
+    }
+}
+
+/// The grazing probe: whether a deeper basin lies across a grazing cliff from the best
+/// optimum. Where the soil's c_P lies among the measured phase speeds (plastic pipes in stiff
+/// soil) the pieces (see [`Pieces`]) are narrow, in c_P and in ξ (which moves the phase
+/// speeds), and the DE runs settle in one of them: on `bench --verify 200 --network-seed
+/// 848709` WM10039 ends at χ² 9.50 with c_P = 507 m/s, just below the phase speed 507.3, while
+/// the piece above reaches 9.10; with seed 848613 WM10148 ends at 5.58 with ξ = 0.81, while the
+/// same soil at ξ = 1 has 4.00.
+///
+/// Candidates: the best optimum's soil with c_P at the middle of each gap between the sorted
+/// measured phase speeds and just outside their range ([`GRAZING_PROBE_MARGIN`]), c_S kept, at
+/// ξ ∈ {the best's, 0, 1}; and the best soil at ξ ∈ [`GRAZING_PROBE_CONTACTS`]. A candidate
+/// counts if its misfit is within [`GRAZING_PROBE_GATE`] times the best's and its pattern
+/// differs from the best's, or if it is better than the best (then a cliff of another kind,
+/// e.g. a change of root, lies between them). The best candidate of
+/// each pattern is a start, and the [`GRAZING_PROBE_POLISHES`] best starts are polished. (A
+/// polish held within its start's piece did no better on the verify networks: a piece is
+/// not always connected, and its walls stop the polish short.)
+pub(super) fn grazing_probe(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    optima: &[Optimum],
+) -> Vec<(Optimum, bool)> {
+    let Some(best) = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
+        return Vec::new();
+    };
+    let Some(pieces) = Pieces::new(problem) else {
+        return Vec::new();
+    };
+    let Some((_, own)) = pieces.at(&best.x) else {
+        return Vec::new();
+    };
+    let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
+    let (_, c_s) = pieces.speeds(&best.x);
+    let mut v: Vec<f64> = problem
+        .data
+        .measurements
+        .iter()
+        .map(|m| m.phase_speed())
+        .collect();
+    v.sort_by(f64::total_cmp);
+    let mut targets: Vec<f64> = v.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+    if let (Some(lo), Some(hi)) = (v.first(), v.last()) {
+        targets.push(lo * (1.0 - GRAZING_PROBE_MARGIN));
+        targets.push(hi * (1.0 + GRAZING_PROBE_MARGIN));
+    }
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    let xis = jx.map_or(vec![None], |j| vec![Some(best.x[j]), Some(0.0), Some(1.0)]);
+    for c_p in targets {
+        let Some(x) = pieces.with_speeds(&best.x, c_p, c_s) else {
+            continue;
+        };
+        for &xi in &xis {
+            let mut x = x.clone();
+            if let (Some(j), Some(xi)) = (jx, xi) {
+                x[j] = xi;
+            }
+            starts.push(x);
+        }
+    }
+    if let Some(j) = jx {
+        let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
+        for &t in &GRAZING_PROBE_CONTACTS {
+            let mut x = best.x.clone();
+            x[j] = lo + t * (hi - lo);
+            starts.push(x);
+        }
+    }
+    // The best candidate of each pattern.
+    let mut by_pattern: Vec<(f64, Vec<f64>, Vec<bool>)> = Vec::new();
+    for x in starts {
+        let Some((f, pattern)) = pieces.at(&x) else {
+            continue;
+        };
+        if !(f <= GRAZING_PROBE_GATE * best.cost && (pattern != own || f < best.cost)) {
+            continue;
+        }
+        match by_pattern.iter_mut().find(|(_, _, p)| *p == pattern) {
+            Some(c) if f < c.0 => *c = (f, x, pattern),
+            Some(_) => {}
+            None => by_pattern.push((f, x, pattern)),
+        }
+    }
+    by_pattern.sort_by(|a, b| a.0.total_cmp(&b.0));
+    by_pattern
+        .into_iter()
+        .take(GRAZING_PROBE_POLISHES)
+        .filter_map(|(_, x, _)| polish(problem, &x, bounds, POLISH_ITERATIONS))
+        .collect()
+}
+
+/// The grazing probe's c_P just outside the range of the measured phase speeds, relative.
+pub const GRAZING_PROBE_MARGIN: f64 = 0.02;
+/// The grazing probe's contact coefficients at the best soil, as fractions of ξ's range.
+pub const GRAZING_PROBE_CONTACTS: [f64; 11] =
+    [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
+/// Starts of the grazing probe polished, best first.
+pub const GRAZING_PROBE_POLISHES: usize = 2;
+/// The grazing probe polishes only starts whose misfit is at most this multiple of the
+/// best's. Measured with the probe polishing without this limit, on `bench --network 200
+/// --network-seed 848701` (both material mixes) and `bench --verify 200 --network-seed S`
+/// (S = 848709, 848723): of 2,719 polishes, 14 improved on the best by more than 0.01 in χ²,
+/// all from starts at most 1.43 times the best's misfit; the limit skips about 9 in 10.
+pub const GRAZING_PROBE_GATE: f64 = 2.0;
+
+/// The incompressible probe's classes of c_P: far past grazing above this multiple of the
+/// measured phase speed.
+pub const FAR_PAST_GRAZING: f64 = 2.0;
+/// Poisson's ratios of the incompressible probe's grid (each capped at the upper bound).
+pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
+/// log10 E_m (Pa) of the incompressible probe's grid: half decades over the moduli of soils.
+pub const INCOMPRESSIBLE_PROBE_LOG10_E: [f64; 8] = [6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5];
+
+/// An optimum whose ξ is within this fraction of its range from a bound lies on that face.
+pub const CONTACT_FACE_RTOL: f64 = 1e-9;
+
+/// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
+pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
+
+/// Points just off a grazing cliff next to `x`, to be tried in turn. Where χ² falls towards a
+/// cliff (see [`Pieces`]) the search's optimum sits on its edge, and there the search path and
+/// the reference path can take roots on either side of it. Just off the edge, on the side the
+/// search path rates lower, they agree: on WM10081 of `bench --verify 200 --network-seed
+/// 848709` the optimum at c_P = 563.45 m/s has χ² 12.19 on the search path and 13.11 on the
+/// reference path; at c_P × (1 − 1e-4) both give 12.19. For each step of [`OFF_CLIFF_STEPS`],
+/// the side the search path rates lower.
+pub(super) fn off_cliff(problem: &Problem<'_>, x: &[f64]) -> Vec<Vec<f64>> {
+    let Some(pieces) = Pieces::new(problem) else {
+        return Vec::new();
+    };
+    let (c_p, c_s) = pieces.speeds(x);
+    OFF_CLIFF_STEPS
+        .iter()
+        .filter_map(|&step| {
+            [-step, step]
+                .into_iter()
+                .filter_map(|s| pieces.with_speeds(x, c_p * (1.0 + s), c_s))
+                .map(|y| (problem.value(&y), y))
+                .filter(|(f, _)| f.is_finite())
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|(_, y)| y)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::invert::problem::Method;
+    use crate::physics::{ContactMode, Model};
+
+    fn paper_problem(data: &crate::invert::SegmentData) -> Problem<'_> {
+        Problem::new(
+            data,
+            Method::Default,
+            Model::Full,
+            ContactMode::Reciprocal,
+            &[],
+        )
+    }
+
+    /// A soil moved to given speeds has those speeds (P63–P64 inverted), keeps ξ, and is
+    /// refused outside the search box or where no soil has them (c_P ≤ c_S √(4/3)).
+    #[test]
+    fn a_soil_moved_to_given_speeds_has_them_and_stays_in_the_box() {
+        let data = crate::bench::paper_case_data();
+        let p = paper_problem(&data);
+        let pieces = Pieces::new(&p).expect("soil parameters");
+        let x = vec![8.0, 0.3, 0.4];
+        let (c_p, c_s) = pieces.speeds(&x);
+        let y = pieces.with_speeds(&x, 1.5 * c_p, c_s).expect("inside");
+        let (c_p2, c_s2) = pieces.speeds(&y);
+        assert!(
+            (c_p2 / (1.5 * c_p) - 1.0).abs() < 1e-12,
+            "{c_p2} vs {}",
+            1.5 * c_p
+        );
+        assert!((c_s2 / c_s - 1.0).abs() < 1e-12, "{c_s2} vs {c_s}");
+        assert_eq!(y[2], x[2]);
+        assert!(y[1] > x[1], "a higher c_P at the same c_S is a higher ν_m");
+        assert!(pieces.with_speeds(&x, 1.1 * c_s, c_s).is_none());
+        assert!(pieces.with_speeds(&x, 1e3 * c_p, 1e3 * c_s).is_none());
+    }
+
+    /// The points off a cliff keep c_S and ξ and move c_P by each step of
+    /// [`OFF_CLIFF_STEPS`], on one side or the other.
+    #[test]
+    fn points_off_a_cliff_move_only_c_p_by_the_steps() {
+        let data = crate::bench::paper_case_data();
+        let p = paper_problem(&data);
+        let pieces = Pieces::new(&p).expect("soil parameters");
+        let x = vec![8.0, 0.3, 0.4];
+        let (c_p, c_s) = pieces.speeds(&x);
+        let points = off_cliff(&p, &x);
+        assert_eq!(points.len(), OFF_CLIFF_STEPS.len());
+        for (y, step) in points.iter().zip(OFF_CLIFF_STEPS) {
+            let (c_p2, c_s2) = pieces.speeds(y);
+            assert!(((c_p2 / c_p - 1.0).abs() / step - 1.0).abs() < 1e-6);
+            assert!((c_s2 / c_s - 1.0).abs() < 1e-12);
+            assert_eq!(y[2], x[2]);
+        }
+    }
+}
