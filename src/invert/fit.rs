@@ -1258,6 +1258,65 @@ mod tests {
     use super::*;
     use crate::invert::uncertainty::{soil_speeds, Z_95};
 
+    /// Where no finite-difference Jacobian exists on any path or step, the curvature is
+    /// unknown and the intervals span the search range. The point: the answer of the stress
+    /// network's HDPE segment WM10951 (tests/stress.rs) before the grazing probe and the step
+    /// off a cliff (fit algorithm 8), where the model's root jumps between branches for the
+    /// slightest change of E_m or ξ; version 9 answers next to it, where a Jacobian exists.
+    #[test]
+    fn where_no_jacobian_exists_the_intervals_span_the_search_range() {
+        use crate::physics::effects::Effect;
+        use crate::synth::{default_hidden_range, generate, SynthOptions};
+        let (lo, hi) = default_hidden_range(Effect::WallThinning).expect("a default range");
+        let net = generate(&SynthOptions {
+            segments: 2500,
+            seed: 13,
+            defect_fraction: 0.0,
+            hidden_effect: Some((Effect::WallThinning, lo, hi)),
+            ..SynthOptions::default()
+        });
+        let data = net
+            .iter()
+            .find(|s| s.id == "WM10951")
+            .expect("the segment")
+            .segment_data();
+        let mut p = Problem::new(
+            &data,
+            Method::Default,
+            Model::default(),
+            ContactMode::default(),
+            &[],
+        );
+        // The answer came from the safe path (the fast path's ranking was not confirmed).
+        p.path = SolvePath::Safe;
+        let bounds = p.bounds().expect("bounds");
+        let x: Vec<f64> = [
+            4_620_961_825_393_077_189,
+            4_600_801_963_784_091_329,
+            1.0f64.to_bits(),
+        ]
+        .into_iter()
+        .map(f64::from_bits)
+        .collect(); // (8.477143144458646, 0.39581359668668986, 1): log10 E_m, ν_m, ξ
+        let sys = p.system_at(&x).expect("a system");
+        let predicted: Vec<Complex64> = p
+            .reference_roots(&sys)
+            .expect("the reference path solves there")
+            .iter()
+            .map(|r| r.k1)
+            .collect();
+        let ss = p.sum_of_squares(&predicted);
+        let d = uncertainty(&p, &bounds, &x, &predicted, ss, 1.0);
+        assert!(d.curvature_unknown);
+        for (i, s) in d.intervals.iter().zip(&p.specs) {
+            assert!(
+                i.lo <= s.value(s.lower) * (1.0 + 1e-9) && i.hi >= s.value(s.upper) * (1.0 - 1e-9),
+                "{:?}: {i:?}",
+                s.param
+            );
+        }
+    }
+
     /// The 95 % intervals and the errors of the soil speeds and the leak-band speed reach an
     /// optimum inside the 95 % region of the best (Δχ² ≤ 3.84 × scale), and only such one.
     #[test]
