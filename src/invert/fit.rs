@@ -547,7 +547,14 @@ fn run(
     // no root on the reference path: the fast path followed another root there, so its
     // ranking of the optima is not to be trusted.
     let mut unconfirmed = false;
+    // The best reference misfit of an optimum confirmed just off a cliff: a later optimum can
+    // still be better (its search misfit is lower), so the checks go on while it is.
+    let mut off_cliff_best = f64::INFINITY;
     for &i in &order {
+        if optima[i].cost >= off_cliff_best {
+            break;
+        }
+        let mut moved = false;
         let mut check = check_at(problem, i, &optima[i].x);
         if !matches!(&check, Check::Roots(c) if c.agree) {
             // Off the cliff: the optimum may sit on a grazing cliff, where the two paths take
@@ -562,6 +569,7 @@ fn run(
                     if c.agree && c.cost < cost {
                         optima[i].x = x;
                         check = Check::Roots(c);
+                        moved = true;
                         break;
                     }
                 }
@@ -579,10 +587,13 @@ fn run(
             }
             Check::Roots(c) => {
                 optima[i].cost = c.cost;
-                let agree = c.agree;
+                let (agree, cost) = (c.agree, c.cost);
                 checked.push(c);
-                if agree {
+                if agree && !moved {
                     break;
+                }
+                if agree {
+                    off_cliff_best = off_cliff_best.min(cost);
                 }
             }
         }
