@@ -6,7 +6,7 @@
 
 use pipewave::bench::{Algorithm, BenchSegment};
 use pipewave::physics::effects::Effect;
-use pipewave::synth::{default_hidden_range, generate, SynthOptions};
+use pipewave::synth::{generate, SynthOptions};
 use rayon::prelude::*;
 
 fn main() {
@@ -27,14 +27,8 @@ fn main() {
     ];
     let mut net: Vec<(Effect, pipewave::synth::SynthSegment)> = Vec::new();
     for (i, e) in effects.iter().enumerate() {
-        let (lo, hi) = default_hidden_range(*e).expect("range");
-        let segs = generate(&SynthOptions {
-            segments: n / effects.len(),
-            seed: seed + i as u64,
-            defect_fraction: 0.0,
-            hidden_effect: Some((*e, lo, hi)),
-            ..SynthOptions::default()
-        });
+        let options = SynthOptions::hiding(*e, n / effects.len(), seed + i as u64).expect("range");
+        let segs = generate(&options);
         net.extend(segs.into_iter().map(|s| (*e, s)));
     }
     if let Ok(only) = std::env::var("ONLY") {

@@ -303,6 +303,21 @@ impl Default for SynthOptions {
     }
 }
 
+impl SynthOptions {
+    /// `segments` segments of seed `seed`, without defects, every one hiding `effect` at a
+    /// value drawn from its [`default_hidden_range`]; `None` for an effect without one.
+    pub fn hiding(effect: Effect, segments: usize, seed: u64) -> Option<Self> {
+        let (lo, hi) = default_hidden_range(effect)?;
+        Some(Self {
+            segments,
+            seed,
+            defect_fraction: 0.0,
+            hidden_effect: Some((effect, lo, hi)),
+            ..Self::default()
+        })
+    }
+}
+
 /// The value range a hidden effect is drawn from by default: values whose signature is
 /// visible at 1 %/5 % noise in some segments (spec §8): soil loss 0.05–0.3, air 2e-5–5e-4
 /// (log-uniform), effective wall 0.5–0.85 of nominal, wall loss factor 0.04–0.15.

@@ -6,7 +6,7 @@
 
 use pipewave::invert::{fit_segment, FitSettings, FitStatus};
 use pipewave::physics::effects::Effect;
-use pipewave::synth::{default_hidden_range, generate, SynthOptions};
+use pipewave::synth::{generate, SynthOptions};
 use rayon::prelude::*;
 
 #[test]
@@ -19,14 +19,8 @@ fn no_segment_of_a_stress_network_is_left_without_a_fit() {
     ];
     let mut net = Vec::new();
     for (i, e) in effects.iter().enumerate() {
-        let (lo, hi) = default_hidden_range(*e).expect("a default range");
-        net.extend(generate(&SynthOptions {
-            segments: 100,
-            seed: 61 + i as u64,
-            defect_fraction: 0.0,
-            hidden_effect: Some((*e, lo, hi)),
-            ..SynthOptions::default()
-        }));
+        let options = SynthOptions::hiding(*e, 100, 61 + i as u64).expect("a default range");
+        net.extend(generate(&options));
     }
     let results: Vec<_> = net
         .par_iter()
@@ -72,14 +66,8 @@ fn no_segment_of_a_stress_network_is_left_without_a_fit() {
 /// probe's optimum at ξ = 0, χ² 1532.
 #[test]
 fn an_optimum_next_to_a_root_jump_gets_an_answer_with_a_jacobian() {
-    let (lo, hi) = default_hidden_range(Effect::WallThinning).expect("a default range");
-    let net = generate(&SynthOptions {
-        segments: 2500,
-        seed: 13,
-        defect_fraction: 0.0,
-        hidden_effect: Some((Effect::WallThinning, lo, hi)),
-        ..SynthOptions::default()
-    });
+    let options = SynthOptions::hiding(Effect::WallThinning, 2500, 13).expect("a range");
+    let net = generate(&options);
     let s = net.iter().find(|s| s.id == "WM10951").expect("the segment");
     let r = fit_segment(
         &s.segment_data(),

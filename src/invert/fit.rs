@@ -322,6 +322,7 @@ pub fn restart_seed(seed: u64, r: usize) -> u64 {
 }
 
 /// One optimum found by one restart (or by the nested start).
+#[derive(Clone)]
 pub(super) struct Optimum {
     pub(super) x: Vec<f64>,
     pub(super) cost: f64,
@@ -426,6 +427,9 @@ fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
         .collect()
 }
 
+/// A probe: polished optima (with whether each polish was capped) from the best so far.
+type ProbeFn = fn(&Problem<'_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
+
 /// The search: every restart's DE run polished, and the nested start polished.
 fn search(
     problem: &Problem<'_>,
@@ -462,17 +466,24 @@ fn search(
         }
     }
     if settings.method == Method::Default {
-        if let Some((o, c)) = probes::contact_probe(problem, bounds, &optima) {
-            optima.push(o);
-            capped.push(c);
-        }
-        for (o, c) in probes::incompressible_probe(problem, bounds, &optima) {
-            optima.push(o);
-            capped.push(c);
-        }
-        for (o, c) in probes::grazing_probe(problem, bounds, &optima) {
-            optima.push(o);
-            capped.push(c);
+        // Each probe starts from the best optimum so far.
+        let best = |optima: &[Optimum]| {
+            optima
+                .iter()
+                .min_by(|a, b| a.cost.total_cmp(&b.cost))
+                .cloned()
+        };
+        let probes: [ProbeFn; 3] = [
+            |p, b, o| probes::contact_probe(p, b, o).into_iter().collect(),
+            probes::incompressible_probe,
+            probes::grazing_probe,
+        ];
+        for probe in probes {
+            let Some(b) = best(&optima) else { break };
+            for (o, c) in probe(problem, bounds, &b) {
+                optima.push(o);
+                capped.push(c);
+            }
         }
     }
     // The best optimum's polish goes on where it stopped still descending: only the best's,
@@ -1277,15 +1288,9 @@ mod tests {
     #[test]
     fn where_no_jacobian_exists_the_intervals_span_the_search_range() {
         use crate::physics::effects::Effect;
-        use crate::synth::{default_hidden_range, generate, SynthOptions};
-        let (lo, hi) = default_hidden_range(Effect::WallThinning).expect("a default range");
-        let net = generate(&SynthOptions {
-            segments: 2500,
-            seed: 13,
-            defect_fraction: 0.0,
-            hidden_effect: Some((Effect::WallThinning, lo, hi)),
-            ..SynthOptions::default()
-        });
+        use crate::synth::{generate, SynthOptions};
+        let options = SynthOptions::hiding(Effect::WallThinning, 2500, 13).expect("a range");
+        let net = generate(&options);
         let data = net
             .iter()
             .find(|s| s.id == "WM10951")

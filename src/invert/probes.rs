@@ -21,9 +21,8 @@ use crate::optimize::{Bounds, Objective};
 pub(super) fn contact_probe(
     problem: &Problem<'_>,
     bounds: &Bounds,
-    optima: &[Optimum],
+    best: &Optimum,
 ) -> Option<(Optimum, bool)> {
-    let best = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost))?;
     let j = problem
         .specs
         .iter()
@@ -67,11 +66,8 @@ pub(super) fn contact_probe(
 pub(super) fn incompressible_probe(
     problem: &Problem<'_>,
     bounds: &Bounds,
-    optima: &[Optimum],
+    best: &Optimum,
 ) -> Vec<(Optimum, bool)> {
-    let Some(best) = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
-        return Vec::new();
-    };
     let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
     let (Some(je), Some(jn)) = (position(Param::SoilModulus), position(Param::SoilPoisson)) else {
         return Vec::new();
@@ -221,11 +217,8 @@ impl<'p, 'a> Pieces<'p, 'a> {
 pub(super) fn grazing_probe(
     problem: &Problem<'_>,
     bounds: &Bounds,
-    optima: &[Optimum],
+    best: &Optimum,
 ) -> Vec<(Optimum, bool)> {
-    let Some(best) = optima.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
-        return Vec::new();
-    };
     let Some(pieces) = Pieces::new(problem) else {
         return Vec::new();
     };
@@ -348,17 +341,12 @@ pub(super) fn off_cliff(problem: &Problem<'_>, x: &[f64]) -> Vec<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::invert::problem::Method;
-    use crate::physics::{ContactMode, Model};
+    use crate::invert::FitSettings;
 
-    fn paper_problem(data: &crate::invert::SegmentData) -> Problem<'_> {
-        Problem::new(
-            data,
-            Method::Default,
-            Model::Full,
-            ContactMode::Reciprocal,
-            &[],
-        )
+    /// The problem of the default fit.
+    fn default_fit_problem(data: &crate::invert::SegmentData) -> Problem<'_> {
+        let s = FitSettings::default();
+        Problem::new(data, s.method, s.model, s.contact_mode, &s.effects)
     }
 
     /// A soil moved to given speeds has those speeds (P63–P64 inverted), keeps ξ, and is
@@ -366,7 +354,7 @@ mod tests {
     #[test]
     fn a_soil_moved_to_given_speeds_has_them_and_stays_in_the_box() {
         let data = crate::bench::paper_case_data();
-        let p = paper_problem(&data);
+        let p = default_fit_problem(&data);
         let pieces = Pieces::new(&p).expect("soil parameters");
         let x = vec![8.0, 0.3, 0.4];
         let (c_p, c_s) = pieces.speeds(&x);
@@ -389,7 +377,7 @@ mod tests {
     #[test]
     fn points_off_a_cliff_move_only_c_p_by_the_steps() {
         let data = crate::bench::paper_case_data();
-        let p = paper_problem(&data);
+        let p = default_fit_problem(&data);
         let pieces = Pieces::new(&p).expect("soil parameters");
         let x = vec![8.0, 0.3, 0.4];
         let (c_p, c_s) = pieces.speeds(&x);
