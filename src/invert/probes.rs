@@ -68,12 +68,12 @@ pub(super) fn incompressible_probe(
     bounds: &Bounds,
     best: &Optimum,
 ) -> Vec<(Optimum, bool)> {
-    let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
-    let (Some(je), Some(jn)) = (position(Param::SoilModulus), position(Param::SoilPoisson)) else {
+    let Some(pieces) = Pieces::new(problem) else {
         return Vec::new();
     };
+    let (je, jn) = (pieces.je, pieces.jn);
     let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
-    let jx = position(Param::Contact);
+    let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
     let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
         let mut x = best.x.clone();
         x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
@@ -83,8 +83,7 @@ pub(super) fn incompressible_probe(
         }
         x
     };
-    let rho = problem.data.soil_density;
-    let c_p_of = |x: &[f64]| soil_speeds(e_spec.value(x[je]), x[jn], rho).0;
+    let c_p_of = |x: &[f64]| pieces.speeds(x).0;
     let phase_speed = problem
         .data
         .measurements
@@ -182,6 +181,8 @@ impl<'p, 'a> Pieces<'p, 'a> {
         })
     }
 
+    /// Which frequencies radiate at x, given the model's wavenumbers k there: phase speed
+    /// ω/Re k above c_P (P63).
     fn pattern_of(&self, x: &[f64], k: &[Complex64]) -> Vec<bool> {
         let (c_p, _) = self.speeds(x);
         k.iter()
