@@ -428,7 +428,8 @@ fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
 }
 
 /// A probe: polished optima (with whether each polish was capped) from the best so far.
-type ProbeFn = fn(&Problem<'_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
+type ProbeFn =
+    fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
 
 /// The search: every restart's DE run polished, and the nested start polished.
 fn search(
@@ -465,7 +466,8 @@ fn search(
             capped.push(c);
         }
     }
-    if settings.method == Method::Default {
+    let pieces = probes::Pieces::new(problem).filter(|_| settings.method == Method::Default);
+    if let Some(pieces) = pieces {
         // Each probe starts from the best optimum so far.
         let best = |optima: &[Optimum]| {
             optima
@@ -480,7 +482,7 @@ fn search(
         ];
         for probe in probes {
             let Some(b) = best(&optima) else { break };
-            for (o, c) in probe(problem, bounds, &b) {
+            for (o, c) in probe(&pieces, bounds, &b) {
                 optima.push(o);
                 capped.push(c);
             }
@@ -561,6 +563,7 @@ fn run(
     // The best reference misfit of an optimum confirmed just off a cliff: a later optimum can
     // still be better (its search misfit is lower), so the checks go on while it is.
     let mut off_cliff_best = f64::INFINITY;
+    let pieces = probes::Pieces::new(problem);
     for &i in &order {
         if optima[i].cost >= off_cliff_best {
             break;
@@ -575,7 +578,10 @@ fn run(
                 Check::Roots(c) => c.cost,
                 _ => f64::INFINITY,
             };
-            for x in probes::off_cliff(problem, &optima[i].x) {
+            let moves = pieces
+                .as_ref()
+                .map_or_else(Vec::new, |p| probes::off_cliff(p, &optima[i].x));
+            for x in moves {
                 if let Check::Roots(c) = check_at(problem, i, &x) {
                     if c.agree && c.cost < cost {
                         optima[i].x = x;
@@ -1296,13 +1302,8 @@ mod tests {
             .find(|s| s.id == "WM10951")
             .expect("the segment")
             .segment_data();
-        let mut p = Problem::new(
-            &data,
-            Method::Default,
-            Model::default(),
-            ContactMode::default(),
-            &[],
-        );
+        let s = FitSettings::default();
+        let mut p = Problem::new(&data, s.method, s.model, s.contact_mode, &s.effects);
         // The answer came from the safe path (the fast path's ranking was not confirmed).
         p.path = SolvePath::Safe;
         let bounds = p.bounds().expect("bounds");

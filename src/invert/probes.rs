@@ -19,14 +19,12 @@ use crate::optimize::{Bounds, Objective};
 /// Returns the probe's optimum, if its polish improved on its start, and whether that polish
 /// was capped.
 pub(super) fn contact_probe(
-    problem: &Problem<'_>,
+    pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
     best: &Optimum,
 ) -> Option<(Optimum, bool)> {
-    let j = problem
-        .specs
-        .iter()
-        .position(|s| s.param == Param::Contact)?;
+    let problem = pieces.problem;
+    let j = pieces.jx?;
     let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
     let on_face = CONTACT_FACE_RTOL * (hi - lo);
     let opposite = if best.x[j] <= lo + on_face {
@@ -64,16 +62,13 @@ pub(super) fn contact_probe(
 /// 848484 / 848531 / 848561), for about 260 more evaluations a fit (1,355 → 1,616 on
 /// `bench --network 200 --network-seed 848601`).
 pub(super) fn incompressible_probe(
-    problem: &Problem<'_>,
+    pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
     best: &Optimum,
 ) -> Vec<(Optimum, bool)> {
-    let Some(pieces) = Pieces::new(problem) else {
-        return Vec::new();
-    };
-    let (je, jn) = (pieces.je, pieces.jn);
+    let problem = pieces.problem;
+    let (je, jn, jx) = (pieces.je, pieces.jn, pieces.jx);
     let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
-    let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
     let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
         let mut x = best.x.clone();
         x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
@@ -139,13 +134,16 @@ pub(super) fn incompressible_probe(
 
 /// Which measured frequencies radiate compressional waves into the soil at a point: those whose
 /// model phase speed lies above the soil's c_P (§7.8 item 3). χ² jumps where one of them
-/// crosses c_P (P44), so the landscape falls into pieces, each with its own pattern.
+/// crosses c_P (P44), so the landscape falls into pieces, each with its own pattern. Also the
+/// soil's axes among the parameters, which every probe works along.
 pub(super) struct Pieces<'p, 'a> {
     problem: &'p Problem<'a>,
     /// Index of log10 E_m among the parameters.
     je: usize,
     /// Index of ν_m.
     jn: usize,
+    /// Index of ξ, when it is fitted.
+    jx: Option<usize>,
 }
 
 impl<'p, 'a> Pieces<'p, 'a> {
@@ -156,6 +154,7 @@ impl<'p, 'a> Pieces<'p, 'a> {
             problem,
             je: position(Param::SoilModulus)?,
             jn: position(Param::SoilPoisson)?,
+            jx: position(Param::Contact),
         })
     }
 
@@ -216,17 +215,15 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// polish held within its start's piece did no better on the verify networks: a piece is
 /// not always connected, and its walls stop the polish short.)
 pub(super) fn grazing_probe(
-    problem: &Problem<'_>,
+    pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
     best: &Optimum,
 ) -> Vec<(Optimum, bool)> {
-    let Some(pieces) = Pieces::new(problem) else {
-        return Vec::new();
-    };
+    let problem = pieces.problem;
     let Some((_, own)) = pieces.at(&best.x) else {
         return Vec::new();
     };
-    let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
+    let jx = pieces.jx;
     let (_, c_s) = pieces.speeds(&best.x);
     let mut v: Vec<f64> = problem
         .data
@@ -320,10 +317,7 @@ pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
 /// 848709` the optimum at c_P = 563.45 m/s has χ² 12.19 on the search path and 13.11 on the
 /// reference path; at c_P × (1 − 1e-4) both give 12.19. For each step of [`OFF_CLIFF_STEPS`],
 /// the side the search path rates lower.
-pub(super) fn off_cliff(problem: &Problem<'_>, x: &[f64]) -> Vec<Vec<f64>> {
-    let Some(pieces) = Pieces::new(problem) else {
-        return Vec::new();
-    };
+pub(super) fn off_cliff(pieces: &Pieces<'_, '_>, x: &[f64]) -> Vec<Vec<f64>> {
     let (c_p, c_s) = pieces.speeds(x);
     OFF_CLIFF_STEPS
         .iter()
@@ -331,7 +325,7 @@ pub(super) fn off_cliff(problem: &Problem<'_>, x: &[f64]) -> Vec<Vec<f64>> {
             [-step, step]
                 .into_iter()
                 .filter_map(|s| pieces.with_speeds(x, c_p * (1.0 + s), c_s))
-                .map(|y| (problem.value(&y), y))
+                .map(|y| (pieces.problem.value(&y), y))
                 .filter(|(f, _)| f.is_finite())
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .map(|(_, y)| y)
@@ -382,7 +376,7 @@ mod tests {
         let pieces = Pieces::new(&p).expect("soil parameters");
         let x = vec![8.0, 0.3, 0.4];
         let (c_p, c_s) = pieces.speeds(&x);
-        let points = off_cliff(&p, &x);
+        let points = off_cliff(&pieces, &x);
         assert_eq!(points.len(), OFF_CLIFF_STEPS.len());
         for (y, step) in points.iter().zip(OFF_CLIFF_STEPS) {
             let (c_p2, c_s2) = pieces.speeds(y);
