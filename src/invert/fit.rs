@@ -113,11 +113,11 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// ξ's range when the best optimum lies on one (issue 10). Version 8: the incompressible
 /// probe, polishes from the best of a set of soils near ν_m = ½ (issue 10). Version 9: the
 /// grazing probe, polishes from soils across a grazing cliff, and an optimum on a cliff's
-/// edge confirmed just off it (issue 10). Version 10: on the fast path an evaluation that fails
-/// gives up sooner (Muller's fallback capped at 20 iterations, the ramp only after a failure at
-/// the lowest frequency), and Newton starts from the parabola through the last three points of
-/// the continuation; the same roots to the fast tolerance, but the DE's path moves with the
-/// last bits, so individual fits change (issue 10).
+/// edge confirmed just off it (issue 10). Version 10: an evaluation that fails on the fast
+/// path gives up sooner (Muller's fallback capped at 20 iterations, the ramp only after a
+/// failure at the lowest frequency); a fit changes only where Muller needed more than 20
+/// iterations or the ramp would have answered after a failure higher up, which no fit of the
+/// bench networks did (issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 10;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the

@@ -467,22 +467,6 @@ fn extrapolate(hist: &[PathPoint], omega: f64) -> Complex64 {
     }
 }
 
-/// The value at `omega` of the parabola through the last three accepted points (Lagrange's
-/// form), `None` with fewer than three points or two at the same frequency.
-fn extrapolate_quadratic(hist: &[PathPoint], omega: f64) -> Option<Complex64> {
-    let [.., a, b, c] = hist else {
-        return None;
-    };
-    let (x0, x1, x2) = (a.omega, b.omega, c.omega);
-    if x0 == x1 || x1 == x2 || x0 == x2 {
-        return None;
-    }
-    let l0 = (omega - x1) * (omega - x2) / ((x0 - x1) * (x0 - x2));
-    let l1 = (omega - x0) * (omega - x2) / ((x1 - x0) * (x1 - x2));
-    let l2 = (omega - x0) * (omega - x1) / ((x2 - x0) * (x2 - x1));
-    Some(a.k1 * l0 + b.k1 * l1 + c.k1 * l2)
-}
-
 #[inline]
 fn unreachable_guess() -> Complex64 {
     // The path always starts with the in-vacuo root, so the history is never empty when a
@@ -690,15 +674,7 @@ fn step_to(
     loop {
         let prev = hist[hist.len() - 1];
         let guess = extrapolate(hist, target);
-        // Newton starts from the parabola through the last three points where there are three:
-        // closer to the root than the line of P42, it saves one iteration in two. The test
-        // below still measures the root against the line's guess, so which roots are accepted
-        // is the spec's rule. Muller (the reference's iteration) keeps the spec's start.
-        let start = match tol.method {
-            RootMethod::Newton => extrapolate_quadratic(hist, target).unwrap_or(guess),
-            RootMethod::Muller => guess,
-        };
-        let attempt = solve_from_guess_tol(system, target, start, tol);
+        let attempt = solve_from_guess_tol(system, target, guess, tol);
         let mut ratio = f64::NAN;
         match attempt {
             Ok(root) => {
@@ -872,33 +848,5 @@ mod tests {
             Some("shear")
         );
         assert_eq!(grazing_wave(&sys, at(cp * 1.2)), None);
-    }
-
-    /// Newton's start on the fast path: the parabola through the last three points is exact
-    /// for a wavenumber quadratic in ω (where the line of P42 is off by c·(ω − ω₃)(ω − ω₂)), and
-    /// there is none without three points at distinct frequencies.
-    #[test]
-    fn the_quadratic_start_is_exact_for_a_parabola() {
-        let k = |w: f64| {
-            Complex64::new(0.3, -0.01)
-                + Complex64::new(2.0e-3, -1.0e-5) * w
-                + Complex64::new(4.0e-7, -3.0e-9) * w * w
-        };
-        let at = |w: f64| PathPoint { omega: w, k1: k(w) };
-        let hist = [at(200.0), at(700.0), at(900.0), at(1000.0)];
-        for w in [1000.5, 1500.0, 4000.0] {
-            let q = extrapolate_quadratic(&hist, w).expect("three points");
-            assert!(
-                (q - k(w)).norm() <= 1e-12 * k(w).norm(),
-                "{w}: {q} vs {}",
-                k(w)
-            );
-            let line = extrapolate(&hist, w);
-            let miss = (Complex64::new(4.0e-7, -3.0e-9) * (w - 1000.0) * (w - 900.0)).norm();
-            assert!(((line - k(w)).norm() - miss).abs() <= 1e-9 * k(w).norm());
-        }
-        assert_eq!(extrapolate_quadratic(&hist[2..], 1500.0), None);
-        let repeated = [at(700.0), at(900.0), at(900.0)];
-        assert_eq!(extrapolate_quadratic(&repeated, 1500.0), None);
     }
 }
