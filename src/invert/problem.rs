@@ -627,3 +627,48 @@ impl LeastSquares for Problem<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::{bench_network, MaterialMix};
+    use crate::invert::FitSettings;
+
+    /// The fast path keeps its ramp for what the ramp is for: on WM10145 of `bench --network 200
+    /// --network-seed 848701`, at a point a polish evaluated, the direct start at the lowest
+    /// frequency (421 rad/s) finds no root and the 8-point ramp answers, with decaying waves.
+    /// (Fit algorithm 10 runs the ramp only after such a failure.)
+    #[test]
+    fn the_ramp_answers_where_the_lowest_frequency_fails() {
+        let net = bench_network(200, 848701, MaterialMix::Default);
+        let seg = net
+            .iter()
+            .find(|s| s.id == "WM10145")
+            .expect("in the network");
+        let s = FitSettings::default();
+        let problem = Problem::new(&seg.data, Method::Default, s.model, s.contact_mode, &[]);
+        let x = [8.454412826549524, 0.34785634812278293, 0.19030904466416065];
+        let sys = problem.system_at(&x).expect("a system");
+        let omegas = &problem.omegas;
+        let direct = solve_curve(
+            &sys,
+            omegas,
+            Continuation {
+                ramp_points: 0,
+                tolerance: Tolerance::FAST,
+            },
+        );
+        let lowest = (0..omegas.len())
+            .min_by(|&a, &b| omegas[a].total_cmp(&omegas[b]))
+            .expect("measurements");
+        assert!(accept_roots(&sys, &direct[lowest..=lowest]).is_none());
+        let fast = predict_fast(&sys, omegas).expect("the ramp answers");
+        // The point lies at grazing: the ramp's root at the lowest frequency travels at the
+        // soil's c_P (488.4 m/s), where the reference path reports no root (P44).
+        let (c_p, _) = sys.soil.wave_speeds();
+        let c = omegas[lowest] / fast[lowest].re;
+        assert!((c / c_p - 1.0).abs() < 0.01, "{c} against c_P {c_p}");
+        assert!(fast.iter().all(|k| k.im < 0.0 && k.re > 0.0));
+        assert!(problem.reference_roots(&sys).is_none());
+    }
+}
