@@ -290,8 +290,11 @@ pub struct Problem<'a> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SolvePath {
     /// Every frequency by continuation from the lowest one, solved directly from its in-vacuo
-    /// root (no ramp); an 8-point ramp only if that fails. Fast; may track another root for
-    /// thin plastic pipes in stiff soil, so the fit checks its optimum by the reference path.
+    /// root (no ramp); an 8-point ramp only if that fails at the lowest frequency
+    /// ([`predict_fast`]); Muller, Newton's fallback, capped at
+    /// [`MULLER_FAST_MAX_ITER`](crate::physics::solver::MULLER_FAST_MAX_ITER) iterations.
+    /// Fast; may track another root for thin plastic pipes in stiff soil, so the fit checks
+    /// its optimum by the reference path.
     Fast,
     /// As `Fast`, but the ramp is also used whenever the lowest root is more than 10 % from
     /// its in-vacuo value ([`predict`]).
