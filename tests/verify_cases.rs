@@ -21,6 +21,13 @@ fn verify_one(seed: u64, id: &str) -> VerifyRow {
     r
 }
 
+/// [`verify_one`], and the default fit's χ² below `bound` (`before`: where it ended without the
+/// mechanism under test).
+fn verify_below(seed: u64, id: &str, bound: f64, before: &str) {
+    let r = verify_one(seed, id);
+    assert!(r.chi2 < bound, "{id}: χ² {} ({before})", r.chi2);
+}
+
 /// An MDPE segment whose best optimum lies in a narrow curved valley: the continued polish
 /// with a forward-difference Jacobian stopped (small step) at χ² 3.891, 0.126 above the
 /// exhaustive search's 3.765; with central differences it reaches the bottom.
@@ -34,12 +41,7 @@ fn the_continued_polish_reaches_the_bottom_of_a_narrow_curved_valley() {
 /// without the incompressible probe ended in the subsonic basin at χ² 2.08 (c_P 166 m/s).
 #[test]
 fn the_incompressible_probe_finds_a_basin_past_grazing() {
-    let r = verify_one(848484, "WM10101");
-    assert!(
-        r.chi2 < 1.5,
-        "χ² {} (the subsonic basin is at 2.08)",
-        r.chi2
-    );
+    verify_below(848484, "WM10101", 1.5, "the subsonic basin is at 2.08");
 }
 
 /// A cast-iron segment whose global optimum is the fluid-like end of its c_P valley (ν_m at
@@ -47,8 +49,7 @@ fn the_incompressible_probe_finds_a_basin_past_grazing() {
 /// the other end, ν_m = 0, at χ² 10.63.
 #[test]
 fn the_incompressible_probe_finds_the_fluid_like_end_of_the_cp_valley() {
-    let r = verify_one(848484, "WM10095");
-    assert!(r.chi2 < 10.5, "χ² {} (the ν_m = 0 end is at 10.63)", r.chi2);
+    verify_below(848484, "WM10095", 10.5, "the ν_m = 0 end is at 10.63");
 }
 
 /// A thin MDPE segment whose soil's c_P lies among the measured phase speeds (506–538 m/s):
@@ -57,8 +58,7 @@ fn the_incompressible_probe_finds_the_fluid_like_end_of_the_cp_valley() {
 /// best soil moved to the middle of each gap between the phase speeds.
 #[test]
 fn the_grazing_probe_crosses_a_cliff_in_c_p() {
-    let r = verify_one(848709, "WM10039");
-    assert!(r.chi2 < 9.3, "χ² {} (the piece below is at 9.50)", r.chi2);
+    verify_below(848709, "WM10039", 9.3, "the piece below is at 9.50");
 }
 
 /// An MDPE segment whose better piece lies across a cliff in ξ (the contact moves the model's
@@ -66,12 +66,7 @@ fn the_grazing_probe_crosses_a_cliff_in_c_p() {
 /// ξ = 1 has 4.00. The grazing probe's scan of ξ at the best soil finds it.
 #[test]
 fn the_grazing_probe_crosses_a_cliff_in_the_contact_coefficient() {
-    let r = verify_one(848613, "WM10148");
-    assert!(
-        r.chi2 < 4.5,
-        "χ² {} (the search's piece is at 5.58)",
-        r.chi2
-    );
+    verify_below(848613, "WM10148", 4.5, "the search's piece is at 5.58");
 }
 
 /// A PVC segment whose optimum sits on the edge of a grazing cliff (c_P = 493.5 m/s, next to
@@ -80,10 +75,5 @@ fn the_grazing_probe_crosses_a_cliff_in_the_contact_coefficient() {
 /// (c_P × (1 − 1e-4)) both paths give 5.02.
 #[test]
 fn an_optimum_on_a_cliff_edge_is_confirmed_just_off_the_cliff() {
-    let r = verify_one(848717, "WM10080");
-    assert!(
-        r.chi2 < 5.5,
-        "χ² {} (the next agreed optimum is at 9.11)",
-        r.chi2
-    );
+    verify_below(848717, "WM10080", 5.5, "the next agreed optimum is at 9.11");
 }

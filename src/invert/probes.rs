@@ -69,6 +69,7 @@ pub(super) fn incompressible_probe(
     let problem = pieces.problem;
     let (je, jn, jx) = (pieces.je, pieces.jn, pieces.jx);
     let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
+    // E_m in its search coordinate (log10 E_m, [`Param::SoilModulus`]).
     let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
         let mut x = best.x.clone();
         x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
@@ -91,9 +92,9 @@ pub(super) fn incompressible_probe(
     // grazing only (c_P above the measured phase speed).
     let (m, g) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
     let mut starts = vec![
-        candidate((g * 2.0 * (1.0 + nu_hi)).log10(), nu_hi, None),
+        candidate(e_spec.coordinate(g * 2.0 * (1.0 + nu_hi)), nu_hi, None),
         candidate(
-            (m * (1.0 + nu_hi) * (1.0 - 2.0 * nu_hi) / (1.0 - nu_hi)).log10(),
+            e_spec.coordinate(m * (1.0 + nu_hi) * (1.0 - 2.0 * nu_hi) / (1.0 - nu_hi)),
             nu_hi,
             None,
         ),

@@ -292,7 +292,7 @@ pub enum SolvePath {
     /// Every frequency by continuation from the lowest one, solved directly from its in-vacuo
     /// root (no ramp); an 8-point ramp only if that fails at the lowest frequency
     /// ([`predict_fast`]); Muller, Newton's fallback, capped at
-    /// [`MULLER_FAST_MAX_ITER`](crate::physics::solver::MULLER_FAST_MAX_ITER) iterations.
+    /// [`MULLER_FALLBACK_MAX_ITER`](crate::physics::solver::MULLER_FALLBACK_MAX_ITER) iterations.
     /// Fast; may track another root for thin plastic pipes in stiff soil, so the fit checks
     /// its optimum by the reference path.
     Fast,
@@ -566,7 +566,6 @@ pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
     // another root, and Muller's start from three points is the spec's, validated iteration.
     let tolerance = Tolerance {
         method: crate::physics::solver::RootMethod::Muller,
-        muller_max_iterations: crate::physics::solver::MULLER_MAX_ITER,
         ..Tolerance::FAST
     };
     let fast = Continuation {

@@ -14,15 +14,16 @@ use crate::special::abs;
 pub const MULLER_STEP_RTOL: f64 = 1e-13;
 /// Muller gives up after this many iterations (spec §5.5).
 pub const MULLER_MAX_ITER: u32 = 100;
-/// Muller's iterations on the inversion's fast path ([`Tolerance::FAST`]), where Muller is only
-/// the fallback after Newton failed. Over all paths, converged Mullers took 1–10 iterations in
-/// 99.8 % of cases (83,472 of 83,616 fitting `bench --network 200 --network-seed 848752
-/// --materials plastic-heavy`), while one that does not converge runs all its iterations, at
-/// each of up to [`MAX_STEP_HALVINGS`] halvings of the continuation's step: Mullers that did
-/// not converge took 11 % of that network's fitting time, 1 % with this cap and the fast
-/// path's ramp only after a failure at the lowest frequency (`invert::problem::predict_fast`).
-/// Every fit of that network and of seed 848751 (default mix) ends where it did with 100.
-pub const MULLER_FAST_MAX_ITER: u32 = 20;
+/// Muller's iterations when it is Newton's fallback ([`RootMethod::Newton`], the inversion's
+/// fast path); as the primary iteration (the spec's, [`RootMethod::Muller`]) it keeps
+/// [`MULLER_MAX_ITER`]. Over all paths, converged Mullers took 1–10 iterations in 99.8 % of
+/// cases (83,472 of 83,616 fitting `bench --network 200 --network-seed 848752 --materials
+/// plastic-heavy`), while one that does not converge runs all its iterations, at each of up to
+/// [`MAX_STEP_HALVINGS`] halvings of the continuation's step: Mullers that did not converge
+/// took 11 % of that network's fitting time, 1 % with this cap and the fast path's ramp only
+/// after a failure at the lowest frequency (`invert::problem::predict_fast`). Every fit of that
+/// network and of seed 848751 (default mix) ends where it did with 100.
+pub const MULLER_FALLBACK_MAX_ITER: u32 = 20;
 /// A root is accepted only if |F(k1)| ≤ this; F is O(1) (spec §5.5).
 pub const RESIDUAL_ATOL: f64 = 1e-10;
 /// Jump detector threshold on the correction ratio of eq. P43 (spec §5.5).
@@ -192,8 +193,6 @@ pub struct Tolerance {
     pub residual_stop: f64,
     /// The iteration: Muller's (P40) or Newton's with the analytic dF/dk1.
     pub method: RootMethod,
-    /// Muller iterations before the solve is declared not converged.
-    pub muller_max_iterations: u32,
 }
 
 /// The root iteration.
@@ -205,7 +204,8 @@ pub enum RootMethod {
     /// spec §5.3 allows as an alternative "if it passes the same tests". Stops when a step is
     /// below `step_rtol`, or as soon as the convergence is visibly quadratic (a step below
     /// √step_rtol that is under 1 % of the one before), since the next step would then be below
-    /// `step_rtol`. Falls back to Muller if it does not converge.
+    /// `step_rtol`. Falls back to Muller, for at most [`MULLER_FALLBACK_MAX_ITER`] iterations,
+    /// if it does not converge.
     Newton,
 }
 
@@ -215,7 +215,6 @@ impl Tolerance {
         step_rtol: MULLER_STEP_RTOL,
         residual_stop: 0.0,
         method: RootMethod::Muller,
-        muller_max_iterations: MULLER_MAX_ITER,
     };
     /// For the inversion: stop at |dx| ≤ 1e-10|x| or |F| ≤ 1e-12, far below any measurement
     /// noise yet smooth enough for finite-difference Jacobians with relative steps of 1e-6.
@@ -223,7 +222,6 @@ impl Tolerance {
         step_rtol: 1e-10,
         residual_stop: 1e-12,
         method: RootMethod::Newton,
-        muller_max_iterations: MULLER_FAST_MAX_ITER,
     };
 }
 
@@ -240,8 +238,14 @@ struct MullerOut {
     iterations: u32,
 }
 
-/// Muller's method on F from the guess g, eq. P40 [R16].
-fn muller(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
+/// Muller's method on F from the guess g, eq. P40 [R16], for at most `max_iterations`
+/// iterations.
+fn muller(
+    ev: &Evaluator,
+    g: Complex64,
+    tol: Tolerance,
+    max_iterations: u32,
+) -> Result<MullerOut, SolveError> {
     let fail = |r: f64| SolveError::NoConvergence {
         omega: ev.omega,
         residual: r,
@@ -256,7 +260,7 @@ fn muller(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
     let mut x1 = g * (1.0 + 1e-3) + Complex64::new(0.0, 1e-6 * g.norm());
     let mut x2 = g;
     let (mut f0, mut f1, mut f2) = (f(x0)?, f(x1)?, f(x2)?);
-    for it in 1..=tol.muller_max_iterations {
+    for it in 1..=max_iterations {
         let h1 = x1 - x0;
         let h2 = x2 - x1;
         let d1 = (f1 - f0) / h1;
@@ -345,8 +349,10 @@ fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
 /// The root from guess g by the chosen iteration (Newton falls back to Muller on failure).
 fn iterate(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
     match tol.method {
-        RootMethod::Muller => muller(ev, g, tol),
-        RootMethod::Newton => newton(ev, g, tol).or_else(|_| muller(ev, g, tol)),
+        RootMethod::Muller => muller(ev, g, tol, MULLER_MAX_ITER),
+        RootMethod::Newton => {
+            newton(ev, g, tol).or_else(|_| muller(ev, g, tol, MULLER_FALLBACK_MAX_ITER))
+        }
     }
 }
 
