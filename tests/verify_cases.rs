@@ -77,3 +77,29 @@ fn the_grazing_probe_crosses_a_cliff_in_the_contact_coefficient() {
 fn an_optimum_on_a_cliff_edge_is_confirmed_just_off_the_cliff() {
     verify_below(848717, "WM10080", 5.5, "the next agreed optimum is at 9.11");
 }
+
+/// An MDPE segment whose optimum lies on the edge of a cliff, at the end of a valley that runs
+/// along it: Levenberg–Marquardt's finite differences cross the cliff, and the polish stopped
+/// where it met the edge, χ² 8.74 at ξ = 0.77; along the edge the misfit falls to 8.38 at
+/// ξ = 0.69. The edge probe walks there by the downhill simplex.
+#[test]
+fn the_edge_probe_walks_along_a_cliff_edge() {
+    verify_below(
+        848782,
+        "WM10103",
+        8.5,
+        "the polish stopped on the edge at 8.74",
+    );
+}
+
+/// Another MDPE segment on a cliff's edge: the polish stopped at χ² 6.60, and the edge leads
+/// to 5.92.
+#[test]
+fn the_edge_probe_walks_along_a_cliff_edge_to_a_lower_contact() {
+    verify_below(
+        848784,
+        "WM10035",
+        6.0,
+        "the polish stopped on the edge at 6.60",
+    );
+}

@@ -117,8 +117,9 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// path gives up sooner (Muller's fallback capped at 20 iterations, the ramp only after a
 /// failure at the lowest frequency); a fit changes only where Muller needed more than 20
 /// iterations or the ramp would have answered after a failure higher up, which no fit of the
-/// bench networks did (issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 10;
+/// bench networks did (issue 10). Version 11: the edge probe, a walk along the edge of a
+/// cliff by the downhill simplex when the best optimum sits on one (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 11;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -431,7 +432,8 @@ fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
         .collect()
 }
 
-/// A probe: polished optima (with whether each polish was capped) from the best so far.
+/// A probe: polished (or walked) optima, with whether each polish was capped, from the best
+/// so far.
 type ProbeFn =
     fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
 
@@ -479,10 +481,11 @@ fn search(
                 .min_by(|a, b| a.cost.total_cmp(&b.cost))
                 .cloned()
         };
-        let probes: [ProbeFn; 3] = [
+        let probes: [ProbeFn; 4] = [
             |p, b, o| probes::contact_probe(p, b, o).into_iter().collect(),
             probes::incompressible_probe,
             probes::grazing_probe,
+            probes::edge_probe,
         ];
         for probe in probes {
             let Some(b) = best(&optima) else { break };

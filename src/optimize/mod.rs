@@ -2,7 +2,8 @@
 //!
 //! This module knows nothing about pipes: it minimises any [`Objective`] over a box
 //! ([`Bounds`]) by differential evolution ([`de`]), refines least-squares problems by a
-//! bounded Levenberg–Marquardt method ([`lm`]), and offers the small dense linear algebra
+//! bounded Levenberg–Marquardt method ([`lm`]), searches locally where the objective jumps by
+//! the downhill simplex ([`simplex`]), and offers the small dense linear algebra
 //! both need, including parameter covariances from a Jacobian ([`linalg`]).
 //!
 //! The shape follows the `argmin` crate: the problem is a trait the caller implements,
@@ -18,12 +19,14 @@
 pub mod de;
 pub mod linalg;
 pub mod lm;
+pub mod simplex;
 
 pub use de::{DeMethod, DeResult, DifferentialEvolution};
 pub use lm::{
     jacobian_fd, FiniteDifference, LeastSquares, LevenbergMarquardt, LmResult, LmStopReason,
     SumOfSquares,
 };
+pub use simplex::{NelderMead, SimplexResult, SimplexStopReason};
 
 use thiserror::Error;
 
