@@ -103,3 +103,20 @@ fn the_edge_probe_walks_along_a_cliff_edge_to_a_lower_contact() {
         "the polish stopped on the edge at 6.60",
     );
 }
+
+/// An MDPE segment whose better piece (c_P 529 m/s, among the measured phase speeds 527–545
+/// m/s) is narrow: a polish from the grazing probe's start inside it (c_P 527 m/s, ξ = 1)
+/// leaves it downhill, back to the search's χ² 4.11 at c_P 349 m/s; the downhill simplex
+/// from the same start stays in the piece and reaches 3.24.
+#[test]
+fn the_grazing_probe_walks_within_a_narrow_piece() {
+    verify_below(848607, "WM10110", 3.5, "the polish returned to 4.11");
+}
+
+/// An MDPE segment whose best piece lies next to a piece that only the grazing probe's first
+/// round finds: that round moves the best from χ² 10.54 to 10.34, and the second round, from
+/// the new best's soil moved between the phase speeds 541 and 543 m/s, reaches 4.79.
+#[test]
+fn a_second_grazing_round_starts_from_the_new_best() {
+    verify_below(848784, "WM10052", 5.0, "one round ends at 10.34");
+}
