@@ -118,7 +118,9 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// failure at the lowest frequency); a fit changes only where Muller needed more than 20
 /// iterations or the ramp would have answered after a failure higher up, which no fit of the
 /// bench networks did (issue 10). Version 11: the edge probe, a walk along the edge of a
-/// cliff by the downhill simplex when the best optimum sits on one (issue 10).
+/// cliff by the downhill simplex when the best optimum sits on one; the grazing probe walks
+/// from its starts too, and the grazing and edge probes run again from a best they moved
+/// (issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 11;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the

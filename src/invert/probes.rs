@@ -354,16 +354,17 @@ pub const EDGE_PROBE_DETECT_STEP: f64 = 1e-6;
 /// A change of χ² above this over [`EDGE_PROBE_DETECT_STEP`] is a jump: the best optimum is
 /// on an edge.
 pub const EDGE_PROBE_JUMP: f64 = 0.5;
-/// The edge probe's initial simplex: steps of this fraction of each parameter's range.
-/// Measured on `bench --verify 200` networks 848782, 848784 (default mix) and 848752
-/// (plastic-heavy), with a budget of 400: steps of 1e-3 leave WM10103 at 8.58 (8.38 with
-/// 1e-2), the other gains are the same.
+/// The edge probe's initial simplex: steps of this fraction of each parameter's range. From
+/// where fit algorithm 10 ended, with the budget and stall test below: on WM10103 (see
+/// [`edge_probe`]) steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and 8.42; on
+/// WM10035 steps of 3e-2 stall at the start, 6.60, and the others reach 5.92.
 pub const EDGE_PROBE_STEP: f64 = 1e-2;
 /// The edge probe's budget of evaluations.
 pub const EDGE_PROBE_EVALUATIONS: usize = 400;
 /// The edge probe stops when χ² fell by less than `.1` over the last `.0` evaluations: most
 /// best optima on an edge are where the edge's valley ends, and the walk gains nothing. With
-/// this test the probe adds 8–12 evaluations per fit on average (`bench --network 200`,
+/// this test the edge probe alone (before the grazing probe walked too) added 8–12
+/// evaluations per fit on average (`bench --network 200`,
 /// seeds 848782 and 848784, default mix, 848752 and 848792, plastic-heavy: 1,668 → 1,677,
 /// 1,658 → 1,666, 1,682 → 1,694, 1,667 → 1,679); stopping after 40 evaluations without
 /// gain leaves WM10103 (see [`edge_probe`]) at 8.70.
