@@ -308,10 +308,8 @@ pub(super) fn grazing_probe(
 ///
 /// The best optimum is on an edge when a step of [`EDGE_PROBE_DETECT_STEP`] (relative, as the
 /// polish's finite differences) along one parameter changes χ² by more than
-/// [`EDGE_PROBE_JUMP`]. The simplex starts with steps of [`EDGE_PROBE_STEP`] times each
-/// parameter's range and stops after [`EDGE_PROBE_EVALUATIONS`], or when χ² fell by less than
-/// [`EDGE_PROBE_STALL`]`.1` over the last [`EDGE_PROBE_STALL`]`.0` evaluations. Its optimum
-/// counts if it is better than the best.
+/// [`EDGE_PROBE_JUMP`]. The walk is [`walk`]'s; its optimum counts if it is better than the
+/// best.
 pub(super) fn edge_probe(
     pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
@@ -336,14 +334,15 @@ pub(super) fn edge_probe(
         .collect()
 }
 
-/// The downhill simplex from `x`, as the edge probe runs it.
+/// A walk by the downhill simplex from `x`, for the edge probe and the grazing probe's starts:
+/// initial steps of [`WALK_STEP`] times each parameter's range, at most
+/// [`WALK_EVALUATIONS`], stopping when χ² fell by less than [`WALK_STALL`]`.1` over the last
+/// [`WALK_STALL`]`.0` evaluations.
 fn walk(problem: &Problem<'_>, bounds: &Bounds, x: &[f64]) -> Option<Optimum> {
-    let steps: Vec<f64> = (0..x.len())
-        .map(|j| EDGE_PROBE_STEP * bounds.width(j))
-        .collect();
+    let steps: Vec<f64> = (0..x.len()).map(|j| WALK_STEP * bounds.width(j)).collect();
     let r = NelderMead::new()
-        .max_evaluations(EDGE_PROBE_EVALUATIONS)
-        .and_then(|s| s.stall(EDGE_PROBE_STALL.0, EDGE_PROBE_STALL.1))
+        .max_evaluations(WALK_EVALUATIONS)
+        .and_then(|s| s.stall(WALK_STALL.0, WALK_STALL.1))
         .and_then(|s| s.minimize(problem, bounds, x, &steps))
         .ok()?;
     Some(Optimum { x: r.x, cost: r.f })
@@ -354,21 +353,21 @@ pub const EDGE_PROBE_DETECT_STEP: f64 = 1e-6;
 /// A change of χ² above this over [`EDGE_PROBE_DETECT_STEP`] is a jump: the best optimum is
 /// on an edge.
 pub const EDGE_PROBE_JUMP: f64 = 0.5;
-/// The edge probe's initial simplex: steps of this fraction of each parameter's range. From
-/// where fit algorithm 10 ended, with the budget and stall test below: on WM10103 (see
-/// [`edge_probe`]) steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and 8.42; on
-/// WM10035 steps of 3e-2 stall at the start, 6.60, and the others reach 5.92.
-pub const EDGE_PROBE_STEP: f64 = 1e-2;
-/// The edge probe's budget of evaluations.
-pub const EDGE_PROBE_EVALUATIONS: usize = 400;
-/// The edge probe stops when χ² fell by less than `.1` over the last `.0` evaluations: most
+/// A walk's initial simplex: steps of this fraction of each parameter's range. Chosen for the
+/// edge probe, from where fit algorithm 10 ended, with the budget and stall test below: on
+/// WM10103 (see `edge_probe`) steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and
+/// 8.42; on WM10035 steps of 3e-2 stall at the start, 6.60, and the others reach 5.92.
+pub const WALK_STEP: f64 = 1e-2;
+/// A walk's budget of evaluations.
+pub const WALK_EVALUATIONS: usize = 400;
+/// A walk stops when χ² fell by less than `.1` over the last `.0` evaluations: most
 /// best optima on an edge are where the edge's valley ends, and the walk gains nothing. With
 /// this test the edge probe alone (before the grazing probe walked too) added 8–12
 /// evaluations per fit on average (`bench --network 200`,
 /// seeds 848782 and 848784, default mix, 848752 and 848792, plastic-heavy: 1,668 → 1,677,
 /// 1,658 → 1,666, 1,682 → 1,694, 1,667 → 1,679); stopping after 40 evaluations without
-/// gain leaves WM10103 (see [`edge_probe`]) at 8.70.
-pub const EDGE_PROBE_STALL: (usize, f64) = (80, 1e-4);
+/// gain leaves WM10103 (see `edge_probe`) at 8.70.
+pub const WALK_STALL: (usize, f64) = (80, 1e-4);
 
 /// The grazing probe's c_P just outside the range of the measured phase speeds, relative.
 pub const GRAZING_PROBE_MARGIN: f64 = 0.02;
