@@ -11,31 +11,31 @@ use super::problem::{Param, Problem};
 use super::uncertainty::{soil_from_speeds, soil_moduli, soil_speeds};
 use crate::optimize::{Bounds, NelderMead, Objective};
 
-/// The contact probe: when the best optimum lies on a face of the contact coefficient's range
-/// (ξ = 0 or ξ = 1), a polish from the same soil at the opposite face. ξ enters the soil's
+/// The contact probe: when an optimum of the DE runs lies on a face of the contact
+/// coefficient's range (ξ = 0 or ξ = 1), a polish from the same soil at the opposite face
+/// (the search runs it from each of them with its own soil). ξ enters the soil's
 /// stiffness as a weight (§4.10), so a misfit that falls towards one face from one side can
 /// have a deeper basin towards the other: on the paper's case (bench) both DE runs of seed 15
 /// end at ξ = 0 with f = 0.770, while the global optimum, at ξ = 0.72 and nearly the same
-/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`).
-/// Returns the probe's optimum, if its polish improved on its start, and whether that polish
-/// was capped.
+/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`,
+/// fit algorithm 7). Returns the probe's optimum and whether its polish was capped.
 pub(super) fn contact_probe(
     pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
-    best: &Optimum,
+    from: &Optimum,
 ) -> Option<(Optimum, bool)> {
     let problem = pieces.problem;
     let j = pieces.jx?;
     let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
     let on_face = CONTACT_FACE_RTOL * (hi - lo);
-    let opposite = if best.x[j] <= lo + on_face {
+    let opposite = if from.x[j] <= lo + on_face {
         hi
-    } else if best.x[j] >= hi - on_face {
+    } else if from.x[j] >= hi - on_face {
         lo
     } else {
         return None;
     };
-    let mut x = best.x.clone();
+    let mut x = from.x.clone();
     x[j] = opposite;
     polish(problem, &x, bounds, POLISH_ITERATIONS)
 }

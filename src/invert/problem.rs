@@ -1,14 +1,14 @@
 //! The inversion problem of one segment: the measurements, the parameter space and the
 //! objective (spec §7.1–7.2 for the paper's method; chi-square for the default).
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 
 use num_complex::Complex64;
 
 use crate::optimize::{Bounds, LeastSquares, Objective, OptimizeError};
 use crate::physics::effects::Effect;
 use crate::physics::inputs::{check_range, MAX_SOIL_POISSON};
-use crate::physics::solver::{solve_curve, Continuation, Tolerance};
+use crate::physics::solver::{refine_near, solve_curve, Continuation, Tolerance};
 use crate::physics::{ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System};
 
 /// One measured wavenumber (spec C6: k = k_re − i·att).
@@ -284,6 +284,9 @@ pub struct Problem<'a> {
     pub path: SolvePath,
     omegas: Vec<f64>,
     evaluations: Cell<usize>,
+    /// The last point [`Problem::predict`] solved on the fast path and its wavenumbers: the
+    /// start of the roots a finite-difference step away ([`LeastSquares::residuals_near`]).
+    last: RefCell<Option<(Vec<f64>, Vec<Complex64>)>>,
 }
 
 /// How the inversion solves the forward model at each candidate.
@@ -338,6 +341,7 @@ impl<'a> Problem<'a> {
             path: SolvePath::Fast,
             omegas: data.measurements.iter().map(|m| m.omega).collect(),
             evaluations: Cell::new(0),
+            last: RefCell::new(None),
         }
     }
 
@@ -354,6 +358,7 @@ impl<'a> Problem<'a> {
             path,
             omegas: self.omegas.clone(),
             evaluations: Cell::new(0),
+            last: RefCell::new(None),
         }
     }
 
@@ -467,7 +472,37 @@ impl<'a> Problem<'a> {
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation.
     pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
         self.evaluations.set(self.evaluations.get() + 1);
-        self.predict_system(&self.system_at(x)?)
+        let k = self.predict_system(&self.system_at(x)?)?;
+        if self.path == SolvePath::Fast {
+            let mut last = self.last.borrow_mut();
+            let (lx, lk) = last.get_or_insert_with(Default::default);
+            lx.clear();
+            lx.extend_from_slice(x);
+            lk.clear();
+            lk.extend_from_slice(&k);
+        }
+        Some(k)
+    }
+
+    /// The wavenumbers at `x`, a finite-difference step from `base`, when `base` is the last
+    /// point predicted on the fast path: each root one Newton step from the root there
+    /// ([`refine_near`]). `None` when `base` is another point or a root's step is not short
+    /// (the caller predicts on its path). Counts an evaluation when it answers.
+    fn predict_near(&self, base: &[f64], x: &[f64]) -> Option<Vec<Complex64>> {
+        let last = self.last.borrow();
+        let (lx, lk) = last.as_ref().filter(|(lx, _)| lx.as_slice() == base)?;
+        debug_assert_eq!(lx.len(), x.len());
+        let sys = self.system_at(x)?;
+        let mut k = Vec::with_capacity(lk.len());
+        for (&w, &g) in self.omegas.iter().zip(lk) {
+            let root = refine_near(&sys, w, g)?;
+            if root.flags.growing_wave && sys.contact_mode != ContactMode::Printed {
+                return None;
+            }
+            k.push(root.k1);
+        }
+        self.evaluations.set(self.evaluations.get() + 1);
+        Some(k)
     }
 
     /// Number of residuals (two per measurement).
@@ -628,6 +663,38 @@ impl LeastSquares for Problem<'_> {
             None => false,
         }
     }
+
+    /// Whether `base` is the last point predicted on the fast path. Only then: a problem
+    /// made afresh (the diagnosis's score tests take a Jacobian of one at a fit's optimum,
+    /// against residuals of their own) differences against the residuals it is given, as
+    /// before; recomputing them there on the fast path moved the score statistics of
+    /// `tests/diagnose_groups.rs` by 3–6 and raised a false alarm.
+    fn near_at(&self, base: &[f64]) -> bool {
+        self.last
+            .borrow()
+            .as_ref()
+            .is_some_and(|(lx, _)| lx.as_slice() == base)
+    }
+
+    /// The roots one Newton step from those at `base` when `base` is the last point predicted
+    /// on the fast path ([`Problem::predict_near`]), else [`Self::residuals`]. The point is
+    /// not remembered, so every step of a Jacobian starts from its centre.
+    fn residuals_near(&self, base: &[f64], x: &[f64], out: &mut [f64]) -> bool {
+        let k = match self.predict_near(base, x) {
+            Some(k) => Some(k),
+            None => {
+                self.evaluations.set(self.evaluations.get() + 1);
+                self.system_at(x).and_then(|sys| self.predict_system(&sys))
+            }
+        };
+        match k {
+            Some(k) => {
+                self.residuals_of(&k, out);
+                out.iter().all(|v| v.is_finite())
+            }
+            None => false,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -672,5 +739,78 @@ mod tests {
         assert!((c / c_p - 1.0).abs() < 0.01, "{c} against c_P {c_p}");
         assert!(fast.iter().all(|k| k.im < 0.0 && k.re > 0.0));
         assert!(problem.reference_roots(&sys).is_none());
+    }
+
+    /// The Jacobian of a fit's polish with each step's roots one Newton step from the centre's
+    /// ([`LeastSquares::residuals_near`]) agrees with central differences of the full fast
+    /// path over a 100 times longer step (accurate to about 1e-6 there) to 1e-5 of each
+    /// column, on every segment of a plastic-heavy bench network; with the centre not the last
+    /// point predicted, it is the full path's, bit for bit.
+    #[test]
+    fn a_jacobian_from_the_centre_roots_is_the_full_paths() {
+        use crate::optimize::{jacobian_fd, FiniteDifference};
+        /// The problem without its near residuals.
+        struct Full<'p>(&'p Problem<'p>);
+        impl LeastSquares for Full<'_> {
+            fn n_params(&self) -> usize {
+                self.0.n_params()
+            }
+            fn n_residuals(&self) -> usize {
+                LeastSquares::n_residuals(self.0)
+            }
+            fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
+                self.0.residuals(x, out)
+            }
+        }
+        let s = FitSettings::default();
+        let mut compared = 0;
+        for seg in bench_network(12, 848812, MaterialMix::PlasticHeavy) {
+            let problem = Problem::new(&seg.data, Method::Default, s.model, s.contact_mode, &[]);
+            let bounds = problem.bounds().expect("a box");
+            let x: Vec<f64> = (0..bounds.dim())
+                .map(|q| bounds.lower()[q] + 0.37 * bounds.width(q))
+                .collect();
+            let (n, m) = (x.len(), LeastSquares::n_residuals(&problem));
+            let mut r0 = vec![0.0; m];
+            if !problem.residuals(&x, &mut r0) {
+                continue;
+            }
+            let jacobian = |p: &dyn LeastSquares, fd: FiniteDifference, step: f64| {
+                let mut j = vec![0.0; m * n];
+                jacobian_fd(p, &x, &r0, Some(&bounds), fd, step, &mut j).expect("a Jacobian");
+                j
+            };
+            let before = problem.evaluations();
+            let near = jacobian(&problem, FiniteDifference::Forward, 1e-6);
+            assert!(problem.evaluations() > before);
+            let reference = jacobian(&Full(&problem), FiniteDifference::Central, 1e-4);
+            for q in 0..n {
+                let norm = (0..m)
+                    .map(|i| reference[i * n + q].powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                for i in 0..m {
+                    let (a, b) = (near[i * n + q], reference[i * n + q]);
+                    assert!(
+                        (a - b).abs() <= 1e-5 * norm,
+                        "{} column {q} row {i}: {a} against {b} (norm {norm})",
+                        seg.id
+                    );
+                }
+            }
+            // Another point predicted last: the Jacobian at x is the full path's.
+            let mut other = vec![0.0; m];
+            let y: Vec<f64> = (0..n)
+                .map(|q| bounds.lower()[q] + 0.5 * bounds.width(q))
+                .collect();
+            problem.residuals(&y, &mut other);
+            let fallback = jacobian(&problem, FiniteDifference::Forward, 1e-6);
+            assert_eq!(
+                fallback,
+                jacobian(&Full(&problem), FiniteDifference::Forward, 1e-6)
+            );
+            compared += 1;
+        }
+        assert!(compared >= 8, "{compared}");
     }
 }

@@ -23,6 +23,22 @@ pub trait LeastSquares {
     /// Returns `false` if the model cannot be evaluated at `x` (the contents of `out` are
     /// then ignored). Non-finite residuals are treated the same way.
     fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool;
+    /// [`residuals`](Self::residuals) at `x`, a finite-difference step from `base`: a problem
+    /// that can reuse its work at `base` (a root solved there, say) does so here. It must give
+    /// the residuals at `x` to the accuracy of `residuals`. By default, `residuals`.
+    fn residuals_near(&self, base: &[f64], x: &[f64], out: &mut [f64]) -> bool {
+        let _ = base;
+        self.residuals(x, out)
+    }
+    /// Whether [`residuals_near`](Self::residuals_near) answers next to `base` by another
+    /// scheme than `residuals` (default false). Then [`jacobian_fd`] takes its differences
+    /// against `residuals_near(base, base)`, not against the residuals it is given, so that
+    /// both ends of a difference carry the same scheme's error: where a derivative is small
+    /// (along a flat valley) the two schemes' errors, uncorrelated, would swamp it.
+    fn near_at(&self, base: &[f64]) -> bool {
+        let _ = base;
+        false
+    }
 }
 
 impl<T: LeastSquares + ?Sized> LeastSquares for &T {
@@ -34,6 +50,12 @@ impl<T: LeastSquares + ?Sized> LeastSquares for &T {
     }
     fn residuals(&self, x: &[f64], out: &mut [f64]) -> bool {
         (**self).residuals(x, out)
+    }
+    fn residuals_near(&self, base: &[f64], x: &[f64], out: &mut [f64]) -> bool {
+        (**self).residuals_near(base, x, out)
+    }
+    fn near_at(&self, base: &[f64]) -> bool {
+        (**self).near_at(base)
     }
 }
 
@@ -113,8 +135,9 @@ fn eval_ok<P: LeastSquares + ?Sized>(problem: &P, x: &[f64], out: &mut [f64]) ->
 /// `r0` must hold the residuals at `x`. With `bounds`, every evaluation point stays inside
 /// the box (the step is reversed or made one-sided near a bound). `rel_step` is the relative
 /// step (see [`FiniteDifference::default_rel_step`] and [`FD_FLOOR_FRACTION`]). If the
-/// residuals cannot be evaluated on one side, the other side is tried. Returns the number
-/// of residual evaluations used.
+/// residuals cannot be evaluated on one side, the other side is tried. The residuals at each
+/// step are [`LeastSquares::residuals_near`] `x`. Returns the number of residual evaluations
+/// used.
 pub fn jacobian_fd<P: LeastSquares + ?Sized>(
     problem: &P,
     x: &[f64],
@@ -139,6 +162,15 @@ pub fn jacobian_fd<P: LeastSquares + ?Sized>(
     let mut xp = x.to_vec();
     let mut r1 = vec![0.0; m];
     let mut r2 = vec![0.0; m];
+    let mut centre = Vec::new();
+    if problem.near_at(x) {
+        centre.resize(m, 0.0);
+        evals += 1;
+        if !(problem.residuals_near(x, x, &mut centre) && centre.iter().all(|v| v.is_finite())) {
+            centre.clear();
+        }
+    }
+    let r0 = if centre.is_empty() { r0 } else { &centre };
     let inside = |q: usize, v: f64| bounds.is_none_or(|b| b.lower()[q] <= v && v <= b.upper()[q]);
     for q in 0..n {
         let floor = bounds.map_or(1.0, |b| FD_FLOOR_FRACTION * b.width(q));
@@ -151,7 +183,7 @@ pub fn jacobian_fd<P: LeastSquares + ?Sized>(
             }
             xp[q] = v;
             *evals += 1;
-            let ok = eval_ok(problem, &xp, out);
+            let ok = problem.residuals_near(x, &xp, out) && out.iter().all(|v| v.is_finite());
             xp[q] = x[q];
             ok.then_some(v - x[q])
         };
@@ -256,7 +288,8 @@ pub struct LmResult {
     /// Residuals at `x`.
     pub residuals: Vec<f64>,
     /// Finite-difference Jacobian at `x`, row-major `n_residuals × n_params` (empty if it
-    /// could not be evaluated, i.e. stop reason [`LmStopReason::JacobianFailed`]).
+    /// could not be evaluated, i.e. stop reason [`LmStopReason::JacobianFailed`], or if it was
+    /// not asked for, [`LevenbergMarquardt::final_jacobian`]).
     pub jacobian: Vec<f64>,
     /// Iterations (Jacobian evaluations along the path) performed.
     pub iterations: usize,
@@ -276,6 +309,7 @@ pub struct LevenbergMarquardt {
     scheme: FiniteDifference,
     rel_step: Option<f64>,
     initial_damping: f64,
+    final_jacobian: bool,
 }
 
 impl Default for LevenbergMarquardt {
@@ -288,6 +322,7 @@ impl Default for LevenbergMarquardt {
             scheme: FiniteDifference::Forward,
             rel_step: None,
             initial_damping: LM_INITIAL_DAMPING,
+            final_jacobian: true,
         }
     }
 }
@@ -357,6 +392,14 @@ impl LevenbergMarquardt {
         }
         self.initial_damping = l;
         Ok(self)
+    }
+
+    /// Whether the result carries the Jacobian at its `x` (default true). The last accepted
+    /// step leaves the Jacobian of the point before it, so a run whose caller only wants the
+    /// minimum saves the `n` (forward) or `2n` (central) evaluations of a fresh one.
+    pub fn final_jacobian(mut self, v: bool) -> Self {
+        self.final_jacobian = v;
+        self
     }
 
     /// Minimises `Σ r_i(x)²` from `x0`, inside `bounds` if given (`x0` is projected onto the
@@ -504,7 +547,9 @@ impl LevenbergMarquardt {
             }
         };
 
-        if !jac_current && stop_reason != LmStopReason::JacobianFailed {
+        if !self.final_jacobian {
+            jac.clear();
+        } else if !jac_current && stop_reason != LmStopReason::JacobianFailed {
             match jacobian_fd(problem, &x, &r, bounds, self.scheme, rel_step, &mut jac) {
                 Ok(e) => evaluations += e,
                 Err(_) => jac.clear(),
@@ -613,6 +658,26 @@ mod tests {
                 assert!((a - e).abs() < 1e-5 * (1.0 + e.abs()));
             }
         }
+    }
+
+    #[test]
+    fn a_run_without_the_final_jacobian_ends_at_the_same_point_for_fewer_evaluations() {
+        let p = ExpFit::new([2.5, 0.7, 0.3]);
+        // Three iterations: the run ends at its cap, on an accepted step.
+        let lm = LevenbergMarquardt::new().max_iterations(3).unwrap();
+        let with = lm.clone().minimize(&p, &[1.0, 0.2, 0.0], None).unwrap();
+        let without = lm
+            .final_jacobian(false)
+            .minimize(&p, &[1.0, 0.2, 0.0], None)
+            .unwrap();
+        assert_eq!(with.stop_reason, LmStopReason::MaxIterations);
+        assert_eq!(with.x, without.x);
+        assert_eq!(with.cost, without.cost);
+        assert_eq!(with.iterations, without.iterations);
+        assert_eq!(with.jacobian.len(), 21 * 3);
+        assert!(without.jacobian.is_empty());
+        // The full result paid for a fresh Jacobian at its end (3 forward differences).
+        assert_eq!(with.evaluations, without.evaluations + 3);
     }
 
     #[test]
