@@ -246,6 +246,19 @@ fn migrations_create_every_table_and_the_view_and_set_user_version() {
     assert_eq!(mode, "wal");
 }
 
+/// A database pipewave opens commits without waiting for the disk (`synchronous = NORMAL`,
+/// 1; SQLite's default is FULL, 2), which WAL keeps consistent through a power cut.
+#[test]
+fn the_database_commits_without_an_fsync_per_transaction() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = pipewave::db::Database::open(dir.path().join("p.sqlite")).unwrap();
+    let level: i64 = db
+        .conn()
+        .query_row("PRAGMA synchronous", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(level, 1);
+}
+
 /// Header and rows of a small valid segments file; bad cases append or replace lines.
 const SEGS_HEAD: &str =
     "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,geometry_wkt,srid";
