@@ -241,7 +241,8 @@ pub struct FitResult {
     pub flags: Vec<Flag>,
     /// Notes: what the data leave undetermined.
     pub notes: Vec<Flag>,
-    /// Forward-model evaluations used (search + polish + uncertainty).
+    /// Forward-model evaluations used (search + polish + uncertainty); a Jacobian step solved
+    /// one Newton step from its centre's roots, and the centre's re-solve, count one each.
     pub evaluations: usize,
     /// The fitted system, `None` when the fit failed.
     pub system: Option<System>,
