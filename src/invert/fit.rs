@@ -546,33 +546,27 @@ fn search(
     // central differences below instead: on WM10121 of `bench --verify 200 --network-seed
     // 848607` (ductile iron) 30 more forward iterations cross onto a grazing cliff (χ² 5.38 on
     // the search path, 19.6 on the reference path), and the answer falls back to 5.66 where
-    // the central polish reaches 5.42.
-    if let Some(i) = best.filter(|&i| settings.method == Method::Default && !capped[i]) {
-        if let Some((o, c)) = polish_with(
-            problem,
-            &optima[i].x,
-            bounds,
-            POLISH_ITERATIONS,
-            FiniteDifference::Forward,
-            Depth::Answer,
-        ) {
+    // the central polish ends within 0.1 of the exhaustive search's 5.42.
+    if let Some(i) = best {
+        for (iterations, fd) in [
+            (POLISH_ITERATIONS, FiniteDifference::Forward),
+            (POLISH_MORE_ITERATIONS, FiniteDifference::Central),
+        ] {
+            let go = match fd {
+                FiniteDifference::Forward => settings.method == Method::Default && !capped[i],
+                FiniteDifference::Central => capped[i],
+            };
+            if !go {
+                continue;
+            }
+            let Some((o, c)) =
+                polish_with(problem, &optima[i].x, bounds, iterations, fd, Depth::Answer)
+            else {
+                continue;
+            };
             if o.cost < optima[i].cost {
                 optima[i] = o;
                 capped[i] = c;
-            }
-        }
-    }
-    if let Some(i) = best.filter(|&i| capped[i]) {
-        if let Some((o, _)) = polish_with(
-            problem,
-            &optima[i].x,
-            bounds,
-            POLISH_MORE_ITERATIONS,
-            FiniteDifference::Central,
-            Depth::Answer,
-        ) {
-            if o.cost < optima[i].cost {
-                optima[i] = o;
             }
         }
     }
