@@ -424,7 +424,7 @@ pub fn solve_from_guess_tol(
 pub const NEAR_STEP_RTOL: f64 = 1e-5;
 
 /// The root at `omega` next to `guess`, the root of a system a finite-difference step away (a
-/// Jacobian's neighbour): one Newton step, accepted when it moves the root by at most
+/// Jacobian's neighbour): one Newton step on the residual F(k1) of eq. P32, accepted when it moves the root by at most
 /// [`NEAR_STEP_RTOL`] relative and leaves it classified as [`solve_from_guess`] would. `None`
 /// otherwise: across a cliff of the misfit (a branch cut of q_P or q_S moving past the root,
 /// where F jumps) the step is long, and the caller solves on its usual path.
