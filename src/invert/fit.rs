@@ -81,7 +81,8 @@ pub const DEFAULT_RESTARTS: usize = 2;
 /// of 200); with 20 members single runs found it in only 51 of 80 (see the issue 3 note).
 /// Since the probes look where the DE runs do not, fit algorithm 12 spends 160: the three
 /// bench cases still reach the global optimum from 100 of 100 seeds (`examples/budget_scan
-/// 160 2 100`; with 130, 99 of 100 on the paper's case), and on twenty verify networks (seeds
+/// 160 2 100`, and with 150; with the contact probe from the best optimum alone, 160 gave 99
+/// of 100 on the paper's case, see `search`), and on twenty verify networks (seeds
 /// 848484–848804 of the README and 848812, 848821–848823 plastic-heavy) the same five segments
 /// end more than 0.1 above the exhaustive χ² as with 170. With 150 one more does: on WM10018
 /// of seed 848782 (MDPE) both DE runs end near χ² 120 at ξ ≈ 1, and no probe reaches the
@@ -126,9 +127,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// bench networks did (issue 10). Version 11: the edge probe, a walk along the edge of a
 /// cliff by the downhill simplex when the best optimum sits on one; the grazing probe walks
 /// from its starts too, and the grazing and edge probes run again from a best they moved
-/// (issue 10). Version 12: the candidates' polishes stop at a looser tolerance and only the
-/// best is polished to the bottom, and the DE runs spend 160 evaluations per parameter, not
-/// 170 (issue 10).
+/// (issue 10). Version 12: the roots of a Jacobian's steps one Newton step from its centre's
+/// (`LeastSquares::residuals_near`), the candidates' polishes stopped at a looser tolerance
+/// and only the best polished to the bottom, the contact probe from every DE optimum with its
+/// own soil, and the DE runs at 160 evaluations per parameter, not 170 (issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 12;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
@@ -1199,7 +1201,7 @@ enum Depth {
 
 /// Relative tolerance (LM's `ftol` and `xtol`) of the polish of a candidate of the search,
 /// where only the ranking of the optima matters; the best is then polished to the bottom
-/// ([`Depth::Answer`]). A candidate's polish spent its last iterations gaining less than this.
+/// (`Depth::Answer`). A candidate's polish spent its last iterations gaining less than this.
 /// On `bench --network 200 --network-seed 848812 --materials plastic-heavy` (fit algorithm
 /// 11's budget) the fits took 1,723 evaluations each with every polish to LM's own
 /// tolerances, 1,615 with this one and 1,585 with 1e-6. On the verify networks of seeds
