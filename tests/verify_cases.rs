@@ -5,9 +5,14 @@
 
 use pipewave::bench::{bench_network, verify, MaterialMix, VerifyRow, VERIFY_DCHI2_MAX};
 
-/// `bench --verify` on segment `id` of the 200-segment network of `seed`.
+/// `bench --verify` on segment `id` of the 200-segment network of `seed` (default mix).
 fn verify_one(seed: u64, id: &str) -> VerifyRow {
-    let net = bench_network(200, seed, MaterialMix::Default);
+    verify_one_of(seed, MaterialMix::Default, id)
+}
+
+/// [`verify_one`] on a network of the given material mix.
+fn verify_one_of(seed: u64, mix: MaterialMix, id: &str) -> VerifyRow {
+    let net = bench_network(200, seed, mix);
     let seg = net.iter().find(|s| s.id == id).expect("segment");
     let mut rows = verify(std::slice::from_ref(seg), 1);
     assert_eq!(rows.len(), 1);
@@ -119,4 +124,18 @@ fn the_grazing_probe_walks_within_a_narrow_piece() {
 #[test]
 fn a_second_grazing_round_starts_from_the_new_best() {
     verify_below(848784, "WM10052", 5.0, "one round ends at 10.34");
+}
+
+/// A PVC segment whose optimum (χ² 14.84, c_P 491.7 m/s) lies where the reference path takes
+/// another root at the highest frequency than the search path (phase speed 483.5 against
+/// 488.1 m/s) and rates it 20.85: the two paths disagree up to c_P × (1 − 1e-3), so the answer
+/// fell to an optimum at ξ = 0.95 with χ² 20.70. At c_P × (1 − 3e-3) both give 14.88.
+#[test]
+fn an_optimum_is_confirmed_further_off_a_cliff_where_the_reference_path_has_another_root() {
+    let r = verify_one_of(848860, MaterialMix::PlasticHeavy, "WM10273");
+    assert!(
+        r.chi2 < 15.0,
+        "WM10273: χ² {} (the answer fell to 20.70)",
+        r.chi2
+    );
 }
