@@ -131,6 +131,12 @@ pub trait Objective {
     fn dim(&self) -> usize;
     /// Objective value at `x` (lower is better; non-finite = worst).
     fn value(&self, x: &[f64]) -> f64;
+    /// Objective value at `x` for a population search's selection, which only ranks points:
+    /// an objective may compute it to a lower precision than [`Objective::value`], far below
+    /// any difference the search acts on. Default: [`Objective::value`].
+    fn search_value(&self, x: &[f64]) -> f64 {
+        self.value(x)
+    }
 }
 
 impl<T: Objective + ?Sized> Objective for &T {
@@ -139,6 +145,9 @@ impl<T: Objective + ?Sized> Objective for &T {
     }
     fn value(&self, x: &[f64]) -> f64 {
         (**self).value(x)
+    }
+    fn search_value(&self, x: &[f64]) -> f64 {
+        (**self).search_value(x)
     }
 }
 

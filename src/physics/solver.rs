@@ -223,6 +223,16 @@ impl Tolerance {
         residual_stop: 1e-12,
         method: RootMethod::Newton,
     };
+    /// For a global search's selection (the DE runs), which only ranks points: stop at
+    /// |dx| ≤ 1e-6|x|, or at a step below 1e-3 under 1 % of the one before. Newton's
+    /// convergence being quadratic, the root is then within about 1e-6 relative (the next step),
+    /// and the misfit far closer than the search's spread test ([`Tolerance::FAST`] takes one
+    /// step more, to machine precision, which finite-difference Jacobians need).
+    pub const SEARCH: Tolerance = Tolerance {
+        step_rtol: 1e-6,
+        residual_stop: 1e-12,
+        method: RootMethod::Newton,
+    };
 }
 
 impl Default for Tolerance {

@@ -428,7 +428,10 @@ impl DifferentialEvolution {
             DeMethod::Shade => shade::initialise(&mut pop, bounds, rng),
         }
         for i in 0..np {
-            pop.f[i] = run.eval(pop.row(i));
+            pop.f[i] = match self.method {
+                DeMethod::Paper => run.eval(pop.row(i)),
+                DeMethod::Shade => run.eval_search(pop.row(i)),
+            };
         }
         let mut state = shade::State::new(self, np);
 
@@ -554,6 +557,12 @@ impl<O: Objective + ?Sized> Run<'_, O> {
     fn eval(&mut self, x: &[f64]) -> f64 {
         self.evaluations += 1;
         sanitize(self.objective.value(x))
+    }
+
+    /// [`Run::eval`] by [`Objective::search_value`] (SHADE's evaluations).
+    fn eval_search(&mut self, x: &[f64]) -> f64 {
+        self.evaluations += 1;
+        sanitize(self.objective.search_value(x))
     }
 
     fn exhausted(&self) -> bool {

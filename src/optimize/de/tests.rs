@@ -306,6 +306,56 @@ fn evaluation_budget_is_never_exceeded() {
     assert_eq!(r.population.len(), 75);
 }
 
+/// Counts the evaluations by [`Objective::value`] and by [`Objective::search_value`], whose
+/// values differ (a lower precision's error, as the inversion's problem).
+struct TwoPrecisions {
+    values: Cell<usize>,
+    search_values: Cell<usize>,
+}
+
+impl Objective for TwoPrecisions {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn value(&self, x: &[f64]) -> f64 {
+        self.values.set(self.values.get() + 1);
+        sphere(x)
+    }
+    fn search_value(&self, x: &[f64]) -> f64 {
+        self.search_values.set(self.search_values.get() + 1);
+        sphere(x) * (1.0 + 1e-7)
+    }
+}
+
+/// SHADE ranks its population by search values only, and its answer carries one; the paper's
+/// DE (P51–P59) evaluates the objective as written.
+#[test]
+fn shade_ranks_by_search_values_and_the_paper_by_values() {
+    let b = Bounds::uniform(2, -5.0, 5.0).unwrap();
+    for method in [DeMethod::Shade, DeMethod::Paper] {
+        let obj = TwoPrecisions {
+            values: Cell::new(0),
+            search_values: Cell::new(0),
+        };
+        let r = DifferentialEvolution::new(method)
+            .max_evaluations(400)
+            .unwrap()
+            .minimize(&obj, &b, &mut rng(3))
+            .unwrap();
+        let (values, searched) = (obj.values.get(), obj.search_values.get());
+        match method {
+            DeMethod::Shade => {
+                assert_eq!((values, searched), (0, r.evaluations));
+                assert_eq!(r.f, sphere(&r.x) * (1.0 + 1e-7));
+            }
+            DeMethod::Paper => {
+                assert_eq!((values, searched), (r.evaluations, 0));
+                assert_eq!(r.f, sphere(&r.x));
+            }
+        }
+    }
+}
+
 #[test]
 fn shade_converges_on_spread_with_nonzero_minimum() {
     // Minimum value 2: the relative tolerance decides; the result's spread obeys it.
