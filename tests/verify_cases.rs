@@ -139,3 +139,12 @@ fn an_optimum_is_confirmed_further_off_a_cliff_where_the_reference_path_has_anot
         r.chi2
     );
 }
+
+/// A ductile-iron segment whose search ended at the fluid-like end of its valley of constant
+/// c_P (ν_m = 0.499, c_S = 8 m/s, χ² 13.43, where the incompressible probe leads), while the
+/// valley's other end (ν_m = 0, c_S 132 m/s) has 13.21. The valley-end probe polishes from
+/// the same c_P at ν_m = 0.
+#[test]
+fn the_valley_end_probe_reaches_the_other_end_of_a_c_p_valley() {
+    verify_below(848873, "WM10013", 13.3, "the fluid-like end is at 13.43");
+}

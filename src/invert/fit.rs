@@ -132,8 +132,9 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// and only the best polished to the bottom, the contact probe from every DE optimum with its
 /// own soil, and the DE runs at 160 evaluations per parameter, not 170 (issue 10). Version
 /// 13: an optimum the reference path has roots at but rates otherwise is confirmed up to 1 %
-/// off its cliff in c_P, not 0.1 % (`probes::FURTHER_OFF_CLIFF_STEPS`), and the DE runs rank
-/// their points by misfits with roots to 1e-6 (`Tolerance::SEARCH`; issue 10).
+/// off its cliff in c_P, not 0.1 % (`probes::FURTHER_OFF_CLIFF_STEPS`), the valley-end probe
+/// (`probes::valley_end_probe`), and the DE runs rank their points by misfits with roots to
+/// 1e-6 (`Tolerance::SEARCH`; issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 13;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
@@ -528,6 +529,7 @@ fn search(
             }
         };
         run_probe(probes::incompressible_probe, &mut optima);
+        run_probe(probes::valley_end_probe, &mut optima);
         // The grazing and edge probes again from a best they moved: its pieces are others.
         for _ in 0..GRAZING_ROUNDS {
             let before = best(&optima).map_or(f64::INFINITY, |o| o.cost);

@@ -11,8 +11,8 @@
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
 //! `fit` searches and builds the result once; `probes` looks for the basins a search leaves
-//! unvisited (across a grazing cliff, towards ν_m → ½, at the other face of ξ, along the edge
-//! of a cliff); `uncertainty` and `flags` are pure functions of
+//! unvisited (across a grazing cliff, towards ν_m → ½ and back along a valley of constant c_P,
+//! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure functions of
 //! what the search found.
 pub mod fit;
 pub mod flags;

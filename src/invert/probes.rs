@@ -1,6 +1,6 @@
 //! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
-//! candidates built from the best optimum so far and polished (the contact, incompressible and
-//! grazing probes), the walk along a cliff's edge from a best optimum on one (the edge probe),
+//! candidates built from the best optimum so far and polished (the contact, incompressible,
+//! valley-end and grazing probes), the walk along a cliff's edge from a best optimum on one (the edge probe),
 //! and the step off a grazing cliff that lets the reference path confirm an optimum on its
 //! edge.
 
@@ -27,7 +27,7 @@ pub(super) fn contact_probe(
     let problem = pieces.problem;
     let j = pieces.jx?;
     let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
-    let on_face = CONTACT_FACE_RTOL * (hi - lo);
+    let on_face = ON_BOUND_RTOL * (hi - lo);
     let opposite = if from.x[j] <= lo + on_face {
         hi
     } else if from.x[j] >= hi - on_face {
@@ -131,6 +131,37 @@ pub(super) fn incompressible_probe(
         .into_iter()
         .flatten()
         .filter_map(|(_, x)| polish(problem, &x, bounds, POLISH_ITERATIONS))
+        .collect()
+}
+
+/// The valley-end probe: when the best optimum lies at the upper bound of ν_m (the fluid-like
+/// end of a valley of constant c_P, c_S → 0, which the incompressible probe often finds), a
+/// polish from the valley's other end, the same c_P at ν_m's lower bound (c_S = c_P/√2 at
+/// ν_m = 0). The data of a metal pipe fix c_P and barely c_S, so χ² changes little along the
+/// valley, and a polish from one end does not cross it: on `bench --verify 200 --network-seed
+/// 848873` WM10013 (ductile iron) ended at χ² 13.43 with ν_m = 0.499 and c_S = 8 m/s, while the
+/// other end has 13.21 (ν_m = 0, c_S 132 m/s, the exhaustive search's); on plastic-heavy seed
+/// 848858 WM10038 (ductile iron), 3.55 against 3.42.
+pub(super) fn valley_end_probe(
+    pieces: &Pieces<'_, '_>,
+    bounds: &Bounds,
+    best: &Optimum,
+) -> Vec<(Optimum, bool)> {
+    let problem = pieces.problem;
+    let (je, jn) = (pieces.je, pieces.jn);
+    let (e_spec, n_spec) = (&problem.specs[je], &problem.specs[jn]);
+    if best.x[jn] < n_spec.upper - ON_BOUND_RTOL * (n_spec.upper - n_spec.lower) {
+        return Vec::new();
+    }
+    // The best soil's c_P at the lower bound of ν_m: its P-wave modulus M kept (P63).
+    let (m, _) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
+    let nu = n_spec.lower;
+    let e = m * (1.0 + nu) * (1.0 - 2.0 * nu) / (1.0 - nu);
+    let mut x = best.x.clone();
+    x[je] = e_spec.coordinate(e).clamp(e_spec.lower, e_spec.upper);
+    x[jn] = nu;
+    polish(problem, &x, bounds, POLISH_ITERATIONS)
+        .into_iter()
         .collect()
 }
 
@@ -391,8 +422,9 @@ pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
 /// log10 E_m (Pa) of the incompressible probe's grid: half decades over the moduli of soils.
 pub const INCOMPRESSIBLE_PROBE_LOG10_E: [f64; 8] = [6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5];
 
-/// An optimum whose ξ is within this fraction of its range from a bound lies on that face.
-pub const CONTACT_FACE_RTOL: f64 = 1e-9;
+/// An optimum whose coordinate is within this fraction of its range from a bound lies on that
+/// bound (ξ's for the contact probe, ν_m's for the valley-end probe).
+pub const ON_BOUND_RTOL: f64 = 1e-9;
 
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
 pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
