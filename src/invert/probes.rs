@@ -8,7 +8,7 @@ use num_complex::Complex64;
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem};
-use super::uncertainty::{soil_from_speeds, soil_moduli, soil_speeds};
+use super::uncertainty::{soil_from_speeds, soil_moduli, soil_speeds, youngs_from_p_wave_modulus};
 use crate::optimize::{Bounds, NelderMead, Objective};
 
 /// The contact probe: when an optimum of the DE runs lies on a face of the contact
@@ -95,7 +95,7 @@ pub(super) fn incompressible_probe(
     let mut starts = vec![
         candidate(e_spec.coordinate(g * 2.0 * (1.0 + nu_hi)), nu_hi, None),
         candidate(
-            e_spec.coordinate(m * (1.0 + nu_hi) * (1.0 - 2.0 * nu_hi) / (1.0 - nu_hi)),
+            e_spec.coordinate(youngs_from_p_wave_modulus(m, nu_hi)),
             nu_hi,
             None,
         ),
@@ -156,7 +156,7 @@ pub(super) fn valley_end_probe(
     // The best soil's c_P at the lower bound of ν_m: its P-wave modulus M kept (P63).
     let (m, _) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
     let nu = n_spec.lower;
-    let e = m * (1.0 + nu) * (1.0 - 2.0 * nu) / (1.0 - nu);
+    let e = youngs_from_p_wave_modulus(m, nu);
     let mut x = best.x.clone();
     x[je] = e_spec.coordinate(e).clamp(e_spec.lower, e_spec.upper);
     x[jn] = nu;

@@ -36,6 +36,12 @@ pub fn soil_moduli(e: f64, nu: f64) -> (f64, f64) {
     (m, g)
 }
 
+/// E_m (Pa) of the soil with P-wave modulus M (Pa) at Poisson's ratio ν_m, the same c_P at
+/// another ν_m: the inverse of [`soil_moduli`]'s M (P63).
+pub fn youngs_from_p_wave_modulus(m: f64, nu: f64) -> f64 {
+    m * (1.0 + nu) * (1.0 - 2.0 * nu) / (1.0 - nu)
+}
+
 /// The soil's compressional and shear wave speeds c_P = √(M/ρ_m), c_S = √(G/ρ_m), m/s (P63,
 /// P64).
 pub fn soil_speeds(e: f64, nu: f64, rho: f64) -> (f64, f64) {
@@ -619,6 +625,17 @@ mod tests {
         assert!((e / 2e7 - 1.0).abs() < 1e-12 && (nu - 0.3).abs() < 1e-12);
         // c_S ≥ c_P·√(3/4) has no soil (ν ≤ −1).
         assert!(soil_from_speeds(100.0, 90.0, 1800.0).is_none());
+        // The same c_P at another ν_m (the valley-end and incompressible probes' moves): at
+        // ν = 0, E = M = 2.6923e7; at ν = 0.49, E = M·1.49·0.02/0.51.
+        let m = 2e7 * 0.7 / (1.3 * 0.4);
+        assert!((youngs_from_p_wave_modulus(m, 0.0) / m - 1.0).abs() < 1e-15);
+        for nu in [0.0, 0.2, 0.49, 0.499] {
+            let e = youngs_from_p_wave_modulus(m, nu);
+            assert!(
+                (soil_speeds(e, nu, 1800.0).0 / cp - 1.0).abs() < 1e-12,
+                "{nu}"
+            );
+        }
     }
 
     #[test]

@@ -785,7 +785,7 @@ mod tests {
         // Same c_P, different (E, ν): move along c_P = const to ν = 0.05.
         let m_mod = 1900.0 * cp * cp;
         let nu_far: f64 = 0.05;
-        let e_far = m_mod * (1.0 + nu_far) * (1.0 - 2.0 * nu_far) / (1.0 - nu_far);
+        let e_far = crate::invert::uncertainty::youngs_from_p_wave_modulus(m_mod, nu_far);
         far.single = (e_far.log10(), nu_far);
         let (_, cs_far) = soil_speeds(e_far, nu_far, 1900.0);
         far.u_hat[1] = cs_far.ln();
