@@ -12,8 +12,8 @@
 //!
 //! `fit` searches and builds the result once; `probes` looks for the basins a search leaves
 //! unvisited (across a grazing cliff, towards ν_m → ½ and back along a valley of constant c_P,
-//! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure functions of
-//! what the search found.
+//! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure
+//! functions of what the search found.
 pub mod fit;
 pub mod flags;
 pub mod probes;

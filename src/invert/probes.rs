@@ -1,8 +1,8 @@
 //! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
 //! candidates built from the best optimum so far and polished (the contact, incompressible,
-//! valley-end and grazing probes), the walk along a cliff's edge from a best optimum on one (the edge probe),
-//! and the step off a grazing cliff that lets the reference path confirm an optimum on its
-//! edge.
+//! valley-end and grazing probes), the walk along a cliff's edge from a best optimum on one
+//! (the edge probe), and the step off a grazing cliff that lets the reference path confirm an
+//! optimum on its edge.
 
 use num_complex::Complex64;
 
