@@ -649,8 +649,8 @@ impl Objective for Problem<'_> {
         self.value_of(self.predict(x))
     }
 
-    /// On the fast path, the misfit with roots to [`Tolerance::SEARCH`] (not remembered for
-    /// [`Problem::predict_near`]); otherwise [`Objective::value`]. Counts one evaluation.
+    /// On the fast path, the misfit with roots to [`Tolerance::SEARCH`] (not remembered as the
+    /// centre of a Jacobian's steps); otherwise [`Objective::value`]. Counts one evaluation.
     fn search_value(&self, x: &[f64]) -> f64 {
         if self.path != SolvePath::Fast {
             return self.value(x);
