@@ -421,6 +421,8 @@ impl DifferentialEvolution {
             objective,
             evaluations: 0,
             max_evaluations: self.max_evaluations.unwrap_or(usize::MAX),
+            // SHADE only ranks its points; the paper's DE (P51–P59) evaluates f as written.
+            by_search_value: self.method == DeMethod::Shade,
         };
         let mut pop = Population::new(np, dim);
         match self.method {
@@ -428,10 +430,7 @@ impl DifferentialEvolution {
             DeMethod::Shade => shade::initialise(&mut pop, bounds, rng),
         }
         for i in 0..np {
-            pop.f[i] = match self.method {
-                DeMethod::Paper => run.eval(pop.row(i)),
-                DeMethod::Shade => run.eval_search(pop.row(i)),
-            };
+            pop.f[i] = run.eval(pop.row(i));
         }
         let mut state = shade::State::new(self, np);
 
@@ -551,18 +550,18 @@ pub(crate) struct Run<'a, O: Objective + ?Sized> {
     objective: &'a O,
     evaluations: usize,
     max_evaluations: usize,
+    /// Whether the run evaluates by [`Objective::search_value`], else [`Objective::value`].
+    by_search_value: bool,
 }
 
 impl<O: Objective + ?Sized> Run<'_, O> {
     fn eval(&mut self, x: &[f64]) -> f64 {
         self.evaluations += 1;
-        sanitize(self.objective.value(x))
-    }
-
-    /// [`Run::eval`] by [`Objective::search_value`] (SHADE's evaluations).
-    fn eval_search(&mut self, x: &[f64]) -> f64 {
-        self.evaluations += 1;
-        sanitize(self.objective.search_value(x))
+        sanitize(if self.by_search_value {
+            self.objective.search_value(x)
+        } else {
+            self.objective.value(x)
+        })
     }
 
     fn exhausted(&self) -> bool {

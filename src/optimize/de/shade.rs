@@ -175,7 +175,7 @@ pub(crate) fn generation<O: Objective + ?Sized, R: Rng + ?Sized>(
             let take_mutant = rng.gen::<f64>() < cr || q == jrand;
             u[q] = if take_mutant { v } else { xi[q] };
         }
-        trial_f.push(run.eval_search(u));
+        trial_f.push(run.eval(u));
         params.push((cr, f));
     }
 
