@@ -341,7 +341,7 @@ fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
         let step = abs(dx) / abs(x_new);
         let quadratic = it >= 2 && step <= tol.step_rtol.sqrt() && step <= 0.01 * prev_step;
         if step <= tol.step_rtol || quadratic {
-            if r > RESIDUAL_ATOL.max(1e3 * step) {
+            if !newton_accepts(r, step) {
                 return Err(fail(r));
             }
             return Ok(MullerOut {
@@ -354,6 +354,13 @@ fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, Sol
         x = x_new;
     }
     Err(fail(f64::NAN))
+}
+
+/// Whether a Newton step that stopped the iteration (relative length `step`, from a point
+/// where |F| = `r`) ends at a root: |F| ≤ [`RESIDUAL_ATOL`], or, since F' = O(1) on the s = 1
+/// branch (see [`Tolerance::residual_stop`]), |F| of the order of the step (≤ 1e3 · step).
+fn newton_accepts(r: f64, step: f64) -> bool {
+    r <= RESIDUAL_ATOL.max(1e3 * step)
 }
 
 /// The root from guess g by the chosen iteration (Newton falls back to Muller on failure).
@@ -434,8 +441,9 @@ pub fn solve_from_guess_tol(
 pub const NEAR_STEP_RTOL: f64 = 1e-5;
 
 /// The root at `omega` next to `guess`, the root of a system a finite-difference step away (a
-/// Jacobian's neighbour): one Newton step on the residual F(k1) of eq. P32, accepted when it moves the root by at most
-/// [`NEAR_STEP_RTOL`] relative and leaves it classified as [`solve_from_guess`] would. `None`
+/// Jacobian's neighbour): one Newton step on the residual F(k1) of eq. P32, accepted when it
+/// moves the root by at most [`NEAR_STEP_RTOL`] relative, ends at a root as a converged Newton
+/// iteration does, and leaves it classified as [`solve_from_guess`] would. `None`
 /// otherwise: across a cliff of the misfit (a branch cut of q_P or q_S moving past the root,
 /// where F jumps) the step is long, and the caller solves on its usual path.
 ///
@@ -455,7 +463,7 @@ pub fn refine_near(system: &System, omega: f64, guess: Complex64) -> Option<Root
     let r = abs(f);
     // A NaN step fails the first test.
     let short = step <= NEAR_STEP_RTOL;
-    if !short || r > RESIDUAL_ATOL.max(1e3 * step) {
+    if !short || !newton_accepts(r, step) {
         return None;
     }
     classify(
