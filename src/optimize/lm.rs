@@ -130,6 +130,16 @@ fn eval_ok<P: LeastSquares + ?Sized>(problem: &P, x: &[f64], out: &mut [f64]) ->
     problem.residuals(x, out) && out.iter().all(|v| v.is_finite())
 }
 
+/// [`eval_ok`] by [`LeastSquares::residuals_near`] `base`.
+fn eval_near_ok<P: LeastSquares + ?Sized>(
+    problem: &P,
+    base: &[f64],
+    x: &[f64],
+    out: &mut [f64],
+) -> bool {
+    problem.residuals_near(base, x, out) && out.iter().all(|v| v.is_finite())
+}
+
 /// Finite-difference Jacobian of `problem` at `x`, written row-major (`m × n`) into `jac`.
 ///
 /// `r0` must hold the residuals at `x`. With `bounds`, every evaluation point stays inside
@@ -166,7 +176,7 @@ pub fn jacobian_fd<P: LeastSquares + ?Sized>(
     if problem.near_at(x) {
         centre.resize(m, 0.0);
         evals += 1;
-        if !(problem.residuals_near(x, x, &mut centre) && centre.iter().all(|v| v.is_finite())) {
+        if !eval_near_ok(problem, x, x, &mut centre) {
             centre.clear();
         }
     }
@@ -183,7 +193,7 @@ pub fn jacobian_fd<P: LeastSquares + ?Sized>(
             }
             xp[q] = v;
             *evals += 1;
-            let ok = problem.residuals_near(x, &xp, out) && out.iter().all(|v| v.is_finite());
+            let ok = eval_near_ok(problem, x, &xp, out);
             xp[q] = x[q];
             ok.then_some(v - x[q])
         };
