@@ -413,18 +413,20 @@ impl LeastSquares for HeldCp<'_, '_, '_> {
 /// The gap scan: at each c_P of `targets` (taken in ascending order), the best soil's c_S and
 /// ξ moved to the bottom of that piece's valley, by Levenberg–Marquardt with c_P held (at most
 /// [`GAP_SCAN_ITERATIONS`] iterations, loose tolerances) and c_S kept within ν_m's range at
-/// that c_P. Each target starts from the previous one's answer or from the best's own c_S and
-/// ξ, whichever fits better there (one evaluation each): always from the previous answer, a
-/// scan that crossed a piece fitting badly carried its c_S and ξ on, and WM10117 of `bench
-/// --verify 200 --network-seed 848804` (MDPE) stayed 1.2 above the exhaustive χ²; always
-/// from the best's own after each piece that fits badly, the fits took about 140 evaluations
-/// more (1,910 against 1,769 per fit on the default mix). For a plastic pipe the data fix c_S to a few per cent and ξ with it,
-/// and the valley moves from piece to piece, so the best's own c_S and ξ, moved to another
-/// piece, can lie far up its walls: WM10084 of `bench --verify 200 --network-seed 848857
-/// --materials plastic-heavy` (MDPE) ends at χ² 15.80 with c_P = 3,676 m/s, c_S 164 m/s and
-/// ξ 0.65; at c_P 492 m/s (between the measured phase speeds 490 and 494) its c_S and ξ give
-/// about 30, while the valley there (c_S 161 m/s, ξ 0.86) has 14.69, the exhaustive search's
-/// piece (14.68).
+/// that c_P. For a plastic pipe the data fix c_S to a few per cent and ξ with it, and the
+/// valley moves from piece to piece, so the best's own c_S and ξ, moved to another piece, can
+/// lie far up its walls: WM10084 of `bench --verify 200 --network-seed 848857 --materials
+/// plastic-heavy` (MDPE) ends at χ² 15.80 with c_P = 3,676 m/s, c_S 164 m/s and ξ 0.65; at
+/// c_P 492 m/s (between the measured phase speeds 490 and 494) its c_S and ξ give about 30,
+/// while the valley there (c_S 161 m/s, ξ 0.86) has 14.69, the exhaustive search's piece
+/// (14.68).
+///
+/// Each target starts from the previous one's answer or from the best's own c_S and ξ,
+/// whichever fits better there (one evaluation each). Always from the previous answer, a scan
+/// that crossed a piece fitting badly carried its c_S and ξ on, and WM10117 of `bench --verify
+/// 200 --network-seed 848804` (MDPE) stayed 1.2 above the exhaustive χ²; from the best's own
+/// after each piece that fits badly, the fits took about 140 evaluations more (1,910 against
+/// 1,769 per fit on the default mix, with 140 evaluations per parameter in the DE runs).
 fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec<f64>> {
     let problem = pieces.problem;
     let (_, c_s) = pieces.speeds(&best.x);
@@ -455,8 +457,7 @@ fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec
     for c_p in sorted {
         // c_S within ν_m's range at this c_P (P63–P64), where the box projects each start: a
         // start off it would give no soil.
-        let (l, mut u) = (lower.clone(), upper.clone());
-        let mut l = l;
+        let (mut l, mut u) = (lower.clone(), upper.clone());
         l[0] = l[0].max((c_p * shear_to_compressional(nu_hi) * (1.0 + 1e-6)).ln());
         u[0] = u[0].min((c_p * shear_to_compressional(nu_lo) * (1.0 - 1e-6)).ln());
         if u[0] <= l[0] {
@@ -737,7 +738,7 @@ mod tests {
     /// where fit algorithm 13 ended (χ² 15.80, c_P 3,676 m/s, c_S 164 m/s, ξ 0.65): the
     /// exhaustive search's piece lies between the measured phase speeds 490 and 494 m/s at
     /// c_S 161 m/s and ξ 0.87 (χ² 14.68). The grazing probe's own starts keep the best's c_S
-    /// and try three ξ, and reach no lower than 15.7; the gap scan's start there reaches
+    /// and try three ξ, and reach no lower than 15.5; the gap scan's start there reaches
     /// within 0.1 of it. Each of the scan's starts has c_P at its target and fits at least as
     /// well as the best's own c_S and ξ moved there.
     #[test]
