@@ -148,3 +148,25 @@ fn an_optimum_is_confirmed_further_off_a_cliff_where_the_reference_path_has_anot
 fn the_valley_end_probe_reaches_the_other_end_of_a_c_p_valley() {
     verify_below(848873, "WM10013", 13.3, "the fluid-like end is at 13.43");
 }
+
+/// An MDPE segment of a plastic-heavy network whose search ended at χ² 15.80 with c_P 3,676
+/// m/s (fit algorithm 13), while the exhaustive search's piece lies between the measured phase
+/// speeds 490 and 494 m/s, at its own c_S and ξ (14.68). The gap scan finds that piece's
+/// valley in (c_S, ξ) with c_P held.
+#[test]
+fn the_gap_scan_reaches_a_narrow_piece_of_a_plastic_pipe() {
+    let r = verify_one_of(848857, MaterialMix::PlasticHeavy, "WM10084");
+    assert!(
+        r.chi2 < 15.0,
+        "WM10084: χ² {} (algorithm 13: 15.80)",
+        r.chi2
+    );
+}
+
+/// A ductile-iron segment whose search ended on ν_m's upper bound at χ² 5.32 (fit algorithm
+/// 13), while the same bound at c_P 1,342 m/s, just below the highest measured phase speed,
+/// has 3.63. The gap scan keeps each target's c_S within ν_m's range.
+#[test]
+fn the_gap_scan_reaches_a_piece_on_the_incompressible_bound() {
+    verify_below(848854, "WM10027", 4.0, "algorithm 13 ended at 5.32");
+}
