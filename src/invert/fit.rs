@@ -462,8 +462,8 @@ fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
 
 /// A probe: polished (or walked) optima, with whether each polish was capped, from the best
 /// so far.
-type ProbeFn =
-    fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
+type ProbeFn<'f> =
+    &'f dyn Fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
 
 /// The search: every restart's DE run polished, and the nested start polished.
 fn search(
@@ -539,21 +539,17 @@ fn search(
                 capped.push(c);
             }
         };
-        run_probe(probes::incompressible_probe, &mut optima);
-        run_probe(probes::valley_end_probe, &mut optima);
+        run_probe(&probes::incompressible_probe, &mut optima);
+        run_probe(&probes::valley_end_probe, &mut optima);
         // The grazing and edge probes again from a best they moved: its pieces are others.
         // The first round with the gap scan's starts (`probes::gap_scan`).
         for round in 0..GRAZING_ROUNDS {
             let before = best(&optima).map_or(f64::INFINITY, |o| o.cost);
             run_probe(
-                if round == 0 {
-                    probes::scanning_grazing_probe
-                } else {
-                    probes::grazing_probe
-                },
+                &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, round == 0),
                 &mut optima,
             );
-            run_probe(probes::edge_probe, &mut optima);
+            run_probe(&probes::edge_probe, &mut optima);
             let after = best(&optima).map_or(f64::INFINITY, |o| o.cost);
             if after >= before - GRAZING_ROUND_GAIN {
                 break;

@@ -49,6 +49,13 @@ pub fn soil_speeds(e: f64, nu: f64, rho: f64) -> (f64, f64) {
     ((m / rho).sqrt(), (g / rho).sqrt())
 }
 
+/// c_S/c_P of a soil with Poisson's ratio ν_m, from P63–P64: √((1 − 2ν)/(2(1 − ν))), √½ at
+/// ν = 0 and 0 at ν = ½. The soils of one c_P in a box of ν_m have c_S between c_P times this
+/// at the upper and at the lower bound.
+pub fn shear_to_compressional(nu: f64) -> f64 {
+    ((1.0 - 2.0 * nu) / (2.0 * (1.0 - nu))).max(0.0).sqrt()
+}
+
 /// E_m (Pa) and ν_m from the soil speeds (the inverse of P63–P64); `None` unless
 /// 0 < c_S and ν_m > −1 and ν_m < 0.5 (i.e. 0 < G < 3M/4).
 pub fn soil_from_speeds(cp: f64, cs: f64, rho: f64) -> Option<(f64, f64)> {
@@ -636,6 +643,24 @@ mod tests {
                 "{nu}"
             );
         }
+    }
+
+    /// The ratio of [`soil_speeds`]' c_S to c_P, whatever E_m and ρ_m; its closed-form ends.
+    #[test]
+    fn the_speed_ratio_is_that_of_the_soil_speeds() {
+        for nu in [0.0, 0.1, 0.3, 0.45, 0.499] {
+            for (e, rho) in [(2e7, 1800.0), (3e8, 2100.0)] {
+                let (cp, cs) = soil_speeds(e, nu, rho);
+                assert!(
+                    (shear_to_compressional(nu) / (cs / cp) - 1.0).abs() < 1e-12,
+                    "{nu}"
+                );
+            }
+        }
+        assert!((shear_to_compressional(0.0) - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+        assert_eq!(shear_to_compressional(0.5), 0.0);
+        // ν = 0.499: c_P/c_S = √(2·0.501/0.002) = √501.
+        assert!((1.0 / shear_to_compressional(0.499) / 501f64.sqrt() - 1.0).abs() < 1e-12);
     }
 
     #[test]
