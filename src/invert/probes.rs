@@ -677,6 +677,14 @@ mod tests {
             .data
     }
 
+    /// The lowest misfit a probe found (∞ when it found nothing).
+    fn lowest(found: &[(Optimum, bool)]) -> f64 {
+        found
+            .iter()
+            .map(|(o, _)| o.cost)
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// The candidate polish from the soil with speeds (c_P, c_S) at contact ξ.
     fn polished_from(
         pieces: &Pieces<'_, '_>,
@@ -762,15 +770,9 @@ mod tests {
         let pieces = Pieces::new(&p).expect("soil parameters");
         let polished = polished_from(&pieces, &bounds, 3676.5, 164.3, 0.651);
         assert!((polished.cost - 15.795).abs() < 0.01, "{}", polished.cost);
-        let best_of = |found: Vec<(Optimum, bool)>| {
-            found
-                .into_iter()
-                .map(|(o, _)| o.cost)
-                .fold(f64::INFINITY, f64::min)
-        };
-        let plain = best_of(grazing_probe(&pieces, &bounds, &polished, false));
+        let plain = lowest(&grazing_probe(&pieces, &bounds, &polished, false));
         assert!(plain > 15.5, "without the scan: {plain}");
-        let scanning = best_of(grazing_probe(&pieces, &bounds, &polished, true));
+        let scanning = lowest(&grazing_probe(&pieces, &bounds, &polished, true));
         assert!(scanning < 14.677 + 0.1, "with the scan: {scanning}");
 
         let targets = [480.0, 492.3, 530.0];
@@ -812,16 +814,12 @@ mod tests {
             .collect();
         let starts = gap_scan(&pieces, &targets, &best);
         assert_eq!(starts.len(), targets.len(), "every target gives a start");
-        let lowest = starts
+        let best_start = starts
             .iter()
             .map(|y| p.value(y))
             .fold(f64::INFINITY, f64::min);
-        assert!(lowest < 3.632 + 0.1, "{lowest}");
-        let found = grazing_probe(&pieces, &bounds, &best, true);
-        let reached = found
-            .iter()
-            .map(|(o, _)| o.cost)
-            .fold(f64::INFINITY, f64::min);
+        assert!(best_start < 3.632 + 0.1, "{best_start}");
+        let reached = lowest(&grazing_probe(&pieces, &bounds, &best, true));
         assert!(reached < 3.632 + 0.01, "{reached}");
     }
 
