@@ -177,3 +177,18 @@ fn the_gap_scan_reaches_a_narrow_piece_of_a_plastic_pipe() {
 fn the_gap_scan_reaches_a_piece_on_the_incompressible_bound() {
     verify_below(848854, "WM10027", 4.0, "algorithm 13 ended at 5.32");
 }
+
+/// A cast-iron segment whose best piece lies between the measured phase speeds 1,335.4 and
+/// 1,338.1 m/s (0.2 % apart): the gap scan's targets, 0.4 % from each phase speed, all fell
+/// outside that gap, and the search ended at χ² 5.59 (c_P 1,376 m/s) against the exhaustive
+/// search's 5.16 (c_P 1,336.9 m/s). A gap narrower than twice the offset is scanned at its
+/// middle.
+#[test]
+fn the_gap_scan_reaches_a_gap_narrower_than_its_offsets() {
+    verify_below(
+        848918,
+        "WM10027",
+        5.3,
+        "without the gap's middle it ended at 5.59",
+    );
+}

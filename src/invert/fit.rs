@@ -145,8 +145,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// 1e-6 (`Tolerance::SEARCH`; issue 10). Version 14: the gap scan, the grazing probe's
 /// first round also starts from the bottom of each piece's valley in c_S and ξ next to every
 /// measured phase speed (`probes::gap_scan`), and the DE runs at 110 evaluations per
-/// parameter, not 160 (issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 14;
+/// parameter, not 160 (issue 10). Version 15: the gap scan also targets the middle of each
+/// gap between measured phase speeds narrower than twice its offset, which its targets next
+/// to the phase speeds leapt over (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 15;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
