@@ -192,3 +192,17 @@ fn the_gap_scan_reaches_a_gap_narrower_than_its_offsets() {
         "without the gap's middle it ended at 5.59",
     );
 }
+
+/// A cast-iron segment whose best piece lies just below its highest model phase speed, where
+/// that frequency has just begun to radiate: the search ended at χ² 1.37 with c_P 1,359 m/s
+/// (highest model phase speed 1,337.75 m/s), while the exhaustive search's 0.57 lies at
+/// 1,336.12 m/s. The gap scan targets c_P just below the best's highest model phase speed.
+#[test]
+fn the_gap_scan_reaches_a_piece_just_past_the_first_grazing_point() {
+    verify_below(
+        848934,
+        "WM10157",
+        1.0,
+        "without that target it ended at 1.37",
+    );
+}

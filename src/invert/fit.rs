@@ -147,7 +147,8 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// measured phase speed (`probes::gap_scan`), and the DE runs at 110 evaluations per
 /// parameter, not 160 (issue 10). Version 15: the gap scan also targets the middle of each
 /// gap between measured phase speeds narrower than twice its offset, which its targets next
-/// to the phase speeds leapt over (issue 10).
+/// to the phase speeds leapt over, and c_P just below the best's highest model phase speed
+/// (`probes::GAP_SCAN_BELOW_GRAZING`; issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 15;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
