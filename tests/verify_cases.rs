@@ -206,3 +206,20 @@ fn the_gap_scan_reaches_a_piece_just_past_the_first_grazing_point() {
         "without that target it ended at 1.37",
     );
 }
+
+/// Two cast-iron pipes whose global optimum lies in a basin far past grazing, narrower than a
+/// quarter decade of E_m (log10 E_m 9.75, ν_m at its bound, c_P about 23,000 m/s, ξ about
+/// 0.015), which the incompressible probe's half-decade grid stepped over: the searches ended
+/// at χ² 20.09 and 15.83 against the exhaustive 12.12 and 12.04. The probe also polishes from
+/// the stiffest soils when they fit promisingly.
+#[test]
+fn the_incompressible_probe_finds_a_narrow_basin_of_the_stiffest_soils() {
+    verify_below(848723, "WM10084", 13.0, "the search ended at 20.09");
+    verify_below_of(
+        848958,
+        MaterialMix::PlasticHeavy,
+        "WM10046",
+        13.0,
+        "the search ended at 15.83",
+    );
+}

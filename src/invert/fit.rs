@@ -148,7 +148,9 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// parameter, not 160 (issue 10). Version 15: the gap scan also targets the middle of each
 /// gap between measured phase speeds narrower than twice its offset, which its targets next
 /// to the phase speeds leapt over, and c_P just below the best's highest model phase speed
-/// (`probes::GAP_SCAN_BELOW_GRAZING`; issue 10).
+/// (`probes::GAP_SCAN_BELOW_GRAZING`); the incompressible probe also polishes from the
+/// stiffest soils when they fit promisingly (`probes::INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`;
+/// issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 15;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
