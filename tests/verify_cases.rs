@@ -207,11 +207,12 @@ fn the_gap_scan_reaches_a_piece_just_past_the_first_grazing_point() {
     );
 }
 
-/// Two cast-iron pipes whose global optimum lies in a basin far past grazing, narrower than a
-/// quarter decade of E_m (log10 E_m 9.75, ν_m at its bound, c_P about 23,000 m/s, ξ about
-/// 0.015), which the incompressible probe's half-decade grid stepped over: the searches ended
-/// at χ² 20.09 and 15.83 against the exhaustive 12.12 and 12.04. The probe also polishes from
-/// the stiffest soils when they fit promisingly.
+/// Three cast-iron pipes whose global optimum lies in a basin far past grazing, narrower than a
+/// tenth of a decade of E_m (log10 E_m 9.75–9.82, ν_m at its bound, c_P about 23,000 m/s, ξ
+/// below 0.02), which the incompressible probe's half-decade grid stepped over: the searches
+/// ended at χ² 20.09, 15.83 and 10.95 against the exhaustive 12.12, 12.04 and 9.45. The probe
+/// also polishes from the stiffest soils, a line of moduli, when they fit promisingly; at
+/// log10 E_m 9.75 alone WM10028's best candidate (23.6) was above twice the best's misfit.
 #[test]
 fn the_incompressible_probe_finds_a_narrow_basin_of_the_stiffest_soils() {
     verify_below(848723, "WM10084", 13.0, "the search ended at 20.09");
@@ -222,4 +223,28 @@ fn the_incompressible_probe_finds_a_narrow_basin_of_the_stiffest_soils() {
         13.0,
         "the search ended at 15.83",
     );
+    verify_below_of(
+        848977,
+        MaterialMix::PlasticHeavy,
+        "WM10028",
+        9.6,
+        "the search ended at 10.95",
+    );
+}
+
+/// Two plastic pipes whose global optimum lies just above one of the model's phase speeds, in a
+/// dip 0.2 % wide where that frequency's compressional wave has just stopped radiating: the
+/// searches ended at χ² 14.38 (MDPE, c_P 366 m/s) and 18.49 (PVC, c_P 381 m/s) against the
+/// exhaustive 10.38 (c_P 449.09 m/s, 0.3 % above its model phase speed 447.78) and 16.92
+/// (507.77 m/s, above 506.01). The gap scan targets c_P just above each model phase speed.
+#[test]
+fn the_gap_scan_reaches_a_dip_just_above_a_model_phase_speed() {
+    verify_below_of(
+        848920,
+        MaterialMix::PlasticHeavy,
+        "WM10332",
+        11.0,
+        "the search ended at 14.38",
+    );
+    verify_below(848941, "WM10146", 17.5, "the search ended at 18.49");
 }

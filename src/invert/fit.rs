@@ -150,8 +150,10 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// to the phase speeds leapt over, and c_P just below the best's highest model phase speed
 /// (`probes::GAP_SCAN_BELOW_GRAZING`); the incompressible probe also polishes from the
 /// stiffest soils when they fit promisingly (`probes::INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`;
-/// issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 15;
+/// issue 10). Version 16: the gap scan also targets c_P just above each of the best's model
+/// phase speeds (`probes::GAP_SCAN_ABOVE_GRAZING`), and the incompressible probe's stiffest
+/// soils are a line of five moduli, not one (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 16;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
