@@ -103,7 +103,7 @@ pub(super) fn incompressible_probe(
             None,
         ),
     ];
-    let xis = jx.map_or(vec![None], |j| vec![Some(best.x[j]), Some(0.0), Some(1.0)]);
+    let xis = pieces.contacts(&best.x);
     for &nu1 in &INCOMPRESSIBLE_PROBE_NU {
         for &log10_e in &INCOMPRESSIBLE_PROBE_LOG10_E {
             for &xi in &xis {
@@ -227,6 +227,23 @@ impl<'p, 'a> Pieces<'p, 'a> {
         })
     }
 
+    /// The contact coefficients the probes try a soil at: x's own ξ, then each face of ξ's
+    /// range that is not x's (an optimum often lies on one, and the same point twice would be
+    /// solved twice); `[None]` when ξ is not fitted.
+    fn contacts(&self, x: &[f64]) -> Vec<Option<f64>> {
+        let Some(j) = self.jx else {
+            return vec![None];
+        };
+        let spec = &self.problem.specs[j];
+        let mut xis = vec![Some(x[j])];
+        for face in [spec.lower, spec.upper] {
+            if face != x[j] {
+                xis.push(Some(face));
+            }
+        }
+        xis
+    }
+
     /// The model's phase speeds c = ω/Re k (P2), given its wavenumbers k at the measured
     /// frequencies.
     fn model_phase_speeds<'k>(&self, k: &'k [Complex64]) -> impl Iterator<Item = f64> + 'k
@@ -308,7 +325,7 @@ pub(super) fn grazing_probe(
     let mut targets: Vec<f64> = v.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
     targets.extend(&outside);
     let mut starts: Vec<Vec<f64>> = Vec::new();
-    let xis = jx.map_or(vec![None], |j| vec![Some(best.x[j]), Some(0.0), Some(1.0)]);
+    let xis = pieces.contacts(&best.x);
     for &c_p in &targets {
         let Some(x) = pieces.with_speeds(&best.x, c_p, c_s) else {
             continue;
@@ -404,8 +421,10 @@ fn gap_scan_targets(v: &[f64], outside: &[f64], highest: f64) -> Vec<f64> {
 }
 
 /// The gap scan's targets just above each of the best's model phase speeds (fit algorithm
-/// 16): c_P = c_i·(1 + [`GAP_SCAN_ABOVE_GRAZING`]) for each frequency i, where that frequency's
-/// compressional wave has just stopped radiating. Moving c_P moves c_i too, so the target is
+/// 16): c_P = c_i·(1 + [`GAP_SCAN_ABOVE_GRAZING`]) for each frequency i, c_i = ω_i/Re k_i its
+/// model phase speed (P2), where that frequency's compressional wave has just stopped radiating
+/// (q_P turns evanescent as c_P passes c_i, the grazing cliff of P44). Moving c_P moves c_i
+/// too, so the target is
 /// found from the best's c_i and then once more from c_i at the moved soil (c_S and the rest
 /// of the best kept): one evaluation a frequency. On WM10332 of `bench --verify 200
 /// --network-seed 848920 --materials plastic-heavy` (MDPE) the best, at c_P 366.4 m/s, has
@@ -686,7 +705,7 @@ pub const GAP_SCAN_OFFSET: f64 = 0.004;
 pub const GAP_SCAN_BELOW_GRAZING: f64 = 1e-3;
 /// The gap scan's targets just above each of the best's model phase speeds, relative (fit
 /// algorithm 16, [`above_grazing_targets`]); a target within [`GAP_SCAN_OFFSET`] of one of the
-/// other targets is dropped. Just past a grazing point on the side where the frequency's
+/// other targets is dropped. Just past a grazing point (P44) on the side where the frequency's
 /// compressional wave no longer radiates, the misfit can dip in a piece 0.2 % wide, which
 /// neither the targets next to the measured phase speeds nor the one below the highest model
 /// phase speed reach: WM10332 of `bench --verify 200 --network-seed 848920 --materials
@@ -970,6 +989,24 @@ mod tests {
             assert!((a - b).abs() < 1e-9, "{t:?}");
         }
         assert_eq!(gap_scan_targets(&[100.0], &[], f64::NAN).len(), 2);
+    }
+
+    /// A soil is tried at its own ξ and at each face of ξ's range, a face it lies on only once.
+    #[test]
+    fn the_contacts_tried_hold_no_point_twice() {
+        let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
+        let p = default_fit_problem(&data);
+        let pieces = Pieces::new(&p).expect("soil parameters");
+        let j = pieces.jx.expect("ξ is fitted");
+        let (lo, hi) = (p.specs[j].lower, p.specs[j].upper);
+        let at = |xi: f64| {
+            let mut x = vec![7.8, 0.3, 0.0];
+            x[j] = xi;
+            pieces.contacts(&x)
+        };
+        assert_eq!(at(0.4), [Some(0.4), Some(lo), Some(hi)]);
+        assert_eq!(at(lo), [Some(lo), Some(hi)]);
+        assert_eq!(at(hi), [Some(hi), Some(lo)]);
     }
 
     /// Targets from elsewhere join the scan's only where none of its own lies within the
