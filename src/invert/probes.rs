@@ -753,8 +753,10 @@ pub const FAR_PAST_GRAZING: f64 = 2.0;
 /// 10.1). As candidates of the far-past class they would displace its best, through whose
 /// polish WM10120 of 848561 (steel) reaches its optimum (8.19, else 9.62); polished whatever
 /// their misfit, at 9.75 alone, they would cost 94 evaluations a fit (default mix;
-/// plastic-heavy 110), against 3. The line costs 15 evaluations a fit, 12 more than 9.75 alone
-/// (8 fresh verify networks, 848971–848978).
+/// plastic-heavy 110), against 3. The line evaluates up to 15 candidates a fit (10 when the best
+/// lies on a face of ξ, [`Pieces::contacts`]); before that saving it cost 12 evaluations a fit
+/// more than 9.75 alone on verify networks 848971–848978 (1,700 → 1,712 on the default mix,
+/// 1,705 → 1,716 plastic-heavy).
 pub const INCOMPRESSIBLE_PROBE_STIFF_LOG10_E: [f64; 5] = [9.7, 9.75, 9.8, 9.85, 9.9];
 /// Poisson's ratios of the incompressible probe's grid (each capped at the upper bound).
 pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
