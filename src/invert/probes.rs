@@ -704,7 +704,7 @@ pub const GAP_SCAN_OFFSET: f64 = 0.004;
 /// (30 default-mix, 14 plastic-heavy).
 pub const GAP_SCAN_BELOW_GRAZING: f64 = 1e-3;
 /// The gap scan's targets just above each of the best's model phase speeds, relative (fit
-/// algorithm 16, [`above_grazing_targets`]); a target within [`GAP_SCAN_OFFSET`] of one of the
+/// algorithm 16, `above_grazing_targets`); a target within [`GAP_SCAN_OFFSET`] of one of the
 /// other targets is dropped. Just past a grazing point (P44) on the side where the frequency's
 /// compressional wave no longer radiates, the misfit can dip in a piece 0.2 % wide, which
 /// neither the targets next to the measured phase speeds nor the one below the highest model
@@ -754,7 +754,7 @@ pub const FAR_PAST_GRAZING: f64 = 2.0;
 /// polish WM10120 of 848561 (steel) reaches its optimum (8.19, else 9.62); polished whatever
 /// their misfit, at 9.75 alone, they would cost 94 evaluations a fit (default mix;
 /// plastic-heavy 110), against 3. The line evaluates up to 15 candidates a fit (10 when the best
-/// lies on a face of ξ, [`Pieces::contacts`]); before that saving it cost 12 evaluations a fit
+/// lies on a face of ξ, `Pieces::contacts`); before that saving it cost 12 evaluations a fit
 /// more than 9.75 alone on verify networks 848971–848978 (1,700 → 1,712 on the default mix,
 /// 1,705 → 1,716 plastic-heavy).
 pub const INCOMPRESSIBLE_PROBE_STIFF_LOG10_E: [f64; 5] = [9.7, 9.75, 9.8, 9.85, 9.9];
