@@ -211,6 +211,19 @@ impl<'p, 'a> Pieces<'p, 'a> {
         soil_speeds(e, x[self.jn], self.problem.data.soil_density)
     }
 
+    /// Whether the model's phase speed at some frequency lies within
+    /// [`GRAZING_RTOL`](crate::physics::solver::GRAZING_RTOL) of the soil's c_P or c_S at x (on
+    /// the search path): the `near_grazing` root flag of P44.
+    pub(super) fn near_grazing(&self, x: &[f64]) -> bool {
+        use crate::physics::solver::GRAZING_RTOL;
+        let (c_p, c_s) = self.speeds(x);
+        self.problem.predict(x).is_some_and(|k| {
+            self.model_phase_speeds(&k).any(|c| {
+                (c / c_p - 1.0).abs() < GRAZING_RTOL || (c / c_s - 1.0).abs() < GRAZING_RTOL
+            })
+        })
+    }
+
     /// x with the soil moved to speeds (c_P, c_S), everything else kept; `None` outside the
     /// search box or where no soil has those speeds.
     fn with_speeds(&self, x: &[f64], c_p: f64, c_s: f64) -> Option<Vec<f64>> {
@@ -1056,6 +1069,35 @@ mod tests {
         ] {
             assert!(fit_at(c) > 14.0, "{c}: {}", fit_at(c));
         }
+    }
+
+    /// `near_grazing` is the root flag of P44 at the search path's roots: on WM10332's search
+    /// optimum above (c_P 366.4 m/s, its highest model phase speed more than 10 % above c_P and
+    /// c_S) no frequency is within 2 % of c_P or c_S; with c_P moved to 1 % above the highest
+    /// model phase speed one is, and at 5 % above none is.
+    #[test]
+    fn near_grazing_is_a_model_phase_speed_within_two_percent_of_a_soil_speed() {
+        let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
+        let p = default_fit_problem(&data);
+        let pieces = Pieces::new(&p).expect("soil parameters");
+        let x = vec![
+            58807004.54709561_f64.log10(),
+            0.4545205189982146,
+            0.2365922164449546,
+        ];
+        assert!(!pieces.near_grazing(&x));
+        let (c_p, c_s) = pieces.speeds(&x);
+        let k = p.predict(&x).expect("roots");
+        let highest = pieces
+            .model_phase_speeds(&k)
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            highest > 1.1 * c_p && highest > 1.1 * c_s,
+            "{highest} {c_p} {c_s}"
+        );
+        let moved = |r: f64| pieces.with_speeds(&x, highest * r, c_s).expect("soil");
+        assert!(pieces.near_grazing(&moved(1.01)));
+        assert!(!pieces.near_grazing(&moved(1.05)));
     }
 
     /// WM10103 of `bench --verify 200 --network-seed 848782`, where fit algorithm 10 ended
