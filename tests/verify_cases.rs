@@ -271,3 +271,12 @@ fn near_grazing_the_gap_scan_runs_again_from_the_best_the_probes_left() {
         "the search ended at 19.38",
     );
 }
+
+/// A PVC pipe on which, from its own seed, both DE runs and every probe ended at χ² 59.68 (c_P
+/// 4,013 m/s, ξ 1), flagged `high_misfit`, against the exhaustive search's 6.32 (c_P 400 m/s, ξ
+/// 0.016), which 64 of 64 other seeds reach. A fit flagged `high_misfit` searches once more from
+/// another seed.
+#[test]
+fn a_fit_flagged_high_misfit_searches_once_more_from_another_seed() {
+    verify_below(849214, "WM10098", 6.5, "the search ended at 59.68");
+}

@@ -9,7 +9,7 @@ use num_complex::Complex64;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::flags::{assess, Evidence, Flag, Separated, Severity};
+use super::flags::{assess, Evidence, Flag, FlagCode, Separated, Severity};
 use super::probes;
 use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
@@ -153,7 +153,8 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// issue 10). Version 16: the gap scan also targets c_P just above each of the best's model
 /// phase speeds (`probes::GAP_SCAN_ABOVE_GRAZING`), and the incompressible probe's stiffest
 /// soils are a line of five moduli, not one (issue 10). Version 17: where the best the probes
-/// leave lies near grazing, the gap scan once more from it (issue 10; see `search`).
+/// leave lies near grazing, the gap scan once more from it (see `search`), and a fit flagged
+/// `high_misfit` searches once more from another seed ([`HIGH_MISFIT_RETRY_STREAM`]; issue 10).
 pub const FIT_ALGORITHM_VERSION: i64 = 17;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
@@ -294,6 +295,10 @@ pub struct FitResult {
 }
 
 impl FitResult {
+    /// Whether a flag (not a note) of this kind was raised.
+    pub fn has_flag(&self, code: FlagCode) -> bool {
+        self.flags.iter().any(|f| f.code == code)
+    }
     /// The estimate of a parameter.
     pub fn get(&self, param: Param) -> Option<&Estimate> {
         self.estimates.iter().find(|e| e.param == param)
@@ -394,13 +399,7 @@ fn fit_from(
     seed: u64,
     base: Option<&FitResult>,
 ) -> FitResult {
-    let problem = Problem::new(
-        data,
-        settings.method,
-        settings.model,
-        settings.contact_mode,
-        &settings.effects,
-    );
+    let problem = problem_for(data, settings);
     let n_meas = data.measurements.len();
     if n_meas == 0 {
         return FitResult::failed(
@@ -411,20 +410,73 @@ fn fit_from(
         );
     }
     let start = base.and_then(|b| nested_start(&problem, b));
-    match run(&problem, settings, seed, start.as_deref()) {
+    let first = fit_once(data, settings, seed, &problem, start.as_deref(), n_meas);
+    if settings.method != Method::Default || !first.has_flag(FlagCode::HighMisfit) {
+        return first;
+    }
+    // The model does not explain the data within their noise: before saying so, one more
+    // search from another seed (see [`HIGH_MISFIT_RETRY_STREAM`]), the better answer kept.
+    let problem = problem_for(data, settings);
+    let second = fit_once(
+        data,
+        settings,
+        crate::seed::derive(seed, HIGH_MISFIT_RETRY_STREAM),
+        &problem,
+        start.as_deref(),
+        n_meas,
+    );
+    let evaluations = first.evaluations + second.evaluations;
+    let result_seconds = first.result_seconds + second.result_seconds;
+    let mut r = if second.status != FitStatus::Failed && second.misfit < first.misfit {
+        second
+    } else {
+        first
+    };
+    r.evaluations = evaluations;
+    r.result_seconds = result_seconds;
+    r
+}
+
+/// Seed stream of the second search of a fit flagged `high_misfit` (far from the restarts'
+/// streams 0, 1, …; the same fit whatever the thread count). Rarely, both DE runs and every
+/// probe end in a basin far above the global one: WM10098 of `bench --verify 200
+/// --network-seed 849214` (PVC) ended at χ² 59.68 (c_P 4,013 m/s, ξ 1) against the
+/// exhaustive search's 6.32 (c_P 400 m/s, ξ 0.016), which the default fit reaches from 64 of
+/// 64 other seeds. A misfit that high is flagged (p < [`MISFIT_P_VALUE`](super::flags::MISFIT_P_VALUE)), on about 2 % of
+/// the segments of a realistic network, so a second search there costs about 2 % more
+/// evaluations a fit, and a flag then means the model, not the search, fails to explain the
+/// data.
+pub const HIGH_MISFIT_RETRY_STREAM: u64 = 0x6869_6768;
+
+/// The problem of fitting `data` with `settings`.
+fn problem_for<'a>(data: &'a SegmentData, settings: &'a FitSettings) -> Problem<'a> {
+    Problem::new(
+        data,
+        settings.method,
+        settings.model,
+        settings.contact_mode,
+        &settings.effects,
+    )
+}
+
+/// One search (fast path, and the safe path where the fast one tracked another root at its
+/// optimum) and its result.
+fn fit_once(
+    data: &SegmentData,
+    settings: &FitSettings,
+    seed: u64,
+    problem: &Problem<'_>,
+    start: Option<&[f64]>,
+    n_meas: usize,
+) -> FitResult {
+    match run(problem, settings, seed, start) {
         Ok(r) if r.path_checked => r,
         Ok(fast) => {
             // The fast search path tracked another root at its optimum: search again with the
             // safe path (continuation ramp wherever the soil moves the root far from in vacuo).
-            let mut safe = Problem::new(
-                data,
-                settings.method,
-                settings.model,
-                settings.contact_mode,
-                &settings.effects,
-            );
+            let mut safe = problem_for(data, settings);
             safe.path = SolvePath::Safe;
-            match run(&safe, settings, seed, start.as_deref()) {
+            match run(&safe, settings, seed, start) {
                 Ok(mut r) => {
                     r.evaluations += fast.evaluations;
                     r
