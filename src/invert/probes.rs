@@ -1033,6 +1033,18 @@ mod tests {
         assert_eq!(with_distinct(vec![], vec![1.0], 4e-3), [1.0]);
     }
 
+    /// WM10332 of `bench --verify 200 --network-seed 848920 --materials plastic-heavy` (MDPE)
+    /// and the soil where fit algorithm 15's search ended there (χ² 14.38, c_P 366.4 m/s).
+    fn wm10332_search_optimum() -> (crate::invert::SegmentData, Vec<f64>) {
+        let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
+        let x = vec![
+            58807004.54709561_f64.log10(),
+            0.4545205189982146,
+            0.2365922164449546,
+        ];
+        (data, x)
+    }
+
     /// On WM10332 of `bench --verify 200 --network-seed 848920 --materials plastic-heavy`
     /// (MDPE), from the soil where the search ended (χ² 14.38, c_P 366.4 m/s), the fourth
     /// frequency's target lands in the dip just above its model phase speed, 0.2 % wide, where
@@ -1040,14 +1052,9 @@ mod tests {
     /// speeds 442.5 and 458.9 m/s lie outside it.
     #[test]
     fn a_target_lands_just_above_a_model_phase_speed() {
-        let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
+        let (data, x) = wm10332_search_optimum();
         let p = default_fit_problem(&data);
         let pieces = Pieces::new(&p).expect("soil parameters");
-        let x = vec![
-            58807004.54709561_f64.log10(),
-            0.4545205189982146,
-            0.2365922164449546,
-        ];
         let best = Optimum {
             cost: p.value(&x),
             x,
@@ -1077,14 +1084,9 @@ mod tests {
     /// model phase speed one is, and at 5 % above none is.
     #[test]
     fn near_grazing_is_a_model_phase_speed_within_two_percent_of_a_soil_speed() {
-        let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
+        let (data, x) = wm10332_search_optimum();
         let p = default_fit_problem(&data);
         let pieces = Pieces::new(&p).expect("soil parameters");
-        let x = vec![
-            58807004.54709561_f64.log10(),
-            0.4545205189982146,
-            0.2365922164449546,
-        ];
         assert!(!pieces.near_grazing(&x));
         let (c_p, c_s) = pieces.speeds(&x);
         let k = p.predict(&x).expect("roots");
