@@ -1536,6 +1536,42 @@ mod tests {
     use super::*;
     use crate::invert::uncertainty::{soil_speeds, Z_95};
 
+    /// A fit flagged `high_misfit` searches once more only up to
+    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. WM10098 of the bench network 849214 (PVC): from
+    /// its own seed the search ends at χ² 59.7 (χ²/dof 8.5), the second search at 6.3. With its
+    /// attenuations written in dB/m (8.7 × too large, a defect of the sample network) χ²/dof is
+    /// far above the limit, and the fit is the first search's, evaluation for evaluation.
+    #[test]
+    fn a_high_misfit_is_searched_again_only_below_the_chi2_per_dof_limit() {
+        use crate::bench::{bench_network, MaterialMix};
+        let seg = bench_network(200, 849214, MaterialMix::Default)
+            .into_iter()
+            .find(|s| s.id == "WM10098")
+            .expect("the segment");
+        let settings = FitSettings::default();
+        let first_and_answer = |data: &SegmentData| {
+            let p = problem_for(data, &settings);
+            let first = fit_once(data, &settings, seg.seed, &p, None, data.measurements.len());
+            (first, fit_segment(data, &settings, seg.seed))
+        };
+        let (first, answer) = first_and_answer(&seg.data);
+        assert!(first.has_flag(FlagCode::HighMisfit), "{}", first.misfit);
+        assert!(first.misfit > 50.0, "{}", first.misfit);
+        assert!(answer.misfit < 6.5, "{}", answer.misfit);
+        assert!(answer.evaluations > first.evaluations);
+
+        let mut defective = seg.data.clone();
+        for m in &mut defective.measurements {
+            m.attenuation *= 8.686;
+        }
+        let (first, answer) = first_and_answer(&defective);
+        assert!(first.has_flag(FlagCode::HighMisfit));
+        let per_dof = first.chi2_per_dof.expect("dof > 0");
+        assert!(per_dof > HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF, "{per_dof}");
+        assert_eq!(answer.evaluations, first.evaluations);
+        assert_eq!(answer.misfit, first.misfit);
+    }
+
     /// Where no finite-difference Jacobian exists on any path or step, the curvature is
     /// unknown and the intervals span the search range. The point: the answer of the stress
     /// network's HDPE segment WM10951 (tests/stress.rs) before the grazing probe and the step

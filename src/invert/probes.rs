@@ -211,16 +211,14 @@ impl<'p, 'a> Pieces<'p, 'a> {
         soil_speeds(e, x[self.jn], self.problem.data.soil_density)
     }
 
-    /// Whether the model's phase speed at some frequency lies within
-    /// [`GRAZING_RTOL`](crate::physics::solver::GRAZING_RTOL) of the soil's c_P or c_S at x (on
-    /// the search path): the `near_grazing` root flag of P44.
+    /// Whether the model's phase speed (P2) at some frequency lies in the near-grazing band of
+    /// the soil's c_P or c_S at x, eq. P44 ([`crate::physics::solver::near_grazing`]), on the
+    /// search path.
     pub(super) fn near_grazing(&self, x: &[f64]) -> bool {
-        use crate::physics::solver::GRAZING_RTOL;
         let (c_p, c_s) = self.speeds(x);
         self.problem.predict(x).is_some_and(|k| {
-            self.model_phase_speeds(&k).any(|c| {
-                (c / c_p - 1.0).abs() < GRAZING_RTOL || (c / c_s - 1.0).abs() < GRAZING_RTOL
-            })
+            self.model_phase_speeds(&k)
+                .any(|c| crate::physics::solver::near_grazing(c, c_p, c_s))
         })
     }
 

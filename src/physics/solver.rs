@@ -30,6 +30,12 @@ pub const RESIDUAL_ATOL: f64 = 1e-10;
 pub const CONTINUATION_RATIO_MAX: f64 = 0.1;
 /// Near-grazing band on |c/c_soil − 1|, eq. P44 (spec §5.5).
 pub const GRAZING_RTOL: f64 = 0.02;
+/// Whether a phase speed c lies in the near-grazing band of the soil's wave speeds c_P and c_S:
+/// |c/c_soil − 1| < [`GRAZING_RTOL`] for either, eq. P44 (spec §5.5). The `near_grazing` flag
+/// of a root, and the fit's test for another gap scan (`invert::probes`).
+pub fn near_grazing(c: f64, c_p: f64, c_s: f64) -> bool {
+    (c / c_p - 1.0).abs() < GRAZING_RTOL || (c / c_s - 1.0).abs() < GRAZING_RTOL
+}
 /// How many times a continuation step may be halved before a branch jump is declared (§5.6).
 pub const MAX_STEP_HALVINGS: u32 = 10;
 /// Growing-wave threshold: Im k1 > this·|k1| with every loss factor ≥ 0 (§5.6).
@@ -390,8 +396,7 @@ fn classify(system: &System, ev: &Evaluator, out: MullerOut) -> Result<Root, Sol
     };
     if !system.soil.is_absent() {
         let (cp, cs) = system.soil.wave_speeds();
-        flags.near_grazing =
-            (c / cp - 1.0).abs() < GRAZING_RTOL || (c / cs - 1.0).abs() < GRAZING_RTOL;
+        flags.near_grazing = near_grazing(c, cp, cs);
     }
     flags.out_of_validity = out_of_validity(system, ev.omega);
     Ok(Root {
@@ -791,6 +796,19 @@ fn step_to(
 mod tests {
     use super::*;
     use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil};
+
+    /// The near-grazing band of P44: within 2 % of c_P or of c_S, on either side, and nowhere
+    /// else.
+    #[test]
+    fn the_near_grazing_band_is_two_percent_either_side_of_either_soil_speed() {
+        let (c_p, c_s) = (400.0, 150.0);
+        for c in [400.0, 392.1, 407.9, 150.0, 147.1, 152.9] {
+            assert!(near_grazing(c, c_p, c_s), "{c}");
+        }
+        for c in [391.9, 408.1, 146.9, 153.1, 250.0, 1300.0] {
+            assert!(!near_grazing(c, c_p, c_s), "{c}");
+        }
+    }
 
     /// Issue 11: a thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
     /// the optimum of a fit that failed. Its s = 1 wave is faster than the soil's compressional
