@@ -410,7 +410,7 @@ fn fit_from(
         );
     }
     let start = base.and_then(|b| nested_start(&problem, b));
-    let first = fit_once(data, settings, seed, &problem, start.as_deref(), n_meas);
+    let first = fit_once(data, settings, seed, start.as_deref());
     let retry = settings.method == Method::Default
         && first.has_flag(FlagCode::HighMisfit)
         && first
@@ -421,14 +421,11 @@ fn fit_from(
     }
     // The model does not explain the data within their noise: before saying so, one more
     // search from another seed (see [`HIGH_MISFIT_RETRY_STREAM`]), the better answer kept.
-    let problem = problem_for(data, settings);
     let second = fit_once(
         data,
         settings,
         crate::seed::derive(seed, HIGH_MISFIT_RETRY_STREAM),
-        &problem,
         start.as_deref(),
-        n_meas,
     );
     let evaluations = first.evaluations + second.evaluations;
     let result_seconds = first.result_seconds + second.result_seconds;
@@ -478,11 +475,11 @@ fn fit_once(
     data: &SegmentData,
     settings: &FitSettings,
     seed: u64,
-    problem: &Problem<'_>,
     start: Option<&[f64]>,
-    n_meas: usize,
 ) -> FitResult {
-    match run(problem, settings, seed, start) {
+    let problem = problem_for(data, settings);
+    let n_meas = data.measurements.len();
+    match run(&problem, settings, seed, start) {
         Ok(r) if r.path_checked => r,
         Ok(fast) => {
             // The fast search path tracked another root at its optimum: search again with the
@@ -1550,8 +1547,7 @@ mod tests {
             .expect("the segment");
         let settings = FitSettings::default();
         let first_and_answer = |data: &SegmentData| {
-            let p = problem_for(data, &settings);
-            let first = fit_once(data, &settings, seg.seed, &p, None, data.measurements.len());
+            let first = fit_once(data, &settings, seg.seed, None);
             (first, fit_segment(data, &settings, seg.seed))
         };
         let (first, answer) = first_and_answer(&seg.data);
