@@ -280,21 +280,3 @@ fn near_grazing_the_gap_scan_runs_again_from_the_best_the_probes_left() {
 fn a_fit_flagged_high_misfit_searches_once_more_from_another_seed() {
     verify_below(849214, "WM10098", 6.5, "the search ended at 59.68");
 }
-
-/// Three pipes whose DE runs settled at a contact inside its range, in a shallower basin than
-/// one reached from the same soil at another contact: WM10291 (PVC) ended at χ² 16.03 (ξ 0.114)
-/// and WM10133 (asbestos cement) at 4.96 (ξ 0.48), against the exhaustive 13.19 and 4.71 at
-/// smaller contacts; WM10139 (cast iron) at 6.04 (ξ 0.027, E_m 4.1e8 Pa) against 5.67 (ξ 0.032,
-/// E_m 2.7e9 Pa), reached from ξ = ½. The contact ladder polishes from those contacts.
-#[test]
-fn the_contact_ladder_reaches_deeper_basins_at_other_contacts() {
-    verify_below_of(
-        849226,
-        MaterialMix::PlasticHeavy,
-        "WM10291",
-        13.3,
-        "the search ended at 16.03",
-    );
-    verify_below(848982, "WM10133", 4.8, "the search ended at 4.96");
-    verify_below(849212, "WM10139", 5.75, "the search ended at 6.04");
-}

@@ -155,8 +155,7 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// soils are a line of five moduli, not one (issue 10). Version 17: where the best the probes
 /// leave lies near grazing, the gap scan once more from it (see `search`), and a fit flagged
 /// `high_misfit` searches once more from another seed ([`HIGH_MISFIT_RETRY_STREAM`]; issue 10).
-/// Version 18: the contact ladder (`probes::contact_ladder_probe`; issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 18;
+pub const FIT_ALGORITHM_VERSION: i64 = 17;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -612,8 +611,6 @@ fn search(
                 capped.push(c);
             }
         };
-        // The contact ladder from the best so far, where the contact probe has no face to leave.
-        run_probe(&probes::contact_ladder_probe, &mut optima);
         run_probe(&probes::incompressible_probe, &mut optima);
         run_probe(&probes::valley_end_probe, &mut optima);
         // The grazing and edge probes again from a best they moved: its pieces are others.

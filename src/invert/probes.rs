@@ -42,59 +42,6 @@ pub(super) fn contact_probe(
     polish(problem, &x, bounds, POLISH_ITERATIONS)
 }
 
-/// The contact ladder: polishes from the best optimum's soil at other contact coefficients,
-/// the rungs [`CONTACT_LADDER`] of ξ's range, skipping a rung within [`CONTACT_LADDER_SKIP`] of
-/// the best's own ξ. ξ weights the soil's stiffness (§4.10), and along it the misfit can have
-/// two basins for nearly the same soil: one the DE runs settle in, and a deeper one they
-/// leave, often at a smaller contact. The contact probe covers an optimum on a face of ξ's
-/// range; these are optima inside it. Against cached exhaustive searches of 101 verify
-/// networks (20,200 segments; a scratch program, see the README), the segments more than 0.1
-/// above them fell from 5 to 2, for about 85 evaluations a fit:
-///
-/// * from ξ = 0, WM10291 of plastic-heavy 849226 (PVC): the DE runs end at ξ 0.114, c_S
-///   132 m/s, χ² 16.03; the polish reaches ξ 0.024, c_S 139 m/s, χ² 13.19;
-/// * from ξ = 0, WM10133 of 848982 (asbestos cement): ξ 0.48 → 0.17, χ² 4.96 → 4.71;
-/// * from ξ = ½, WM10139 of 849212 (cast iron): ξ 0.027 → 0.032 with E_m 4.1e8 → 2.7e9 Pa
-///   (c_P 437 → 1,124 m/s), χ² 6.04 → 5.67.
-///
-/// A third rung at ξ = 1 mended none of the others, for 45 evaluations more.
-pub(super) fn contact_ladder_probe(
-    pieces: &Pieces<'_, '_>,
-    bounds: &Bounds,
-    best: &Optimum,
-) -> Vec<(Optimum, bool)> {
-    let Some(j) = pieces.jx else {
-        return Vec::new();
-    };
-    let problem = pieces.problem;
-    let spec = &problem.specs[j];
-    contact_ladder_starts(&best.x, j, spec.lower, spec.upper)
-        .into_iter()
-        .filter_map(|x| polish(problem, &x, bounds, POLISH_ITERATIONS))
-        .collect()
-}
-
-/// The starts of [`contact_ladder_probe`]: `x` with its contact coordinate `j` (range
-/// `lo`–`hi`) moved to each rung of [`CONTACT_LADDER`] not within [`CONTACT_LADDER_SKIP`] of it.
-fn contact_ladder_starts(x: &[f64], j: usize, lo: f64, hi: f64) -> Vec<Vec<f64>> {
-    let width = hi - lo;
-    CONTACT_LADDER
-        .iter()
-        .map(|rung| lo + rung * width)
-        .filter(|xi| (xi - x[j]).abs() > CONTACT_LADDER_SKIP * width)
-        .map(|xi| {
-            let mut start = x.to_vec();
-            start[j] = xi;
-            start
-        })
-        .collect()
-}
-
-/// Rungs of the contact ladder, as fractions of the contact coefficient's range.
-pub const CONTACT_LADDER: [f64; 2] = [0.0, 0.5];
-/// A rung this close to the best's contact (fraction of its range) is not polished from.
-pub const CONTACT_LADDER_SKIP: f64 = 0.1;
-
 /// The incompressible probe: whether a deeper basin lies towards ν_m → ½, the end of the
 /// soil's range that no DE population samples well (saturated, nearly incompressible soils).
 /// Two kinds of basin lie there, both narrow in (log E_m, ν_m) because c_P² ∝ 1/(1 − 2ν_m):
@@ -1194,49 +1141,5 @@ mod tests {
             5,
             "both sides along log E and ν, below ξ = 1 only"
         );
-    }
-
-    /// The ladder moves only the contact, to the rungs ξ = 0 and ½ of a range 0–1, and skips a
-    /// rung within a tenth of the range of the best's ξ.
-    #[test]
-    fn the_contact_ladder_moves_only_the_contact_to_rungs_away_from_it() {
-        let x = [8.0, 0.3, 0.3];
-        assert_eq!(
-            contact_ladder_starts(&x, 2, 0.0, 1.0),
-            vec![vec![8.0, 0.3, 0.0], vec![8.0, 0.3, 0.5]]
-        );
-        assert_eq!(
-            contact_ladder_starts(&[8.0, 0.3, 0.09], 2, 0.0, 1.0),
-            vec![vec![8.0, 0.3, 0.5]]
-        );
-        assert_eq!(
-            contact_ladder_starts(&[8.0, 0.3, 0.55], 2, 0.0, 1.0),
-            vec![vec![8.0, 0.3, 0.0]]
-        );
-        // On another range the rungs are fractions of it.
-        assert_eq!(
-            contact_ladder_starts(&[8.0, 0.3, 1.0], 2, 0.5, 1.5),
-            vec![vec![8.0, 0.3, 0.5]]
-        );
-    }
-
-    /// WM10291 of plastic-heavy 849226 (PVC), where fit algorithm 17 ended on 46 of 64 seeds:
-    /// χ² 16.03 at ξ 0.114 (c_S 132 m/s). From the same soil at ξ = 0 the polish reaches the
-    /// exhaustive search's 13.19 (ξ 0.024, c_S 139 m/s); the ladder finds it.
-    #[test]
-    fn the_contact_ladder_reaches_a_deeper_basin_at_a_smaller_contact() {
-        let data = bench_segment(849226, MaterialMix::PlasticHeavy, "WM10291");
-        let p = default_fit_problem(&data);
-        let bounds = p.bounds().expect("bounds");
-        let pieces = Pieces::new(&p).expect("soil parameters");
-        let x = vec![8.4633e7_f64.log10(), 0.2802, 0.1137];
-        let best = polish(&p, &x, &bounds, POLISH_ITERATIONS)
-            .expect("polish")
-            .0;
-        assert!((best.cost - 16.03).abs() < 0.01, "{}", best.cost);
-        let found = contact_ladder_probe(&pieces, &bounds, &best);
-        assert_eq!(found.len(), 2, "both rungs polished");
-        let reached = lowest(&found);
-        assert!(reached < 13.19 + 0.01, "{reached}");
     }
 }
