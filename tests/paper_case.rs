@@ -169,7 +169,7 @@ fn mdpe_measurements_fit() {
     assert_ne!(r.status, FitStatus::Failed, "{:?}", r.message);
     let e = r.soil_modulus().unwrap();
     assert!(e > 4.0e7 / 1.5 && e < 4.0e7 * 1.5, "E = {e}");
-    assert!(r.flags.iter().any(|f| f.code == FlagCode::HighMisfit));
+    assert!(r.has_flag(FlagCode::HighMisfit));
     assert!(r.chi2_per_dof.unwrap() > 10.0);
     for (m, k) in d.measurements.iter().zip(&r.predicted) {
         assert!(
