@@ -156,8 +156,11 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// leave lies near grazing, the gap scan once more from it (see `search`), and a fit flagged
 /// `high_misfit` searches once more from another seed ([`HIGH_MISFIT_RETRY_STREAM`]; issue 10).
 /// Version 18: that retry up to χ²/dof 20 instead of 10
-/// ([`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]; issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 18;
+/// ([`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]; issue 10). Version 19: on the search's paths a root
+/// solve gives up after 12 Newton iterations and 10 of Muller's, not 30 and 20
+/// ([`crate::physics::solver::NEWTON_MAX_ITER`]); near grazing a solve that does not converge
+/// costs less than half as much, and a fit changes only where a root took more (issue 10).
+pub const FIT_ALGORITHM_VERSION: i64 = 19;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).

@@ -22,8 +22,11 @@ pub const MULLER_MAX_ITER: u32 = 100;
 /// [`MAX_STEP_HALVINGS`] halvings of the continuation's step: Mullers that did not converge
 /// took 11 % of that network's fitting time, 1 % with this cap and the fast path's ramp only
 /// after a failure at the lowest frequency (`invert::problem::predict_fast`). Every fit of that
-/// network and of seed 848751 (default mix) ends where it did with 100.
-pub const MULLER_FALLBACK_MAX_ITER: u32 = 20;
+/// network and of seed 848751 (default mix) ends where it did with 100. 10 since fit algorithm
+/// 19, with [`NEWTON_MAX_ITER`]: fitting networks 849901, 849903 (default mix), 849902 and
+/// 849904 (plastic-heavy), 232 fallbacks converged, 23 of them after 11–20 iterations, while
+/// those that do not converge run them all (see [`NEWTON_MAX_ITER`]).
+pub const MULLER_FALLBACK_MAX_ITER: u32 = 10;
 /// A root is accepted only if |F(k1)| ≤ this; F is O(1) (spec §5.5).
 pub const RESIDUAL_ATOL: f64 = 1e-10;
 /// Jump detector threshold on the correction ratio of eq. P43 (spec §5.5).
@@ -313,8 +316,19 @@ fn muller(
     Err(fail(f2.norm()))
 }
 
-/// Newton iterations before falling back to Muller.
-pub const NEWTON_MAX_ITER: u32 = 30;
+/// Newton iterations before falling back to Muller. A converged Newton solve takes 2–3
+/// iterations as a rule: fitting networks 849901, 849903 (default mix), 849902 and 849904
+/// (plastic-heavy), 197 of 7.35 million converged ones took more than 12 (30 was the cap until
+/// fit algorithm 18). One that does not converge runs them all, and then Muller's
+/// [`MULLER_FALLBACK_MAX_ITER`], at every halving of a continuation step that fails near
+/// grazing (P44): on WM10350 of `bench --network 200 --network-seed 849902 --materials
+/// plastic-heavy` (MDPE) the grazing probe's walks took 770 fallbacks in 200 evaluations, 150 µs
+/// an evaluation against about 6 µs. With 12 and 10 instead of 30 and 20 such a solve costs 22
+/// residual evaluations instead of 50; of the 26,400 fits of 132 verify networks (the README's,
+/// against cached exhaustive searches, a scratch program) one ended lower by more than 0.001
+/// in χ² (WM10395 of plastic-heavy 849533, HDPE: 18.57 → 16.29, the exhaustive search's 16.28)
+/// and none higher.
+pub const NEWTON_MAX_ITER: u32 = 12;
 
 /// Newton's method on F with the analytic derivative, from the guess g.
 fn newton(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, SolveError> {
