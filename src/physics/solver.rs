@@ -318,12 +318,12 @@ fn muller(
 
 /// Newton iterations before falling back to Muller. A converged Newton solve takes 2–3
 /// iterations as a rule: fitting networks 849901, 849903 (default mix), 849902 and 849904
-/// (plastic-heavy), 197 of 7.35 million converged ones took more than 12 (30 was the cap until
+/// (plastic-heavy), 197 of 7.35 million converged ones took more than 12 (the cap was 30 up to
 /// fit algorithm 18). One that does not converge runs them all, and then Muller's
 /// [`MULLER_FALLBACK_MAX_ITER`], at every halving of a continuation step that fails near
 /// grazing (P44): on WM10350 of `bench --network 200 --network-seed 849902 --materials
-/// plastic-heavy` (MDPE) the grazing probe's walks took 770 fallbacks in 200 evaluations, 150 µs
-/// an evaluation against about 6 µs. With 12 and 10 instead of 30 and 20 such a solve costs 22
+/// plastic-heavy` (MDPE) two of the grazing probe's walks took 770 and 860 fallbacks in 200 and
+/// 157 evaluations, 70–150 µs an evaluation against about 6 µs in the fit's DE runs. With 12 and 10 instead of 30 and 20 such a solve costs 22
 /// residual evaluations instead of 50; of the 26,400 fits of 132 verify networks (the README's,
 /// against cached exhaustive searches, a scratch program) one ended lower by more than 0.001
 /// in χ² (WM10395 of plastic-heavy 849533, HDPE: 18.57 → 16.29, the exhaustive search's 16.28)
