@@ -57,6 +57,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0007_diagnose_viscoelastic.sql",
         sql: include_str!("../../migrations/0007_diagnose_viscoelastic.sql"),
     },
+    Migration {
+        version: 8,
+        name: "0008_predictions.sql",
+        sql: include_str!("../../migrations/0008_predictions.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.
