@@ -1,4 +1,5 @@
-//! Statistical tails used by the fit's misfit test and the diagnosis (from `statrs`).
+//! Statistical tails used by the fit's misfit test and the diagnosis (from `statrs`), and the
+//! Birge ratio that widens errors where the model does not explain the data.
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
@@ -10,9 +11,27 @@ pub fn chi2_upper_tail(x: f64, k: f64) -> f64 {
     ChiSquared::new(k).map_or(f64::NAN, |d| d.sf(x.max(0.0)))
 }
 
+/// Birge ratio R_B = max(1, √(χ²_min / (n − p))), eq. P88: the factor by which a fit's errors
+/// are widened when its misfit is larger than the measurement noise explains. 1 when there are
+/// no degrees of freedom (n ≤ p) or χ² is not finite, since then the misfit says nothing.
+pub fn birge_ratio(chi2_min: f64, n_measured: usize, n_fitted: usize) -> f64 {
+    if n_measured <= n_fitted || !chi2_min.is_finite() {
+        return 1.0;
+    }
+    (chi2_min / (n_measured - n_fitted) as f64).sqrt().max(1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn birge_ratio_is_root_chi2_per_dof_and_never_below_one() {
+        assert_eq!(birge_ratio(36.0, 8, 4), 3.0);
+        assert_eq!(birge_ratio(2.0, 8, 4), 1.0);
+        assert_eq!(birge_ratio(50.0, 3, 3), 1.0);
+        assert_eq!(birge_ratio(f64::INFINITY, 8, 3), 1.0);
+    }
 
     #[test]
     fn chi2_tail_matches_tables() {
