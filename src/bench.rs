@@ -40,7 +40,7 @@ pub fn time_per_call(batches: usize, reps: usize, mut f: impl FnMut(usize)) -> f
     v[v.len() / 2]
 }
 
-/// The paper's cast-iron main (spec Appendix A case A) with the estimated soil.
+/// The paper's cast-iron main (model Appendix A case A) with the estimated soil.
 pub fn case_a() -> System {
     let pipe = Pipe::new(1.22e11, 0.25, 7800.0, 0.01, 0.069, 0.006).expect("valid");
     let soil = Soil::new(4.79e7, 0.3326, 1999.0, 0.0).expect("valid");

@@ -880,7 +880,7 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     let rec = &job.record;
     let outcome = catch_unwind(AssertUnwindSafe(|| {
         segment_data(rec).map(|data| {
-            // inventory_error is a choice among records, not a model input (spec §8 E8).
+            // inventory_error is a choice among records, not a model input (model §8 E8).
             let result = if settings.effects.contains(&Effect::InventoryError) {
                 crate::diagnose::inventory::fit_with_records(&data, settings, job.seed).fit
             } else {

@@ -11,7 +11,7 @@ use crate::synth::{band_hz, measure, segment_data, sizes, PipeSize, SOILS};
 
 use super::inventory::{DI_K_CLASSES, MM_PER_INCH, SDR_SERIES};
 
-/// A kind of inventory error (spec §8 E8).
+/// A kind of inventory error (model §8 E8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RecordError {
     /// The pipe is of another material (the record: the recorded material's size nearest in

@@ -1,5 +1,5 @@
 //! Fitting one segment: the search (differential evolution, polish, restarts), then the result,
-//! built once: what the data determine (spec §7.10), the predicted curve with its errors, and
+//! built once: what the data determine (model §7.10), the predicted curve with its errors, and
 //! the findings (flags and notes).
 
 use std::fmt;
@@ -56,7 +56,7 @@ impl Default for FitSettings {
 }
 
 impl FitSettings {
-    /// The paper's method (spec §7.1–7.3) with `seed` or `full` model.
+    /// The paper's method (model §7.1–7.3) with `seed` or `full` model.
     pub fn paper(model: Model, contact_mode: ContactMode) -> Self {
         Self {
             method: Method::Paper,
@@ -76,7 +76,7 @@ pub const PATH_AGREEMENT_RTOL: f64 = 1e-6;
 /// Independent DE runs of the default method.
 pub const DEFAULT_RESTARTS: usize = 2;
 /// Evaluation budget of one default DE run per fitted parameter. Measured first on the paper's
-/// cast-iron case, whose global basin is narrow (spec §7.8): with 2 restarts of 3 × 170
+/// cast-iron case, whose global basin is narrow (model §7.8): with 2 restarts of 3 × 170
 /// evaluations from 100 members, 100 of 100 seeds found the global optimum (single runs: 188
 /// of 200); with 20 members single runs found it in only 51 of 80 (see the issue 3 note).
 /// Since the probes look where the DE runs do not, fit algorithm 12 spends 160: the three
@@ -745,7 +745,7 @@ fn run(
     if order.is_empty() {
         return Err(no_root_anywhere(problem, &bounds));
     }
-    // The answer is reported on the reference path (spec §5.3–5.4). Near grazing (P44) the
+    // The answer is reported on the reference path (model §5.3–5.4). Near grazing (P44) the
     // search path can follow a root on the other side of the branch cut, so its misfit may not
     // be the reference path's. The optima are checked best first, each taking the misfit the
     // reference path gives it (infinite where it finds no root), up to the first on which the

@@ -1,6 +1,6 @@
 //! What a fit's user must know: flags (act on these: the prediction is not to be trusted as it
 //! stands) and notes (what the data leave undetermined: information about the soil, not a defect
-//! of the fit; spec §7.10). Each finding has a code and a one-line reason.
+//! of the fit; model §7.10). Each finding has a code and a one-line reason.
 //!
 //! The rule: a fit is `ok` when the model explains the data, the optimum is unique where it
 //! matters for the prediction, and the leak-band speed is determined (one sigma ≤
@@ -414,7 +414,7 @@ fn misfit_too_high(problem: &Problem<'_>, ev: &Evidence<'_>) -> Option<String> {
     }
 }
 
-/// Notes on what the data leave undetermined (spec §7.10), and on intervals at their bounds.
+/// Notes on what the data leave undetermined (model §7.10), and on intervals at their bounds.
 fn soil_notes(ev: &Evidence<'_>, push: &mut impl FnMut(FlagCode, String)) {
     let problem = ev.problem;
     let d = ev.determined;

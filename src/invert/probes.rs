@@ -52,7 +52,7 @@ pub(super) fn contact_probe(
 ///   (`bench --verify 200 --network-seed 848484`, WM10095: χ² 10.41 at ν_m = 0.499 against the
 ///   search's 10.63 at ν_m = 0);
 /// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
-///   off (spec §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
+///   off (model §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
 ///   network, χ² 1.14 at c_P ≈ 2,500 m/s against 2.08 at c_P = 166 m/s. Water-saturated soils
 ///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
 ///   per segment the data cannot tell, and the fit reports its c_P as undetermined.

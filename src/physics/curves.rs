@@ -1,4 +1,4 @@
-//! Wave-speed and attenuation curves over a frequency grid (spec C2): the form every later part
+//! Wave-speed and attenuation curves over a frequency grid (model §2, P2): the form every later part
 //! stores and exports.
 
 use super::inputs::System;

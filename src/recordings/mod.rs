@@ -1,4 +1,4 @@
-//! Field wavenumbers from hydrant-test recordings (physics §10, eqs. P72–P77).
+//! Field wavenumbers from hydrant-test recordings (model §10, eqs. P72–P77).
 //!
 //! A field team opens a hydrant (a broadband noise source at x = 0) and records sensors on the
 //! pipe at signed positions. This module turns those recordings into the `measurements.csv`

@@ -694,7 +694,7 @@ impl<'t> RowCheck<'t> {
         }
     }
 
-    /// Keep `v` only if it is within `range` (spec §3.1 ranges).
+    /// Keep `v` only if it is within `range` (model §3.1 ranges).
     pub fn in_range(
         &mut self,
         col: &'static str,
