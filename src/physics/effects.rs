@@ -138,7 +138,7 @@ mod tests {
     }
 }
 
-/// The effects that extend the model, by their canonical names (interface.md, "Effects").
+/// The effects that extend the model, by their canonical names (docs/interface.md, "Effects").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Effect {
     /// E1: soil material loss η_m.
