@@ -115,51 +115,9 @@ pub const SEPARATION_SIGMAS: f64 = 3.0;
 /// … and by more than this fraction of its search range.
 pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 
-/// Version of the fitting algorithm. A fit made by another version is stale: `calibrate`
-/// refits it on its own (issue 9). Version 1: pipewave 0.1.0. Version 2: what the data
-/// determine (soil speeds, intervals, curve errors), flags and notes re-derived. Version 3:
-/// no fit fails at grazing or for want of a Jacobian (issue 11; fits that failed under
-/// version 2 get an answer, the others are unchanged). Version 4: the answer is the optimum
-/// the reference path rates best, and the 95 % intervals reach every other optimum inside the
-/// 95 % region (issue 10). Version 5: the best optimum polished to the bottom of a flat
-/// valley, and the errors of the soil speeds and of the leak-band speed reach every valley
-/// point inside the 95 % region (issue 10). Version 6: that continued polish with central
-/// differences (issue 10). Version 7: the contact probe, a polish from the opposite face of
-/// ξ's range when the best optimum lies on one (issue 10). Version 8: the incompressible
-/// probe, polishes from the best of a set of soils near ν_m = ½ (issue 10). Version 9: the
-/// grazing probe, polishes from soils across a grazing cliff, and an optimum on a cliff's
-/// edge confirmed just off it (issue 10). Version 10: an evaluation that fails on the fast
-/// path gives up sooner (Muller's fallback capped at 20 iterations, the ramp only after a
-/// failure at the lowest frequency); a fit changes only where Muller needed more than 20
-/// iterations or the ramp would have answered after a failure higher up, which no fit of the
-/// bench networks did (issue 10). Version 11: the edge probe, a walk along the edge of a
-/// cliff by the downhill simplex when the best optimum sits on one; the grazing probe walks
-/// from its starts too, and the grazing and edge probes run again from a best they moved
-/// (issue 10). Version 12: the roots of a Jacobian's steps one Newton step from its centre's
-/// (`LeastSquares::residuals_near`), the candidates' polishes stopped at a looser tolerance
-/// and only the best polished to the bottom, the contact probe from every DE optimum with its
-/// own soil, and the DE runs at 160 evaluations per parameter, not 170 (issue 10). Version
-/// 13: an optimum the reference path has roots at but rates otherwise is confirmed up to 1 %
-/// off its cliff in c_P, not 0.1 % (`probes::FURTHER_OFF_CLIFF_STEPS`), the valley-end probe
-/// (`probes::valley_end_probe`), and the DE runs rank their points by misfits with roots to
-/// 1e-6 (`Tolerance::SEARCH`; issue 10). Version 14: the gap scan, the grazing probe's
-/// first round also starts from the bottom of each piece's valley in c_S and ξ next to every
-/// measured phase speed (`probes::gap_scan`), and the DE runs at 110 evaluations per
-/// parameter, not 160 (issue 10). Version 15: the gap scan also targets the middle of each
-/// gap between measured phase speeds narrower than twice its offset, which its targets next
-/// to the phase speeds leapt over, and c_P just below the best's highest model phase speed
-/// (`probes::GAP_SCAN_BELOW_GRAZING`); the incompressible probe also polishes from the
-/// stiffest soils when they fit promisingly (`probes::INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`;
-/// issue 10). Version 16: the gap scan also targets c_P just above each of the best's model
-/// phase speeds (`probes::GAP_SCAN_ABOVE_GRAZING`), and the incompressible probe's stiffest
-/// soils are a line of five moduli, not one (issue 10). Version 17: where the best the probes
-/// leave lies near grazing, the gap scan once more from it (see `search`), and a fit flagged
-/// `high_misfit` searches once more from another seed ([`HIGH_MISFIT_RETRY_STREAM`]; issue 10).
-/// Version 18: that retry up to χ²/dof 20 instead of 10
-/// ([`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]; issue 10). Version 19: on the search's paths a root
-/// solve gives up after 12 Newton iterations and 10 of Muller's, not 30 and 20
-/// ([`crate::physics::solver::NEWTON_MAX_ITER`]); near grazing a solve that does not converge
-/// costs less than half as much, and a fit changes only where a root took more (issue 10).
+/// Version of the fitting algorithm, stored with every fit (`fits.algorithm_version`). A fit
+/// made by another version is stale: `calibrate` refits it on its own. Bump it whenever a
+/// change can move a stored fit; CHANGELOG.md says what each version changed.
 pub const FIT_ALGORITHM_VERSION: i64 = 19;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
