@@ -13,9 +13,9 @@ use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 use crate::units::hz_to_omega;
 
-/// Relative noise (one sigma) on Re k of a synthetic measurement (issue 3: 1 %).
+/// Relative noise (one sigma) on Re k of a synthetic measurement (1 %).
 pub const NOISE_K_RE: f64 = 0.01;
-/// Relative noise (one sigma) on the attenuation (issue 3: 5 %).
+/// Relative noise (one sigma) on the attenuation (5 %).
 pub const NOISE_ATTENUATION: f64 = 0.05;
 
 /// Default scatter of log10 E_m within a synthetic soil zone, decades: 0.04 decade is about

@@ -1,4 +1,4 @@
-//! Effects the data cannot tell apart (issue 13): why (the physical quantity both change) and
+//! Effects the data cannot tell apart: why (the physical quantity both change) and
 //! which measurement would separate them (a frequency band where the two fitted models'
 //! predictions differ by more than the noise, or a field test).
 

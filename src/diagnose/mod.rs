@@ -1,4 +1,4 @@
-//! The discrepancy workflow (issue 6): find where model and measurements disagree, name the
+//! The discrepancy workflow: find where model and measurements disagree, name the
 //! missing physical effect, refit with it, and show the misfit shrink.
 //!
 //! 1. **Find.** Residuals of the current fit normalised by the measurement standard deviations,
@@ -524,7 +524,7 @@ pub fn refit_plan(diag: &Diagnosis) -> Vec<usize> {
         .collect()
 }
 
-/// The fit with `effects` added to the base model, never worse than the base (issue 16): the
+/// The fit with `effects` added to the base model, never worse than the base: the
 /// search also starts from the base optimum with the added effects at their neutral values.
 pub fn extended_fit(
     data: &SegmentData,
@@ -647,7 +647,7 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// that window they are a tie, broken by AICc: the record, which has no continuous parameter,
 /// is named when its AICc is no higher than that of the best tied physical effect (its χ² at
 /// most the AIC's price of the effect's parameter above), the physical effect otherwise. A
-/// wrong record is the commonest real discrepancy and the cheapest to check (issue 13). One
+/// wrong record is the commonest real discrepancy and the cheapest to check. One
 /// exception: in a pipe that corrodes or graphitises (every non-plastic material, model §8 E4),
 /// wall thinning keeps its place when it is the physical effect [`PRIOR_ORDER`] names and fits
 /// at least as well as the record, because an old iron wall thins as often as its record is

@@ -1,4 +1,4 @@
-//! Synthetic trials of the diagnosis (issue 13 acceptance): one segment with a hidden effect or
+//! Synthetic trials of the diagnosis (acceptance trials): one segment with a hidden effect or
 //! a wrong inventory record, measured with the synthetic network's noise (1 % on Re k, 5 % on
 //! the attenuation). The diagnosis is given only the record and the measurements.
 

@@ -13,7 +13,7 @@ use crate::physics::curves::{band_mean, LEAK_BAND_HZ};
 
 use super::{crs, ExportError};
 
-/// The standard export frequencies, Hz (issue 5). All are on
+/// The standard export frequencies, Hz. All are on
 /// [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ), so the values are stored
 /// curve points, not interpolations.
 pub const EXPORT_FREQUENCIES_HZ: [f64; 4] = [100.0, 200.0, 500.0, 1000.0];

@@ -30,7 +30,7 @@ pub const RELATIVE_ATTENUATION_RMS_MAX: f64 = 0.3;
 /// wall of the material cannot be the s = 1 wave of that pipe.
 pub const MIN_SPEED_FRACTION_OF_KORTEWEG: f64 = 0.5;
 /// Relative one-sigma error of the leak-band speed above which the prediction is not
-/// determined (issue 9: "σ ≤ 2 %").
+/// determined: the speed a correlator is given should be good to 2 %.
 pub const SPEED_RSTD_MAX: f64 = 0.02;
 /// Relative one-sigma error of c_P or c_S below which the data determine that speed.
 pub const SPEED_DETERMINED_RSTD: f64 = 0.1;

@@ -1,6 +1,6 @@
 //! Inversion of one segment: fit the soil's Young's modulus E_m, Poisson's ratio ν_m and the
 //! contact coefficient ξ (and any switched-on effect parameters) to measured wavenumbers, with
-//! uncertainty and flags (model §7; issue 3).
+//! uncertainty and flags (model §7).
 //!
 //! * `paper` method: the paper's DE/rand/1/bin exactly (P51–P59), its objective and bounds.
 //! * default method: SHADE over (log10 E_m, ν_m, ξ, …), chi-square in the measurement standard

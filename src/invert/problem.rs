@@ -471,8 +471,8 @@ impl<'a> Problem<'a> {
 
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation,
     /// except at the last point solved on the fast path, whose wavenumbers it returns again:
-    /// the probes take a scan's or a polish's answer, often the point LM solved last (on
-    /// `bench --network 200 --network-seed 848911`, 16 such repeats a fit).
+    /// the probes take a scan's or a polish's answer, often the point LM solved last (on a
+    /// realistic network, about 16 such repeats a fit).
     pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
         if self.path == SolvePath::Fast {
             if let Some((_, lk)) = self.last.borrow().as_ref().filter(|(lx, _)| lx == x) {
@@ -578,11 +578,10 @@ fn acceptable(sys: &System, root: &crate::physics::Root) -> bool {
 ///
 /// The ramp changes only the path up to the lowest frequency: where the direct start there
 /// took another root, it can help; where the lowest frequency was solved and a higher one
-/// failed, the ramp arrives at the same root and the continuation above fails again. On
-/// `bench --network 200` with seeds 848701 (both mixes), 848751 and 848752 (plastic-heavy)
-/// the ramp ran 584 times: it answered 12 times, each after a failure at the lowest frequency,
-/// and never in the 572 runs after a failure higher up, which each cost about 1 ms (9 % of the
-/// plastic-heavy network's fitting time).
+/// failed, the ramp arrives at the same root and the continuation above fails again. On four
+/// realistic networks the ramp ran 584 times: it answered 12 times, each after a failure at the
+/// lowest frequency, and never in the 572 runs after a failure higher up, which each cost about
+/// 1 ms (9 % of a plastic-heavy network's fitting time).
 pub fn predict_fast(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
     predict_fast_to(sys, omegas, Tolerance::FAST)
 }
@@ -799,10 +798,10 @@ mod tests {
         assert_eq!(safe.evaluations(), 2);
     }
 
-    /// The fast path keeps its ramp for what the ramp is for: on WM10145 of `bench --network 200
-    /// --network-seed 848701`, at a point a polish evaluated, the direct start at the lowest
-    /// frequency (421 rad/s) finds no root and the 8-point ramp answers, with decaying waves.
-    /// (Fit algorithm 10 runs the ramp only after such a failure.)
+    /// The fast path keeps its ramp for what the ramp is for: on a bench-network pipe, at a
+    /// point a polish evaluated, the direct start at the lowest frequency (421 rad/s) finds no
+    /// root and the 8-point ramp answers, with decaying waves. (The ramp runs only after such a
+    /// failure.)
     #[test]
     fn the_ramp_answers_where_the_lowest_frequency_fails() {
         let net = bench_network(200, 848701, MaterialMix::Default);

@@ -13,7 +13,7 @@ pub const STANDARD_GRID_HZ: [f64; 32] = [
     1400.0, 1500.0, 1600.0, 1800.0, 2000.0,
 ];
 
-/// The typical leak-noise band a correlator operator uses, Hz (issue 5). Its mean speed is
+/// The typical leak-noise band a correlator operator uses, Hz. Its mean speed is
 /// [`band_mean`].
 pub const LEAK_BAND_HZ: (f64, f64) = (100.0, 800.0);
 

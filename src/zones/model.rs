@@ -24,7 +24,7 @@ use crate::physics::inputs::MAX_SOIL_POISSON;
 pub const TAU_E_DECADES: f64 = 0.04;
 /// Typical scatter of ν_m between segments of one soil unit (model §7.11: about 0.01).
 pub const TAU_NU: f64 = 0.01;
-/// Members with a fit a zone needs before it is estimated (issue 12).
+/// Members with a fit a zone needs before it is estimated.
 pub const MIN_MEMBERS: usize = 3;
 /// χ²₂ quantile at 0.999: a member whose misfit at the zone (measurement error and scatter
 /// allowed for) exceeds it is a `zone_outlier` (false-alarm rate 0.1 % per segment).

@@ -107,7 +107,7 @@ impl CsvRows {
         let mut cells = Vec::with_capacity(width);
         for (i, raw) in rec.iter().enumerate() {
             match std::str::from_utf8(raw) {
-                // Our own CSV output neutralises formula-like text with a `'` (issue 17):
+                // Our own CSV output neutralises formula-like text with a `'`:
                 // read it back as written.
                 Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
                 Err(_) => {
