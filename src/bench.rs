@@ -40,7 +40,7 @@ pub fn time_per_call(batches: usize, reps: usize, mut f: impl FnMut(usize)) -> f
     v[v.len() / 2]
 }
 
-/// The paper's cast-iron main (spec Appendix A case A) with the estimated soil.
+/// The paper's cast-iron main (model Appendix A case A) with the estimated soil.
 pub fn case_a() -> System {
     let pipe = Pipe::new(1.22e11, 0.25, 7800.0, 0.01, 0.069, 0.006).expect("valid");
     let soil = Soil::new(4.79e7, 0.3326, 1999.0, 0.0).expect("valid");
@@ -663,9 +663,9 @@ pub fn print_network_figures(label: &str, cur: &NetworkRun, old: &NetworkRun) {
 }
 
 /// Evaluations per parameter of each DE run of the exhaustive search of `bench --verify`:
-/// 20× the default budget of fit algorithms 12 and 13 (160). Fixed, not a multiple of the
-/// default budget, so that a cheaper default fit (fit algorithm 14 spends 110) is not judged
-/// against a weaker reference: 20 × 110 would be 2,200.
+/// about 29× the default budget ([`crate::invert::fit::DEFAULT_EVALUATIONS_PER_DIMENSION`]).
+/// Fixed, not a multiple of the default budget, so that a cheaper default fit is not judged
+/// against a weaker reference.
 pub const VERIFY_EVALUATIONS_PER_DIMENSION: usize = 3200;
 /// Restarts of the exhaustive search of `bench --verify`.
 pub const VERIFY_RESTARTS: usize = 6;

@@ -1,4 +1,4 @@
-//! `pipewave forward`: evaluate the forward model for a table of cases (interface.md, "forward
+//! `pipewave forward`: evaluate the forward model for a table of cases (docs/interface.md, "forward
 //! input and output"). One output row per input row; a malformed row is reported with its line
 //! and column and gets an `invalid_input` status, without stopping the other rows.
 

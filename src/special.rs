@@ -3,13 +3,13 @@
 //!
 //! The Bessel and Hankel functions come from `complex-bessel`, a pure-Rust port of Amos'
 //! TOMS 644 [R17]. We always use the exponentially scaled forms: the scale factor cancels in
-//! every ratio we form, and the unscaled H⁽²⁾ underflows silently for large |Im z| (spec §5.7:
+//! every ratio we form, and the unscaled H⁽²⁾ underflows silently for large |Im z| (model §5.7:
 //! H⁽²⁾(1 − 800i) returns 0 and the ratio becomes NaN).
 
 use complex_bessel::{besselj_seq, hankel2_seq, Scaling};
 use num_complex::Complex64;
 
-/// Below this |z²| the fluid-loading factor uses its series ψ = 1 − z²/8 − z⁴/192 (spec §5.5,
+/// Below this |z²| the fluid-loading factor uses its series ψ = 1 − z²/8 − z⁴/192 (model §5.5,
 /// `PSI_SERIES_Z2`). The next term is below 5e-15 there.
 pub const PSI_SERIES_Z2: f64 = 1e-6;
 
@@ -401,7 +401,7 @@ pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
 }
 
 #[cfg(test)]
-#[allow(clippy::excessive_precision)] // reference values copied verbatim from the spec
+#[allow(clippy::excessive_precision)] // reference values copied verbatim from tests/data/vectors (model Appendix A)
 mod tests {
     use super::*;
 
@@ -413,7 +413,7 @@ mod tests {
         (a - b).norm() / b.norm()
     }
 
-    /// Spec Appendix A.1, branch rule table.
+    /// Model Appendix A.1, branch rule table.
     #[test]
     fn branch_rule_matches_appendix_a1() {
         let cases = [
@@ -447,7 +447,7 @@ mod tests {
         assert_eq!(sqrt_plus(c(-4.0, -0.0)), sqrt_plus(c(-4.0, 0.0)));
     }
 
-    /// Spec Appendix A.1, P(z) from mpmath at ≥ 40 + |Im z| digits; tolerance 1e-13 (§5.7).
+    /// Model Appendix A.1, P(z) from mpmath at ≥ 40 + |Im z| digits; tolerance 1e-13 (§5.7).
     #[test]
     fn hankel_ratio_matches_appendix_a1() {
         let cases = [
@@ -494,7 +494,7 @@ mod tests {
         }
     }
 
-    /// Spec Appendix A.1, ψ as a function of z².
+    /// Model Appendix A.1, ψ as a function of z².
     #[test]
     fn psi_matches_appendix_a1() {
         let cases = [

@@ -13,15 +13,15 @@ use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 use crate::units::hz_to_omega;
 
-/// Relative noise (one sigma) on Re k of a synthetic measurement (issue 3: 1 %).
+/// Relative noise (one sigma) on Re k of a synthetic measurement (1 %).
 pub const NOISE_K_RE: f64 = 0.01;
-/// Relative noise (one sigma) on the attenuation (issue 3: 5 %).
+/// Relative noise (one sigma) on the attenuation (5 %).
 pub const NOISE_ATTENUATION: f64 = 0.05;
 
 /// Default scatter of log10 E_m within a synthetic soil zone, decades: 0.04 decade is about
-/// 10 % in E (physics §7.11, typical of one soil unit).
+/// 10 % in E (model §7.11, typical of one soil unit).
 pub const ZONE_SCATTER_E_DECADES: f64 = 0.04;
-/// Default scatter of ν_m within a synthetic soil zone (physics §7.11).
+/// Default scatter of ν_m within a synthetic soil zone (model §7.11).
 pub const ZONE_SCATTER_NU: f64 = 0.01;
 /// Stream of [`crate::seed::derive`] for the zones' soils (independent of the segments').
 const ZONE_SEED_STREAM: u64 = 12;
@@ -42,7 +42,7 @@ const fn size(dn: u32, od_mm: f64, wall_mm: f64) -> PipeSize {
 }
 
 /// Typical sizes of a European / North American distribution network, per material.
-/// DI: ISO 2531 K9 (e = 9(0.5 + 0.001 DN) mm, not checked against the standard, spec §9);
+/// DI: ISO 2531 K9 (e = 9(0.5 + 0.001 DN) mm, not checked against the standard, model §9);
 /// CI: pit- and spun-cast grey iron, thicker walls; ST: EN 10220 / API 5L line pipe;
 /// PVC: EN 1452 SDR 21; MDPE: PE80 SDR 11; HDPE: PE100 SDR 17; AC: class 20 pressure pipe.
 pub fn sizes(material: Material) -> &'static [PipeSize] {
@@ -278,7 +278,7 @@ pub struct SynthOptions {
     /// EPSG code of the coordinates.
     pub srid: u32,
     /// Soil zones (0: none): the segments are split into this many contiguous zones, each one
-    /// soil unit (physics §7.11).
+    /// soil unit (model §7.11).
     pub zones: usize,
     /// Scatter of the segments' soil about their zone's: (log10 E_m decades, ν_m), one sigma.
     pub zone_scatter: (f64, f64),
@@ -319,7 +319,7 @@ impl SynthOptions {
 }
 
 /// The value range a hidden effect is drawn from by default: values whose signature is
-/// visible at 1 %/5 % noise in some segments (spec §8): soil loss 0.05–0.3, air 2e-5–5e-4
+/// visible at 1 %/5 % noise in some segments (model §8): soil loss 0.05–0.3, air 2e-5–5e-4
 /// (log-uniform), effective wall 0.5–0.85 of nominal, wall loss factor 0.04–0.15.
 pub fn default_hidden_range(effect: Effect) -> Option<(f64, f64)> {
     match effect {
@@ -356,7 +356,7 @@ fn log_uniform<R: Rng + ?Sized>(rng: &mut R, lo: f64, hi: f64) -> f64 {
 }
 
 /// The measurement band of a material, Hz: iron, steel and AC carry leak noise to 1.5 kHz;
-/// plastics attenuate strongly above a few hundred Hz (spec §1, [R8]).
+/// plastics attenuate strongly above a few hundred Hz (model §1, [R8]).
 pub fn band_hz(material: Material) -> (f64, f64) {
     if material.is_plastic() {
         (60.0, 600.0)

@@ -1,8 +1,8 @@
-//! Unit conversions at the edges (spec C2, C6, C7). SI inside the library.
+//! Unit conversions at the edges (model §2: P2, P5, P6). SI inside the library.
 
 use std::f64::consts::{LN_10, PI};
 
-/// Decibels per neper: 20/ln 10 = 8.685889638065035 (spec P2).
+/// Decibels per neper: 20/ln 10 = 8.685889638065035 (P2).
 pub const DB_PER_NP: f64 = 20.0 / LN_10;
 
 /// Attenuation in dB/m from Np/m, eq. P2.

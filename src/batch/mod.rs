@@ -1,5 +1,5 @@
 //! The calibrate run: choose the segments that need a fit, fit them in parallel, store each one
-//! as soon as it is done (issue 4).
+//! as soon as it is done.
 //!
 //! Shape (docs/style.md, "Data"): the calling thread holds the database. It takes the run lock,
 //! counts the segments to fit, and records the run. Then it reads the segments a page
@@ -245,7 +245,7 @@ pub struct CalibrateSummary {
     pub elapsed_s: f64,
     /// Sum of the workers' time over the stored fits, ms.
     pub worker_ms: f64,
-    /// The soil zones estimated after the fits (issue 12), if the run finished.
+    /// The soil zones estimated after the fits, if the run finished.
     pub zones: Option<crate::zones::ZoneUpdate>,
 }
 
@@ -880,7 +880,7 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     let rec = &job.record;
     let outcome = catch_unwind(AssertUnwindSafe(|| {
         segment_data(rec).map(|data| {
-            // inventory_error is a choice among records, not a model input (spec §8 E8).
+            // inventory_error is a choice among records, not a model input (model §8 E8).
             let result = if settings.effects.contains(&Effect::InventoryError) {
                 crate::diagnose::inventory::fit_with_records(&data, settings, job.seed).fit
             } else {

@@ -1,6 +1,6 @@
 //! `pipewave wavenumbers --layout layout.csv --out measurements.csv [--band-hz W]
 //! [--min-coherence C] [--fmin F] [--fmax F] [--campaign TEXT]`: field wavenumbers from
-//! hydrant-test recordings (physics §10).
+//! hydrant-test recordings (model §10).
 //!
 //! Writes the `measurements.csv` columns of docs/interface.md for the bands that carry
 //! information, ready for `import` (which accepts no other columns). A band's notes

@@ -46,7 +46,7 @@ pub struct SegmentRecord {
     /// Year laid (informational).
     pub install_year: Option<i64>,
     /// The soil unit the segment lies in, from a geotechnical map or survey (informational for
-    /// the segment's own fit; segments of one zone are also estimated together, physics §7.11).
+    /// the segment's own fit; segments of one zone are also estimated together, model §7.11).
     pub soil_zone: Option<String>,
     /// `LINESTRING (x y, ...)` in EPSG:`srid`, canonical form.
     pub geometry_wkt: Option<String>,
@@ -82,7 +82,7 @@ pub struct MeasurementRecord {
 }
 
 impl SegmentRecord {
-    /// The material's typical properties (spec §3.3) with this row's overrides.
+    /// The material's typical properties (model §3.3) with this row's overrides.
     pub fn pipe_props(&self) -> MaterialProps {
         let mut p = self.material.typical();
         if let Some(v) = self.pipe_youngs_modulus_pa {
@@ -117,7 +117,7 @@ impl SegmentRecord {
         )
     }
 
-    /// The soil density ρ_m, kg/m³, checked against spec §3.1.
+    /// The soil density ρ_m, kg/m³, checked against model §3.1.
     pub fn soil_density(&self) -> Result<f64, InputError> {
         SOIL_DENSITY_RANGE.check(self.soil_density_kg_m3)
     }

@@ -1,4 +1,4 @@
-//! Soil-zone estimates (`zone_fits`, `zone_members`, migration 0005; physics §7.11): insert and
+//! Soil-zone estimates (`zone_fits`, `zone_members`, migration 0005; model §7.11): insert and
 //! read by column name.
 
 use rusqlite::{params, Connection, OptionalExtension, Row};

@@ -1,4 +1,4 @@
-//! Effects the data cannot tell apart (issue 13): why (the physical quantity both change) and
+//! Effects the data cannot tell apart: why (the physical quantity both change) and
 //! which measurement would separate them (a frequency band where the two fitted models'
 //! predictions differ by more than the noise, or a field test).
 
@@ -15,7 +15,7 @@ pub const SEPARATION_SIGMAS: f64 = 2.0;
 /// measured frequency …
 pub const BAND_LOW_FACTOR: f64 = 0.5;
 /// … to this multiple of the highest (capped at 0.45 of the ring frequency, the model's
-/// validity, spec §3.2) …
+/// validity, model §3.2) …
 pub const BAND_HIGH_FACTOR: f64 = 2.0;
 /// … on this many log-spaced points.
 pub const BAND_POINTS: usize = 40;
@@ -35,7 +35,7 @@ pub struct Ambiguity {
 pub const GENERIC_QUANTITY: &str =
     "the same change of the fitted wavenumbers over the measured band";
 
-/// The physical quantity two effects both change (spec §8 signatures).
+/// The physical quantity two effects both change (model §8 signatures).
 pub fn shared_quantity(a: Effect, b: Effect) -> &'static str {
     use Effect::*;
     let pair = if a <= b { (a, b) } else { (b, a) };

@@ -1,4 +1,4 @@
-//! Group detection (issue 13): an effect present in many members of a group (air in a pressure
+//! Group detection: an effect present in many members of a group (air in a pressure
 //! zone, thinning of old cast iron) can be below the per-segment threshold in each one. The
 //! pooled score test adds the members' one-sided score statistics: under "no effect in any
 //! member" each is χ̄² = ½χ²₀ + ½χ²₁ (the parameter on its bound), so their sum over n members

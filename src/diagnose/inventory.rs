@@ -1,4 +1,4 @@
-//! Inventory-record errors (spec §8 E8): the inventory describes another pipe than the one
+//! Inventory-record errors (model §8 E8): the inventory describes another pipe than the one
 //! measured. The candidates are whole records, not a model parameter: every other material of
 //! §3.3 at its standard sizes, the neighbouring wall classes / SDRs of the recorded material,
 //! the diameter and wall in inches read as mm (×25.4) and the reverse (÷25.4), and the nominal
@@ -32,7 +32,7 @@ pub const MM_PER_INCH: f64 = 25.4;
 pub const MAX_DIAMETER_INCHES: f64 = 80.0;
 /// A standard size counts as "near" the recorded diameter within this factor (the catalogue's
 /// sizes span 63–429 mm, so every size within a factor 4 is tried: relinings and
-/// replacements change the diameter a lot, spec §8 E8's example 110 → 180 mm).
+/// replacements change the diameter a lot, model §8 E8's example 110 → 180 mm).
 pub const NEAR_DIAMETER_FACTOR: f64 = 4.0;
 /// Screening fit of every candidate: one DE run with this budget per parameter …
 pub const SCREEN_EVALUATIONS_PER_DIMENSION: usize = 60;
@@ -143,7 +143,7 @@ fn neighbours(series: &[f64], value: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The candidate records of spec §8 E8 for a segment, each a valid pipe (a candidate the
+/// The candidate records of model §8 E8 for a segment, each a valid pipe (a candidate the
 /// thin-shell model cannot take is left out).
 pub fn candidates(data: &SegmentData) -> Vec<RecordCandidate> {
     let (od, wall) = recorded_size(data);
@@ -329,7 +329,7 @@ pub struct RecordChoice {
     pub record: Option<RecordCandidate>,
 }
 
-/// `calibrate --effects inventory_error` (spec §8 E8): fit the segment as recorded with the
+/// `calibrate --effects inventory_error` (model §8 E8): fit the segment as recorded with the
 /// other effects of `settings`, and test the candidate records exactly as `diagnose` does (only
 /// when the recorded pipe leaves a misfit far above the noise; the best record must pass the
 /// likelihood-ratio test with the number of records tried in its level, lower the AICc, predict

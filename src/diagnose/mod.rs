@@ -1,11 +1,11 @@
-//! The discrepancy workflow (issue 6): find where model and measurements disagree, name the
+//! The discrepancy workflow: find where model and measurements disagree, name the
 //! missing physical effect, refit with it, and show the misfit shrink.
 //!
 //! 1. **Find.** Residuals of the current fit normalised by the measurement standard deviations,
 //!    per frequency, for Re k and the attenuation separately, with tests for structure: misfit
 //!    far above the noise, a trend with frequency, runs of one sign, one part fine and the other
 //!    off ([`structure`]).
-//! 2. **Name.** Every effect of the library ([`Effect`], spec §8) is a nested extension of the
+//! 2. **Name.** Every effect of the library ([`Effect`], model §8) is a nested extension of the
 //!    model with one parameter at a neutral value. At the current fit a score (Lagrange
 //!    multiplier) test says how much χ² each could remove, cheaply and without refitting; the
 //!    one-sided effects (air, thinning, losses only move one way) score zero when the data pull
@@ -50,9 +50,9 @@ pub const EXPLAINED_P: f64 = 1e-4;
 /// (two units of χ²: the AIC's price of a parameter).
 pub const TIE_LR: f64 = 2.0;
 /// Tie-break between equally good effects, most plausible first: the loss factor of a wall
-/// is the least certain input (plastics 0.04–0.1, iron a single published value, spec §3.3);
+/// is the least certain input (plastics 0.04–0.1, iron a single published value, model §3.3);
 /// wall thinning is common in old iron; free air needs a reason (a high point, a recent
-/// repair); soil damping shows only in stiff soil (spec §8 E1); the full model is the default.
+/// repair); soil damping shows only in stiff soil (model §8 E1); the full model is the default.
 /// A viscoelastic wall is a wall loss with a rising modulus: it comes after the plain loss
 /// factor. The inventory record is listed last, but a tie between a record and a physical
 /// effect is broken by AICc instead (see [`name_effect`]).
@@ -524,7 +524,7 @@ pub fn refit_plan(diag: &Diagnosis) -> Vec<usize> {
         .collect()
 }
 
-/// The fit with `effects` added to the base model, never worse than the base (issue 16): the
+/// The fit with `effects` added to the base model, never worse than the base: the
 /// search also starts from the base optimum with the added effects at their neutral values.
 pub fn extended_fit(
     data: &SegmentData,
@@ -614,7 +614,7 @@ fn judge(
     }
 }
 
-/// Step 2c (inventory, spec §8 E8): fit the candidate records of a segment whose misfit needs
+/// Step 2c (inventory, model §8 E8): fit the candidate records of a segment whose misfit needs
 /// explaining, whether or not a physical effect was accepted (a thinner wall class looks like
 /// thinning, a thicker one like a stiffer, lossier wall, another material like either). The
 /// best record is tested like an effect, with the number of records tried in the
@@ -647,8 +647,8 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// that window they are a tie, broken by AICc: the record, which has no continuous parameter,
 /// is named when its AICc is no higher than that of the best tied physical effect (its χ² at
 /// most the AIC's price of the effect's parameter above), the physical effect otherwise. A
-/// wrong record is the commonest real discrepancy and the cheapest to check (issue 13). One
-/// exception: in a pipe that corrodes or graphitises (every non-plastic material, spec §8 E4),
+/// wrong record is the commonest real discrepancy and the cheapest to check. One
+/// exception: in a pipe that corrodes or graphitises (every non-plastic material, model §8 E4),
 /// wall thinning keeps its place when it is the physical effect [`PRIOR_ORDER`] names and fits
 /// at least as well as the record, because an old iron wall thins as often as its record is
 /// wrong; a plastic wall does not thin, so there a thinner wall is a record to check.
@@ -774,7 +774,7 @@ fn score(data: &SegmentData, base: &FitResult, s: &DiagnoseSettings, e: Effect) 
     };
     let dir = if e == Effect::WallThinning { -1.0 } else { 1.0 };
     // One-sided step in the natural parameter: 1e-6 in air fraction (it acts on the scale of
-    // 1e-5, spec §8 E3), 1e-3 in the loss factors and the wall ratio.
+    // 1e-5, model §8 E3), 1e-3 in the loss factors and the wall ratio.
     let h = if e == Effect::AirInWater { 1e-6 } else { 1e-3 };
     let Ok(sys1) = e.apply(&sys0, neutral + dir * h) else {
         return 0.0;

@@ -1,4 +1,4 @@
-//! The diagnosis report: `diagnosis.csv` (interface.md) and `diagnosis.html` (inline SVG).
+//! The diagnosis report: `diagnosis.csv` (docs/interface.md) and `diagnosis.html` (inline SVG).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -34,7 +34,7 @@ pub const CSV_COLUMNS: [&str; 20] = [
     "record_to_check",
 ];
 
-/// Columns of `groups.csv` (interface.md).
+/// Columns of `groups.csv` (docs/interface.md).
 pub const GROUP_CSV_COLUMNS: [&str; 8] = [
     "group",
     "n_segments",

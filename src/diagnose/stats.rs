@@ -1,4 +1,4 @@
-//! The distributions of the diagnosis's tests, from `statrs` (issue 11: no hand-written tails);
+//! The distributions of the diagnosis's tests, from `statrs` (no hand-written tails);
 //! the plain χ² tail is the crate's [`crate::stats::chi2_upper_tail`].
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};

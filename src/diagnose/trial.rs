@@ -1,4 +1,4 @@
-//! Synthetic trials of the diagnosis (issue 13 acceptance): one segment with a hidden effect or
+//! Synthetic trials of the diagnosis (acceptance trials): one segment with a hidden effect or
 //! a wrong inventory record, measured with the synthetic network's noise (1 % on Re k, 5 % on
 //! the attenuation). The diagnosis is given only the record and the measurements.
 
@@ -11,7 +11,7 @@ use crate::synth::{band_hz, measure, segment_data, sizes, PipeSize, SOILS};
 
 use super::inventory::{DI_K_CLASSES, MM_PER_INCH, SDR_SERIES};
 
-/// A kind of inventory error (spec §8 E8).
+/// A kind of inventory error (model §8 E8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RecordError {
     /// The pipe is of another material (the record: the recorded material's size nearest in

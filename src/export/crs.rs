@@ -217,7 +217,7 @@ pub fn is_geographic(srid: i64) -> bool {
 mod tests {
     use super::*;
 
-    /// The systems issue 5 names: each must have a projected WKT whose authority is its code.
+    /// The projected systems utilities commonly use: each must have a projected WKT whose authority is its code.
     #[test]
     fn the_common_projected_systems_are_known() {
         let mut codes = vec![27700, 25832, 25833, 3857, 2154];

@@ -13,7 +13,7 @@ use crate::physics::curves::{band_mean, LEAK_BAND_HZ};
 
 use super::{crs, ExportError};
 
-/// The standard export frequencies, Hz (issue 5). All are on
+/// The standard export frequencies, Hz. All are on
 /// [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ), so the values are stored
 /// curve points, not interpolations.
 pub const EXPORT_FREQUENCIES_HZ: [f64; 4] = [100.0, 200.0, 500.0, 1000.0];
@@ -43,7 +43,7 @@ pub struct SegmentExport {
     pub attenuation_at: [Option<f64>; 4],
     /// Mean phase speed over [`LEAK_BAND_HZ`], m/s ([`band_mean_speed`]).
     pub leak_band_speed: Option<f64>,
-    /// Its zone's newest estimate and its place in it (physics §7.11), if any
+    /// Its zone's newest estimate and its place in it (model §7.11), if any
     /// ([`Self::set_zone`]).
     pub zone: Option<(db::zones::ZoneFitRow, db::zones::ZoneMemberRow)>,
     /// The latest fit's `flags`, with its zone's verdict on that fit appended
@@ -666,7 +666,7 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "soil_zone",
         kind: Kind::Text,
-        doc: "the soil unit of the inventory (physics §7.11)",
+        doc: "the soil unit of the inventory (model §7.11)",
         get: |r| Value::text(r.segment.soil_zone.as_deref()),
     },
     zone_real!(

@@ -1,4 +1,4 @@
-//! CSV files that are safe to open in a spreadsheet (issue 17).
+//! CSV files that are safe to open in a spreadsheet.
 //!
 //! Excel, LibreOffice Calc and Google Sheets read a cell that begins with `=`, `+`, `-`, `@`, a
 //! tab or a carriage return as a formula ("CSV injection", OWASP). A segment id of
@@ -33,7 +33,7 @@ pub const TEXT_PREFIX: char = '\'';
 /// ```
 /// use pipewave::export::spreadsheet::spreadsheet_safe;
 /// assert_eq!(spreadsheet_safe("=HYPERLINK(\"http://x\")"), "'=HYPERLINK(\"http://x\")");
-/// assert_eq!(spreadsheet_safe("WM10003"), "WM10003");
+/// assert_eq!(spreadsheet_safe("HYD-1003"), "HYD-1003");
 /// ```
 pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
     if s.starts_with(FORMULA_LEADS) {

@@ -1,6 +1,6 @@
-//! The GeoPackage's zone layer (issue 12): one polygon per soil zone, the convex hull of its
+//! The GeoPackage's zone layer: one polygon per soil zone, the convex hull of its
 //! segments' geometry buffered by [`ZONE_BUFFER_M`], with the zone's E_m, ν_m, c_P and c_S and
-//! their 95 % intervals (physics §7.11) from its newest estimate.
+//! their 95 % intervals (model §7.11) from its newest estimate.
 
 use std::collections::BTreeMap;
 

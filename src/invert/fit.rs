@@ -1,5 +1,5 @@
 //! Fitting one segment: the search (differential evolution, polish, restarts), then the result,
-//! built once: what the data determine (spec §7.10), the predicted curve with its errors, and
+//! built once: what the data determine (model §7.10), the predicted curve with its errors, and
 //! the findings (flags and notes).
 
 use std::fmt;
@@ -56,7 +56,7 @@ impl Default for FitSettings {
 }
 
 impl FitSettings {
-    /// The paper's method (spec §7.1–7.3) with `seed` or `full` model.
+    /// The paper's method (model §7.1–7.3) with `seed` or `full` model.
     pub fn paper(model: Model, contact_mode: ContactMode) -> Self {
         Self {
             method: Method::Paper,
@@ -75,26 +75,15 @@ pub const PATH_AGREEMENT_RTOL: f64 = 1e-6;
 
 /// Independent DE runs of the default method.
 pub const DEFAULT_RESTARTS: usize = 2;
-/// Evaluation budget of one default DE run per fitted parameter. Measured first on the paper's
-/// cast-iron case, whose global basin is narrow (spec §7.8): with 2 restarts of 3 × 170
-/// evaluations from 100 members, 100 of 100 seeds found the global optimum (single runs: 188
-/// of 200); with 20 members single runs found it in only 51 of 80 (see the issue 3 note).
-/// Since the probes look where the DE runs do not, fit algorithm 12 spends 160: the three
-/// bench cases still reach the global optimum from 100 of 100 seeds (`examples/budget_scan
-/// 160 2 100`, and with 150; with the contact probe from the best optimum alone, 160 gave 99
-/// of 100 on the paper's case, see `search`), and on twenty verify networks (seeds
-/// 848484–848804 of the README and 848812, 848821–848823 plastic-heavy) the same five segments
-/// end more than 0.1 above the exhaustive χ² as with 170. With 150 one more does: on WM10018
-/// of seed 848782 (MDPE) both DE runs end near χ² 120 at ξ ≈ 1, and no probe reaches the
-/// global optimum at 5.88 (ν_m 0.27, ξ 0.008), which one of the runs with 160 finds.
-/// Fit algorithm 14 spends 110: the gap scan (`probes::gap_scan`) finds such pieces itself,
-/// and the three bench cases reach the global optimum from 100 of 100 seeds with 90–140
-/// (`examples/budget_scan B 2 100`). Measured with the gap scan against cached exhaustive
-/// searches of fit algorithm 13 on the verify networks of the README (24 default, 8
-/// plastic-heavy), the segments more than 0.1 above them were, default + plastic-heavy:
-/// 90: 1 + 2, 100: 3 + 3, 110: 1 + 0, 120: 1 + 1, 130: 2 + 2, 140: 0 + 2, at 1,528, 1,587,
-/// 1,645, 1,704, 1,765 and 1,821 evaluations per fit on the default mix. Which segments miss
-/// changes with the DE runs' paths; the count does not fall with the budget.
+/// Evaluation budget of one default DE run per fitted parameter. On the paper's cast-iron case,
+/// whose global basin is narrow (model §7.8), 2 restarts of 3 × 170 evaluations from 100 members
+/// found the global optimum from 100 of 100 seeds (with 20 members single runs found it in only
+/// 51 of 80). Since the probes look where the DE runs do not, and the gap scan
+/// (`probes::gap_scan`) finds the narrow pieces of the misfit surface itself, 110 suffices: the
+/// three bench cases reach the global optimum from 100 of 100 seeds with any budget from 90 to
+/// 140 (`examples/budget_scan B 2 100`). Against exhaustive searches of realistic networks the
+/// count of segments left above the global optimum does not fall with the budget between 90 and
+/// 140: which segments miss changes with the DE runs' paths.
 pub const DEFAULT_EVALUATIONS_PER_DIMENSION: usize = 110;
 /// Initial population of the default DE (L-SHADE, shrinking linearly to 4 over the budget).
 pub const DEFAULT_POPULATION: usize = 100;
@@ -115,51 +104,9 @@ pub const SEPARATION_SIGMAS: f64 = 3.0;
 /// … and by more than this fraction of its search range.
 pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 
-/// Version of the fitting algorithm. A fit made by another version is stale: `calibrate`
-/// refits it on its own (issue 9). Version 1: pipewave 0.1.0. Version 2: what the data
-/// determine (soil speeds, intervals, curve errors), flags and notes re-derived. Version 3:
-/// no fit fails at grazing or for want of a Jacobian (issue 11; fits that failed under
-/// version 2 get an answer, the others are unchanged). Version 4: the answer is the optimum
-/// the reference path rates best, and the 95 % intervals reach every other optimum inside the
-/// 95 % region (issue 10). Version 5: the best optimum polished to the bottom of a flat
-/// valley, and the errors of the soil speeds and of the leak-band speed reach every valley
-/// point inside the 95 % region (issue 10). Version 6: that continued polish with central
-/// differences (issue 10). Version 7: the contact probe, a polish from the opposite face of
-/// ξ's range when the best optimum lies on one (issue 10). Version 8: the incompressible
-/// probe, polishes from the best of a set of soils near ν_m = ½ (issue 10). Version 9: the
-/// grazing probe, polishes from soils across a grazing cliff, and an optimum on a cliff's
-/// edge confirmed just off it (issue 10). Version 10: an evaluation that fails on the fast
-/// path gives up sooner (Muller's fallback capped at 20 iterations, the ramp only after a
-/// failure at the lowest frequency); a fit changes only where Muller needed more than 20
-/// iterations or the ramp would have answered after a failure higher up, which no fit of the
-/// bench networks did (issue 10). Version 11: the edge probe, a walk along the edge of a
-/// cliff by the downhill simplex when the best optimum sits on one; the grazing probe walks
-/// from its starts too, and the grazing and edge probes run again from a best they moved
-/// (issue 10). Version 12: the roots of a Jacobian's steps one Newton step from its centre's
-/// (`LeastSquares::residuals_near`), the candidates' polishes stopped at a looser tolerance
-/// and only the best polished to the bottom, the contact probe from every DE optimum with its
-/// own soil, and the DE runs at 160 evaluations per parameter, not 170 (issue 10). Version
-/// 13: an optimum the reference path has roots at but rates otherwise is confirmed up to 1 %
-/// off its cliff in c_P, not 0.1 % (`probes::FURTHER_OFF_CLIFF_STEPS`), the valley-end probe
-/// (`probes::valley_end_probe`), and the DE runs rank their points by misfits with roots to
-/// 1e-6 (`Tolerance::SEARCH`; issue 10). Version 14: the gap scan, the grazing probe's
-/// first round also starts from the bottom of each piece's valley in c_S and ξ next to every
-/// measured phase speed (`probes::gap_scan`), and the DE runs at 110 evaluations per
-/// parameter, not 160 (issue 10). Version 15: the gap scan also targets the middle of each
-/// gap between measured phase speeds narrower than twice its offset, which its targets next
-/// to the phase speeds leapt over, and c_P just below the best's highest model phase speed
-/// (`probes::GAP_SCAN_BELOW_GRAZING`); the incompressible probe also polishes from the
-/// stiffest soils when they fit promisingly (`probes::INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`;
-/// issue 10). Version 16: the gap scan also targets c_P just above each of the best's model
-/// phase speeds (`probes::GAP_SCAN_ABOVE_GRAZING`), and the incompressible probe's stiffest
-/// soils are a line of five moduli, not one (issue 10). Version 17: where the best the probes
-/// leave lies near grazing, the gap scan once more from it (see `search`), and a fit flagged
-/// `high_misfit` searches once more from another seed ([`HIGH_MISFIT_RETRY_STREAM`]; issue 10).
-/// Version 18: that retry up to χ²/dof 20 instead of 10
-/// ([`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]; issue 10). Version 19: on the search's paths a root
-/// solve gives up after 12 Newton iterations and 10 of Muller's, not 30 and 20
-/// ([`crate::physics::solver::NEWTON_MAX_ITER`]); near grazing a solve that does not converge
-/// costs less than half as much, and a fit changes only where a root took more (issue 10).
+/// Version of the fitting algorithm, stored with every fit (`fits.algorithm_version`). A fit
+/// made by another version is stale: `calibrate` refits it on its own. Bump it whenever a
+/// change can move a stored fit; CHANGELOG.md says what each version changed.
 pub const FIT_ALGORITHM_VERSION: i64 = 19;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
@@ -384,7 +331,7 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
     fit_from(data, settings, seed, None)
 }
 
-/// Fit one segment with effects beyond those of a `base` fit of the same segment (issue 16):
+/// Fit one segment with effects beyond those of a `base` fit of the same segment:
 /// besides the usual search, start from the base optimum with every added effect at its
 /// neutral value, and keep the better. The extended model contains the base model, so the
 /// result's misfit is never above the base fit's (up to the solver's tolerance), whatever the
@@ -446,26 +393,19 @@ fn fit_from(
 
 /// Seed stream of the second search of a fit flagged `high_misfit` (far from the restarts'
 /// streams 0, 1, …; the same fit whatever the thread count). Rarely, both DE runs and every
-/// probe end in a basin far above the global one: WM10098 of `bench --verify 200
-/// --network-seed 849214` (PVC) ended at χ² 59.68 (c_P 4,013 m/s, ξ 1) against the
-/// exhaustive search's 6.32 (c_P 400 m/s, ξ 0.016), which the default fit reaches from 64 of
-/// 64 other seeds. A misfit that high is flagged (p <
-/// [`MISFIT_P_VALUE`](super::flags::MISFIT_P_VALUE)); up to
+/// probe end in a basin far above the global one (χ² 60 against 6.3 on a PVC pipe, whose global
+/// optimum the default fit reaches from nearly every other seed). A misfit that high is flagged
+/// (p < [`MISFIT_P_VALUE`](super::flags::MISFIT_P_VALUE)); up to
 /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`] a second search runs, so that the flag means the
 /// model, not the search, fails to explain the data.
 pub const HIGH_MISFIT_RETRY_STREAM: u64 = 0x6869_6768;
 
 /// χ²/dof up to which a fit flagged `high_misfit` searches once more. Further up the data are
-/// mostly defective (a unit error, an outlier, a wrong record), and no search mends them: on
-/// `net10k` (`synth --seed 77001`, 10,002 segments with the generator's defects) 232 fits are
-/// so flagged, 14 of them at χ²/dof 2.7–4.3 and the rest at 14 or more, the four below 25 all
-/// defective (outliers and an attenuation in dB). Retrying all 232 took the run from 56 to
-/// 61–64 s and brought none of them within the noise (31 fell by 1.5–55 in χ², all still in the
-/// hundreds). Fit algorithm 17 retried up to 10 (WM10098 above: 8.5); then WM10067 of
-/// `bench --verify 200 --network-seed 849544 --materials plastic-heavy` (MDPE, no defect) ended
-/// at χ² 69.05, χ²/dof 13.8, against the exhaustive 4.86 that the default fit reaches from 62 of
-/// 64 other seeds. Up to 20 a retry costs one more fit on net10k (a defective one at 14.0) and 8
-/// on net100k (`--seed 77002`; 129 of its 2,292 such fits lie at or below 20).
+/// mostly defective (a unit error, an outlier, a wrong record), and no search mends them: on a
+/// 10,000-segment synthetic network with the generator's defects, retrying every such fit took
+/// the run about 10 % longer and brought none within the noise. A search that missed its global
+/// optimum can still end at χ²/dof 10–15 (13.8 on an MDPE pipe without defect), so the limit is
+/// 20, above which nearly every such fit is defective.
 pub const HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF: f64 = 20.0;
 
 /// The problem of fitting `data` with `settings`.
@@ -638,14 +578,10 @@ fn search(
         // Where the best the probes leave lies near grazing (`Pieces::near_grazing`), the gap
         // scan once more from it: its targets follow the best's model phase speeds, and the
         // best has moved since the first scan, often along a flat valley, by less in χ² than
-        // the rounds above need to go on. Against cached exhaustive searches of 85 verify
-        // networks (17,000 segments; a scratch program, see the README), the segments more
-        // than 0.1 above them fell from 6 to 3 (WM10312 of plastic-heavy 849016, 5.56 → 5.39;
-        // WM10084 of 849044, 12.78 → 12.57; WM10183 of plastic-heavy 849051, 19.38 → 17.94),
-        // for 35 (default mix) and 50 (plastic-heavy) evaluations a fit more. The whole probe
-        // sequence again mended the same three for 50 and 70; a longer DE run (440 evaluations
-        // per parameter) with its own probes mended WM10281 of plastic-heavy 849027 but not
-        // WM10312 or WM10183, for 128 and 177, and took the plastic-heavy p99 from 25 to 55 ms.
+        // the rounds above need to go on. Against exhaustive searches of realistic networks
+        // this halved the segments left more than 0.1 above the global optimum, for 35–50
+        // evaluations a fit more; the whole probe sequence again, or a longer DE run with its
+        // own probes, cost more and mended no more.
         if best(&optima).is_some_and(|b| pieces.near_grazing(&b.x)) {
             run_probe(
                 &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, true),
@@ -656,16 +592,15 @@ fn search(
     // The best optimum's polish goes on where it stopped still descending: only the best's,
     // since only the answer needs the bottom of its valley. Central differences there: in a
     // narrow curved valley a forward-difference Jacobian's error across the valley swamps the
-    // gradient along it, and the polish stops short (by 0.13 in χ² on an MDPE segment of
-    // `bench --verify 200 --network-seed 848484`).
+    // gradient along it, and the polish stops short (by 0.13 in χ² on an MDPE pipe).
     let best = (0..optima.len()).min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
     // The candidates' polishes stop at a loose tolerance ([`CANDIDATE_POLISH_RTOL`]); the
     // best's goes on to LM's own, with forward differences where it stopped on that
     // tolerance. Where it stopped at its iteration cap, still descending, it goes on with
-    // central differences below instead: on WM10121 of `bench --verify 200 --network-seed
-    // 848607` (ductile iron) 30 more forward iterations cross onto a grazing cliff (χ² 5.38 on
-    // the search path, 19.6 on the reference path), and the answer falls back to 5.66 where
-    // the central polish ends within 0.1 of the exhaustive search's 5.42.
+    // central differences below instead: forward iterations can cross onto a grazing cliff
+    // where the search path and the reference path rate the soil differently (χ² 5.4 against
+    // 19.6 on a ductile-iron pipe), and the answer falls back to a worse basin, while the
+    // central polish ends within 0.1 of the exhaustive search.
     if let Some(i) = best {
         for (iterations, fd) in [
             (POLISH_ITERATIONS, FiniteDifference::Forward),
@@ -698,10 +633,9 @@ pub const SAME_OPTIMUM_FRACTION: f64 = 1e-3;
 
 /// Rounds of the grazing and edge probes at most: another round runs from the best optimum
 /// when the last improved it by more than [`GRAZING_ROUND_GAIN`] in χ², since the pieces
-/// next to a new best are others. On `bench --verify 200 --network-seed 848784` WM10052's
-/// first round takes the best from χ² 10.54 (c_P 402 m/s) to 10.34 (c_P 558 m/s); from there
-/// the soil moved to c_P 542 m/s, between the measured phase speeds 541 and 543 m/s, walks to
-/// the exhaustive search's 4.79.
+/// next to a new best are others. A first round can move the best to a piece from which the
+/// soil, moved between two measured phase speeds, walks to a far better optimum (χ² 10.3 →
+/// 4.8 on a realistic pipe in the second round).
 pub const GRAZING_ROUNDS: usize = 3;
 /// See [`GRAZING_ROUNDS`].
 pub const GRAZING_ROUND_GAIN: f64 = 0.01;
@@ -745,7 +679,7 @@ fn run(
     if order.is_empty() {
         return Err(no_root_anywhere(problem, &bounds));
     }
-    // The answer is reported on the reference path (spec §5.3–5.4). Near grazing (P44) the
+    // The answer is reported on the reference path (model §5.3–5.4). Near grazing (P44) the
     // search path can follow a root on the other side of the branch cut, so its misfit may not
     // be the reference path's. The optima are checked best first, each taking the misfit the
     // reference path gives it (infinite where it finds no root), up to the first on which the
@@ -820,7 +754,7 @@ fn run(
         // reference path has no root at: the caller searches again on the safe path
         // (continuation ramp wherever the soil moves the root far from in vacuo), whose answer
         // stands on the reference path's misfit. Otherwise a worse basin could stand in for a
-        // better one the fast path saw wrongly: on the stress network's HDPE segment WM10951
+        // better one the fast path saw wrongly: on an HDPE pipe of the stress network
         // (tests/stress.rs) the reference path finds no root at the two DE optima of the fast
         // search (χ² 33.7 there), and the contact probe's optimum (χ² 1532) would be the
         // answer; the safe path's is χ² 33.7.
@@ -1319,12 +1253,9 @@ enum Depth {
 /// Relative tolerance (LM's `ftol` and `xtol`) of the polish of a candidate of the search,
 /// where only the ranking of the optima matters; the best is then polished to the bottom
 /// (`Depth::Answer`). A candidate's polish spent its last iterations gaining less than this.
-/// On `bench --network 200 --network-seed 848812 --materials plastic-heavy` (fit algorithm
-/// 11's budget) the fits took 1,723 evaluations each with every polish to LM's own
-/// tolerances, 1,615 with this one and 1,585 with 1e-6. On the verify networks of seeds
-/// 848801–848804, 848607, 848723, 848783 (default mix) and 848812, 848821–848823
-/// (plastic-heavy) this one leaves the same segments more than 0.1 above the exhaustive χ² as
-/// LM's own tolerances, while 1e-6 adds three, 0.10–0.16 above.
+/// On a plastic-heavy realistic network it cut the evaluations a fit from 1,723 (every polish
+/// to LM's own tolerances) to 1,615 and left the same segments above the exhaustive search's
+/// χ², while 1e-6 (1,585) added misses of 0.10–0.16.
 pub const CANDIDATE_POLISH_RTOL: f64 = 1e-7;
 
 /// Levenberg–Marquardt polish of a candidate optimum of the search inside the bounds.
@@ -1544,8 +1475,8 @@ mod tests {
     use crate::invert::uncertainty::{soil_speeds, Z_95};
 
     /// A fit flagged `high_misfit` searches once more only up to
-    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. WM10098 of the bench network 849214 (PVC): from
-    /// its own seed the search ends at χ² 59.7 (χ²/dof 8.5), the second search at 6.3. With its
+    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from its own
+    /// seed the search ends at χ² 59.7 (χ²/dof 8.5), the second search at 6.3. With its
     /// attenuations written in dB/m (8.7 × too large, a defect of the sample network) χ²/dof is
     /// far above the limit, and the fit is the first search's, evaluation for evaluation.
     #[test]
@@ -1579,10 +1510,10 @@ mod tests {
     }
 
     /// Where no finite-difference Jacobian exists on any path or step, the curvature is
-    /// unknown and the intervals span the search range. The point: the answer of the stress
-    /// network's HDPE segment WM10951 (tests/stress.rs) before the grazing probe and the step
-    /// off a cliff (fit algorithm 8), where the model's root jumps between branches for the
-    /// slightest change of E_m or ξ; version 9 answers next to it, where a Jacobian exists.
+    /// unknown and the intervals span the search range. The point: an HDPE pipe of the stress
+    /// network (tests/stress.rs) at a soil where the model's root jumps between branches for
+    /// the slightest change of E_m or ξ (the fit now answers next to it, where a Jacobian
+    /// exists).
     #[test]
     fn where_no_jacobian_exists_the_intervals_span_the_search_range() {
         use crate::physics::effects::Effect;

@@ -1,6 +1,6 @@
 //! What a fit's user must know: flags (act on these: the prediction is not to be trusted as it
 //! stands) and notes (what the data leave undetermined: information about the soil, not a defect
-//! of the fit; spec §7.10). Each finding has a code and a one-line reason.
+//! of the fit; model §7.10). Each finding has a code and a one-line reason.
 //!
 //! The rule: a fit is `ok` when the model explains the data, the optimum is unique where it
 //! matters for the prediction, and the leak-band speed is determined (one sigma ≤
@@ -30,7 +30,7 @@ pub const RELATIVE_ATTENUATION_RMS_MAX: f64 = 0.3;
 /// wall of the material cannot be the s = 1 wave of that pipe.
 pub const MIN_SPEED_FRACTION_OF_KORTEWEG: f64 = 0.5;
 /// Relative one-sigma error of the leak-band speed above which the prediction is not
-/// determined (issue 9: "σ ≤ 2 %").
+/// determined: the speed a correlator is given should be good to 2 %.
 pub const SPEED_RSTD_MAX: f64 = 0.02;
 /// Relative one-sigma error of c_P or c_S below which the data determine that speed.
 pub const SPEED_DETERMINED_RSTD: f64 = 0.1;
@@ -414,7 +414,7 @@ fn misfit_too_high(problem: &Problem<'_>, ev: &Evidence<'_>) -> Option<String> {
     }
 }
 
-/// Notes on what the data leave undetermined (spec §7.10), and on intervals at their bounds.
+/// Notes on what the data leave undetermined (model §7.10), and on intervals at their bounds.
 fn soil_notes(ev: &Evidence<'_>, push: &mut impl FnMut(FlagCode, String)) {
     let problem = ev.problem;
     let d = ev.determined;

@@ -1,12 +1,12 @@
 //! Inversion of one segment: fit the soil's Young's modulus E_m, Poisson's ratio ν_m and the
 //! contact coefficient ξ (and any switched-on effect parameters) to measured wavenumbers, with
-//! uncertainty and flags (spec §7; issue 3).
+//! uncertainty and flags (model §7).
 //!
 //! * `paper` method: the paper's DE/rand/1/bin exactly (P51–P59), its objective and bounds.
 //! * default method: SHADE over (log10 E_m, ν_m, ξ, …), chi-square in the measurement standard
 //!   deviations when given (otherwise the paper's relative errors, squared), a
 //!   Levenberg–Marquardt polish, restarts to detect separated minima.
-//! * what the data determine (spec §7.10, `uncertainty`): the soil's c_P and c_S with errors,
+//! * what the data determine (model §7.10, `uncertainty`): the soil's c_P and c_S with errors,
 //!   95 % intervals of every parameter, the predicted curve with errors;
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!

@@ -21,8 +21,8 @@ use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, NelderMead, Obje
 /// stiffness as a weight (§4.10), so a misfit that falls towards one face from one side can
 /// have a deeper basin towards the other: on the paper's case (bench) both DE runs of seed 15
 /// end at ξ = 0 with f = 0.770, while the global optimum, at ξ = 0.72 and nearly the same
-/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`,
-/// fit algorithm 7). Returns the probe's optimum and whether its polish was capped.
+/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`).
+/// Returns the probe's optimum and whether its polish was capped.
 pub(super) fn contact_probe(
     pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
@@ -49,11 +49,10 @@ pub(super) fn contact_probe(
 /// Two kinds of basin lie there, both narrow in (log E_m, ν_m) because c_P² ∝ 1/(1 − 2ν_m):
 ///
 /// * the fluid-like end of the c_P valley of a metal pipe: the same c_P, c_S → 0
-///   (`bench --verify 200 --network-seed 848484`, WM10095: χ² 10.41 at ν_m = 0.499 against the
-///   search's 10.63 at ν_m = 0);
+///   (on a metal pipe χ² 10.41 at ν_m = 0.499 against the search's 10.63 at ν_m = 0);
 /// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
-///   off (spec §7.8 item 3): a basin past the grazing cliff (P44), e.g. WM10101 of that
-///   network, χ² 1.14 at c_P ≈ 2,500 m/s against 2.08 at c_P = 166 m/s. Water-saturated soils
+///   off (model §7.8 item 3): a basin past the grazing cliff (P44), e.g. χ² 1.14 at c_P ≈ 2,500
+///   m/s against 2.08 at c_P = 166 m/s on a metal pipe. Water-saturated soils
 ///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
 ///   per segment the data cannot tell, and the fit reports its c_P as undetermined.
 ///
@@ -63,10 +62,9 @@ pub(super) fn contact_probe(
 /// kept where c_P lies above the measured phase speed. It polishes the best candidate of each
 /// class of c_P: below the phase speed, between it and [`FAR_PAST_GRAZING`] times it, and
 /// above; and the best of the stiffest candidates ([`INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`]) when
-/// it is promising. On the README's verify networks (`bench --verify 200 --network-seed S`) the segments
-/// more than 0.1 in χ² above the exhaustive search go from 3 / 11 / 6 to 0 / 0 / 0 (seeds
-/// 848484 / 848531 / 848561), for about 260 more evaluations a fit (1,355 → 1,616 on
-/// `bench --network 200 --network-seed 848601`).
+/// it is promising. Against exhaustive searches of realistic networks the segments left more
+/// than 0.1 in χ² above the global optimum fell from 20 of 600 to none, for about 260
+/// evaluations a fit more.
 pub(super) fn incompressible_probe(
     pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
@@ -154,10 +152,9 @@ pub(super) fn incompressible_probe(
 /// end of a valley of constant c_P, c_S → 0, which the incompressible probe often finds), a
 /// polish from the valley's other end, the same c_P at ν_m's lower bound (c_S = c_P/√2 at
 /// ν_m = 0). The data of a metal pipe fix c_P and barely c_S, so χ² changes little along the
-/// valley, and a polish from one end does not cross it: on `bench --verify 200 --network-seed
-/// 848873` WM10013 (ductile iron) ended at χ² 13.43 with ν_m = 0.499 and c_S = 8 m/s, while the
-/// other end has 13.21 (ν_m = 0, c_S 132 m/s, the exhaustive search's); on plastic-heavy seed
-/// 848858 WM10038 (ductile iron), 3.55 against 3.42.
+/// valley, and a polish from one end does not cross it: a ductile-iron pipe ended at χ² 13.43
+/// with ν_m = 0.499 and c_S = 8 m/s, while the other end has 13.21 (ν_m = 0, c_S 132 m/s, the
+/// exhaustive search's).
 pub(super) fn valley_end_probe(
     pieces: &Pieces<'_, '_>,
     bounds: &Bounds,
@@ -203,10 +200,9 @@ pub(super) struct Pieces<'p, 'a> {
 /// grazing probe, or its scan again near grazing, from a best that did not move starts its own
 /// polishes and walks where the round before did, and the edge probe walks from that best once
 /// a round. Answered from here, each fit's result is the same to the bit, with fewer
-/// evaluations: WM10350 of `bench --network 200 --network-seed 849902 --materials
-/// plastic-heavy` (MDPE) ran walks of 145 and 181 evaluations twice each, near grazing, where
-/// under fit algorithm 18 an evaluation cost 70–150 µs against about 6 µs in its DE runs (the
-/// root's continuation halves its steps, see `physics::solver::NEWTON_MAX_ITER`).
+/// evaluations; the saving is largest near grazing, where a walk's evaluation costs 10–25 times
+/// one of the DE runs' (the root's continuation halves its steps, see
+/// `physics::solver::NEWTON_MAX_ITER`).
 struct Trodden<T> {
     seen: RefCell<Vec<(Vec<u64>, Bounds, T)>>,
 }
@@ -342,10 +338,9 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// The grazing probe: whether a deeper basin lies across a grazing cliff from the best
 /// optimum. Where the soil's c_P lies among the measured phase speeds (plastic pipes in stiff
 /// soil) the pieces (see [`Pieces`]) are narrow, in c_P and in ξ (which moves the phase
-/// speeds), and the DE runs settle in one of them: on `bench --verify 200 --network-seed
-/// 848709` WM10039 ends at χ² 9.50 with c_P = 507 m/s, just below the phase speed 507.3, while
-/// the piece above reaches 9.10; with seed 848613 WM10148 ends at 5.58 with ξ = 0.81, while the
-/// same soil at ξ = 1 has 4.00.
+/// speeds), and the DE runs settle in one of them: a search can end at χ² 9.50 with c_P = 507
+/// m/s, just below a measured phase speed of 507.3 m/s, while the piece above reaches 9.10; or
+/// at 5.58 with ξ = 0.81, while the same soil at ξ = 1 has 4.00.
 ///
 /// Candidates: the best optimum's soil with c_P at the middle of each gap between the sorted
 /// measured phase speeds and just outside their range ([`GRAZING_PROBE_MARGIN`]), c_S kept, at
@@ -356,9 +351,9 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// each pattern is a start, and the [`GRAZING_PROBE_POLISHES`] best starts are polished, and
 /// walked from by the downhill simplex (as the edge probe, [`edge_probe`]; the walk's optimum
 /// polished in turn). A polish from inside a narrow piece often leaves it downhill, into the
-/// basin it came from, where the simplex stays in the piece and follows its edges: on `bench
-/// --verify 200 --network-seed 848607` WM10110 ended at χ² 4.11 (c_P 349 m/s), and the walk
-/// from the soil at c_P 527 m/s and ξ = 1 reaches the exhaustive search's 3.24 (c_P 529 m/s),
+/// basin it came from, where the simplex stays in the piece and follows its edges: a PVC pipe
+/// ended at χ² 4.11 (c_P 349 m/s), and the walk from the soil at c_P 527 m/s and ξ = 1 reaches
+/// the exhaustive search's 3.24 (c_P 529 m/s),
 /// while the polish from there returns to 4.11. (A polish held within its start's piece did
 /// no better: a piece is not always connected, and its walls stop the polish short.)
 ///
@@ -491,17 +486,16 @@ fn gap_scan_targets(v: &[f64], outside: &[f64], highest: f64) -> Vec<f64> {
     targets
 }
 
-/// The gap scan's targets just above each of the best's model phase speeds (fit algorithm
-/// 16): c_P = c_i·(1 + [`GAP_SCAN_ABOVE_GRAZING`]) for each frequency i, c_i = ω_i/Re k_i its
+/// The gap scan's targets just above each of the best's model phase speeds:
+/// c_P = c_i·(1 + [`GAP_SCAN_ABOVE_GRAZING`]) for each frequency i, c_i = ω_i/Re k_i its
 /// model phase speed (P2), where that frequency's compressional wave has just stopped radiating
 /// (q_P turns evanescent as c_P passes c_i, the grazing cliff of P44). Moving c_P moves c_i
 /// too, so the target is
 /// found from the best's c_i and then once more from c_i at the moved soil (c_S and the rest
-/// of the best kept): one evaluation a frequency. On WM10332 of `bench --verify 200
-/// --network-seed 848920 --materials plastic-heavy` (MDPE) the best, at c_P 366.4 m/s, has
-/// the fourth frequency's c_4 = 445.52 m/s; at c_P 445.97 m/s c_4 is 446.48, and at the updated
-/// target, 446.93 m/s, χ² is 11.25 with the best's c_S and ξ, against the best's 14.38 (the
-/// exhaustive search's 10.38 lies at c_P 449.09 m/s, 0.3 % above its own c_4 of 447.78 m/s).
+/// of the best kept): one evaluation a frequency. On an MDPE pipe whose best lies at c_P 366.4
+/// m/s, the fourth frequency's c_4 = 445.52 m/s; at c_P 445.97 m/s c_4 is 446.48, and at the
+/// updated target, 446.93 m/s, χ² is 11.25 with the best's c_S and ξ, against the best's 14.38
+/// (the exhaustive search's 10.38 lies at c_P 449.09 m/s, 0.3 % above its own c_4 of 447.78).
 /// Soils outside the search box give no target.
 fn above_grazing_targets(
     pieces: &Pieces<'_, '_>,
@@ -580,18 +574,16 @@ impl LeastSquares for HeldCp<'_, '_, '_> {
 /// [`GAP_SCAN_ITERATIONS`] iterations, loose tolerances) and c_S kept within ν_m's range at
 /// that c_P. For a plastic pipe the data fix c_S to a few per cent and ξ with it, and the
 /// valley moves from piece to piece, so the best's own c_S and ξ, moved to another piece, can
-/// lie far up its walls: WM10084 of `bench --verify 200 --network-seed 848857 --materials
-/// plastic-heavy` (MDPE) ends at χ² 15.80 with c_P = 3,676 m/s, c_S 164 m/s and ξ 0.65; at
-/// c_P 492 m/s (between the measured phase speeds 490 and 494) its c_S and ξ give about 30,
-/// while the valley there (c_S 161 m/s, ξ 0.86) has 14.69, the exhaustive search's piece
-/// (14.68).
+/// lie far up its walls: an MDPE pipe ended at χ² 15.80 with c_P = 3,676 m/s, c_S 164 m/s and
+/// ξ 0.65; at c_P 492 m/s (between the measured phase speeds 490 and 494) its c_S and ξ give
+/// about 30, while the valley there (c_S 161 m/s, ξ 0.86) has 14.69, the exhaustive search's
+/// piece (14.68).
 ///
 /// Each target starts from the previous one's answer or from the best's own c_S and ξ,
 /// whichever fits better there (one evaluation each). Always from the previous answer, a scan
-/// that crossed a piece fitting badly carried its c_S and ξ on, and WM10117 of `bench --verify
-/// 200 --network-seed 848804` (MDPE) stayed 1.2 above the exhaustive χ²; from the best's own
-/// after each piece that fits badly, the fits took about 140 evaluations more (1,910 against
-/// 1,769 per fit on the default mix, with 140 evaluations per parameter in the DE runs).
+/// that crossed a piece fitting badly carried its c_S and ξ on and could end 1.2 above the
+/// exhaustive χ²; from the best's own after each piece that fits badly, the fits took about 140
+/// evaluations more (8 %).
 fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec<f64>> {
     let problem = pieces.problem;
     let (_, c_s) = pieces.speeds(&best.x);
@@ -675,10 +667,9 @@ fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec
 /// crossing a branch cut of q_P or q_S, or switching roots, see [`Pieces`]) the optimum of
 /// the piece lies on its edge, often at the end of a valley running along it. There a
 /// finite-difference Jacobian is taken across the jump, and Levenberg–Marquardt stops where
-/// it first meets the edge: on `bench --verify 200 --network-seed 848782` WM10103 stops at
-/// χ² 8.74, and the misfit falls steadily along the edge to 8.38, at ξ 0.69 instead of 0.77
-/// (log10 E_m and ν_m nearly the same); with seed 848784 WM10035 stops at 6.60, and the
-/// edge leads to 5.92.
+/// it first meets the edge: it can stop at χ² 8.74 while the misfit falls steadily along the
+/// edge to 8.38, at ξ 0.69 instead of 0.77 (log10 E_m and ν_m nearly the same), or at 6.60
+/// where the edge leads to 5.92.
 ///
 /// The best optimum is on an edge when a step of [`EDGE_PROBE_DETECT_STEP`] (relative, as the
 /// polish's finite differences) along one parameter changes χ² by more than
@@ -728,20 +719,18 @@ pub const EDGE_PROBE_DETECT_STEP: f64 = 1e-6;
 /// A change of χ² above this over [`EDGE_PROBE_DETECT_STEP`] is a jump: the best optimum is
 /// on an edge.
 pub const EDGE_PROBE_JUMP: f64 = 0.5;
-/// A walk's initial simplex: steps of this fraction of each parameter's range. Chosen for the
-/// edge probe, from where fit algorithm 10 ended, with the budget and stall test below: on
-/// WM10103 (see `edge_probe`) steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and
-/// 8.42; on WM10035 steps of 3e-2 stall at the start, 6.60, and the others reach 5.92.
+/// A walk's initial simplex: steps of this fraction of each parameter's range. On the two
+/// edges of `edge_probe`'s description, steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46,
+/// 8.38 and 8.42 on the first; on the second steps of 3e-2 stall at the start and the others
+/// reach 5.92.
 pub const WALK_STEP: f64 = 1e-2;
 /// A walk's budget of evaluations.
 pub const WALK_EVALUATIONS: usize = 400;
 /// A walk stops when χ² fell by less than `.1` over the last `.0` evaluations: most
 /// best optima on an edge are where the edge's valley ends, and the walk gains nothing. With
-/// this test the edge probe alone (before the grazing probe walked too) added 8–12
-/// evaluations per fit on average (`bench --network 200`,
-/// seeds 848782 and 848784, default mix, 848752 and 848792, plastic-heavy: 1,668 → 1,677,
-/// 1,658 → 1,666, 1,682 → 1,694, 1,667 → 1,679); stopping after 40 evaluations without
-/// gain leaves WM10103 (see `edge_probe`) at 8.70.
+/// this test the edge probe alone added 8–12 evaluations per fit on average on realistic
+/// networks; stopping after 40 evaluations without gain left the first edge of `edge_probe`'s
+/// description at 8.70.
 pub const WALK_STALL: (usize, f64) = (80, 1e-4);
 
 /// The grazing probe's c_P just outside the range of the measured phase speeds, relative.
@@ -749,43 +738,31 @@ pub const GRAZING_PROBE_MARGIN: f64 = 0.02;
 /// The gap scan's targets of c_P: each measured phase speed times 1 ∓ this (and the
 /// grazing probe's two c_P outside their range). A narrow piece often lies right next to a
 /// measured phase speed, where one frequency's wave is just grazing, not midway between two:
-/// measured on the plastic-heavy verify networks 848857, 848858 and 848877–848880 against
-/// cached exhaustive searches (fit algorithm 13's), with the midpoints of the gaps as
-/// targets 8 segments stayed more than 0.1 above the exhaustive χ² (160 evaluations per
-/// parameter in the DE runs), with 0.2 % 6, 0.3 % 5, 0.4 % 4 (130; with 160, 0.3 % and 0.6 %
-/// left 4 each). In those runs the scan's starts still competed with the probe's own, and
-/// the scan did not yet keep c_S within ν_m's range. A gap narrower than twice this has no
-/// such target inside it, so its middle is a target too (fit algorithm 15): the phase speeds
-/// of a metal pipe often lie within 1 % of each other, and WM10027 of `bench --verify 200
-/// --network-seed 848918` (cast iron) ended at χ² 5.59 while the gap from 1,335.4 to 1,338.1
-/// m/s holds the exhaustive search's 5.16. Every gap's middle as a target would cost about 70
-/// evaluations a fit, against 30 for the narrow gaps' (200-segment bench networks 848911 and
-/// 848912, both mixes), and changed no fit's χ² on those networks.
+/// against exhaustive searches of plastic-heavy networks, with the midpoints of the gaps as
+/// targets 8 segments stayed more than 0.1 above the global optimum, with offsets of 0.2 % 6,
+/// 0.3 % 5, 0.4 % 4. A gap narrower than twice this has no such target inside it, so its
+/// middle is a target too: the phase speeds of a metal pipe often lie within 1 % of each
+/// other, and a cast-iron pipe ended at χ² 5.59 while the gap from 1,335.4 to 1,338.1 m/s holds
+/// the exhaustive search's 5.16. Every gap's middle as a target would cost about 70
+/// evaluations a fit, against 30 for the narrow gaps', and changed no fit's χ².
 pub const GAP_SCAN_OFFSET: f64 = 0.004;
-/// The gap scan's target just below the best optimum's highest model phase speed, relative
-/// (fit algorithm 15). As c_P falls from above every phase speed, that frequency is the first
+/// The gap scan's target just below the best optimum's highest model phase speed, relative.
+/// As c_P falls from above every phase speed, that frequency is the first
 /// to radiate compressional waves, and just past its grazing point the misfit can dip in a
 /// piece too narrow for the targets next to the measured phase speeds, which the model's may
-/// miss by a per cent: on `bench --verify 200 --network-seed 848934` WM10157 (cast iron) ended
-/// at χ² 1.37 with c_P 1,359 m/s, its highest model phase speed 1,337.75 m/s, while the
-/// exhaustive search's 0.57 lies at c_P 1,336.12 m/s; with seed 848931 WM10020 (ductile iron)
-/// ended at 6.03 (c_P 1,379 m/s, highest model phase speed 1,343.94 m/s) against 5.82 at
-/// 1,343.15 m/s (and reaches 5.49 with this target). Targets below every model phase speed
-/// cost 66 evaluations a fit against this one's 15 (default mix; plastic-heavy 72 against 17)
-/// and mended nothing more, on 44 verify networks measured against cached exhaustive searches
-/// (30 default-mix, 14 plastic-heavy).
+/// miss by a per cent: a cast-iron pipe ended at χ² 1.37 with c_P 1,359 m/s, its highest model
+/// phase speed 1,337.75 m/s, while the exhaustive search's 0.57 lies at c_P 1,336.12 m/s.
+/// Targets below every model phase speed cost 66 evaluations a fit against this one's 15 and
+/// mended nothing more.
 pub const GAP_SCAN_BELOW_GRAZING: f64 = 1e-3;
-/// The gap scan's targets just above each of the best's model phase speeds, relative (fit
-/// algorithm 16, `above_grazing_targets`); a target within [`GAP_SCAN_OFFSET`] of one of the
+/// The gap scan's targets just above each of the best's model phase speeds, relative
+/// (`above_grazing_targets`); a target within [`GAP_SCAN_OFFSET`] of one of the
 /// other targets is dropped. Just past a grazing point (P44) on the side where the frequency's
 /// compressional wave no longer radiates, the misfit can dip in a piece 0.2 % wide, which
 /// neither the targets next to the measured phase speeds nor the one below the highest model
-/// phase speed reach: WM10332 of `bench --verify 200 --network-seed 848920 --materials
-/// plastic-heavy` (MDPE, 14.38 against the exhaustive 10.38) and WM10146 of `--network-seed
-/// 848941` (PVC, 18.49 against 16.92, c_P 507.77 m/s, 0.35 % above its model phase speed 506.01
-/// m/s). Measured against cached exhaustive searches on 45 verify networks (31 default-mix, 14
-/// plastic-heavy), these targets mend both and lose none, for 28 evaluations a fit (default
-/// mix; 39 plastic-heavy); kept within 0.1 % of the others, 50 (67); all kept, 70 (86).
+/// phase speed reach (a PVC pipe: χ² 18.49 against 16.92 at c_P 507.77 m/s, 0.35 % above its
+/// model phase speed 506.01 m/s). These targets cost 28 evaluations a fit (39 on plastic-heavy
+/// networks); kept within 0.1 % of the others, 50 (67); all kept, 70 (86).
 pub const GAP_SCAN_ABOVE_GRAZING: f64 = 1e-3;
 /// The gap scan's starts polished and walked from, best first, besides the grazing probe's
 /// own [`GRAZING_PROBE_POLISHES`].
@@ -803,10 +780,9 @@ pub const GRAZING_PROBE_CONTACTS: [f64; 11] =
 /// Starts of the grazing probe polished and walked from, best first.
 pub const GRAZING_PROBE_POLISHES: usize = 2;
 /// The grazing probe polishes only starts whose misfit is at most this multiple of the
-/// best's. Measured with the probe polishing without this limit, on `bench --network 200
-/// --network-seed 848701` (both material mixes) and `bench --verify 200 --network-seed S`
-/// (S = 848709, 848723): of 2,719 polishes, 14 improved on the best by more than 0.01 in χ²,
-/// all from starts at most 1.43 times the best's misfit; the limit skips about 9 in 10.
+/// best's. Measured with the probe polishing without this limit on realistic networks: of
+/// 2,719 polishes, 14 improved on the best by more than 0.01 in χ², all from starts at most
+/// 1.43 times the best's misfit; the limit skips about 9 in 10.
 pub const GRAZING_PROBE_GATE: f64 = 2.0;
 
 /// The incompressible probe's classes of c_P: far past grazing above this multiple of the
@@ -814,21 +790,15 @@ pub const GRAZING_PROBE_GATE: f64 = 2.0;
 pub const FAR_PAST_GRAZING: f64 = 2.0;
 /// log10 E_m (Pa) of the incompressible probe's stiffest candidates, at ν_m's upper bound and ξ
 /// ∈ {the best's, 0, 1}: a class of their own, whose best is polished only when within
-/// [`GRAZING_PROBE_GATE`] times the best's misfit (fit algorithm 15, at 9.75 alone; this line
-/// since fit algorithm 16). Some cast-iron pipes have their global optimum in a basin there
-/// narrower than a tenth of a decade along E_m, c_P about 23,000 m/s with ξ below 0.02, which
-/// the half-decade grid steps over: WM10084 of `bench --verify 200 --network-seed 848723` (χ²
-/// at ν_m 0.499, ξ 0: 102 at log10 E_m 9.5, 12.45 at 9.75, 999 at 10; the search ended at
-/// 20.09, the exhaustive search at 12.12, log10 E_m 9.76), WM10046 of plastic-heavy 848958
-/// (15.83 against 12.04, log10 E_m 9.75), and WM10028 of plastic-heavy 848977 (10.95 against
-/// 9.45 at log10 E_m 9.82, ξ 0.004; at 9.75 and ξ 0 χ² is 23.6, above twice the best's, at 9.8
-/// 10.1). As candidates of the far-past class they would displace its best, through whose
-/// polish WM10120 of 848561 (steel) reaches its optimum (8.19, else 9.62); polished whatever
-/// their misfit, at 9.75 alone, they would cost 94 evaluations a fit (default mix;
-/// plastic-heavy 110), against 3. The line evaluates up to 15 candidates a fit (10 when the best
-/// lies on a face of ξ, `Pieces::contacts`); before that saving it cost 12 evaluations a fit
-/// more than 9.75 alone on verify networks 848971–848978 (1,700 → 1,712 on the default mix,
-/// 1,705 → 1,716 plastic-heavy).
+/// [`GRAZING_PROBE_GATE`] times the best's misfit. Some cast-iron pipes have their global
+/// optimum in a basin there narrower than a tenth of a decade along E_m, c_P about 23,000 m/s
+/// with ξ below 0.02, which the half-decade grid steps over (χ² at ν_m 0.499, ξ 0: 102 at
+/// log10 E_m 9.5, 12.45 at 9.75, 999 at 10, where the search had ended at 20.09); one such
+/// basin lies at 9.82, where 9.75 alone gives more than twice the best's misfit, hence a line.
+/// As candidates of the far-past class they would displace its best, whose polish reaches
+/// other optima (a steel pipe: 8.19, else 9.62); polished whatever their misfit they would
+/// cost about 94 evaluations a fit, against 3. The line evaluates up to 15 candidates a fit
+/// (10 when the best lies on a face of ξ, `Pieces::contacts`).
 pub const INCOMPRESSIBLE_PROBE_STIFF_LOG10_E: [f64; 5] = [9.7, 9.75, 9.8, 9.85, 9.9];
 /// Poisson's ratios of the incompressible probe's grid (each capped at the upper bound).
 pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
@@ -842,23 +812,22 @@ pub const ON_BOUND_RTOL: f64 = 1e-9;
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
 pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
 /// Further moves of c_P, tried after [`OFF_CLIFF_STEPS`] where the reference path has roots at
-/// the optimum but not the search path's. On WM10273 of `bench --verify 200 --network-seed
-/// 848860 --materials plastic-heavy` (PVC) the search ends at χ² 14.84 with c_P = 491.7 m/s,
-/// where the reference path takes another root at the highest frequency (phase speed 483.5
-/// against the search path's 488.1 m/s) and rates it 20.85; the paths disagree up to c_P ×
-/// (1 − 1e-3) and agree at × (1 − 3e-3), at 14.88 (the exhaustive search's 14.85). Where the
-/// reference path has no root at the optimum, the fast path's ranking is not trusted and the
-/// fit searches again on the safe path (see `fit::run`) unless a move of [`OFF_CLIFF_STEPS`]
-/// is confirmed: a longer move there would stand in for that search (WM10231 of network 848862
-/// would end 0.08 above it).
+/// the optimum but not the search path's. A PVC pipe's search ended at χ² 14.84 with c_P =
+/// 491.7 m/s, where the reference path takes another root at the highest frequency (phase
+/// speed 483.5 against the search path's 488.1 m/s) and rates it 20.85; the paths disagree up
+/// to c_P × (1 − 1e-3) and agree at × (1 − 3e-3), at 14.88 (the exhaustive search's 14.85).
+/// Where the reference path has no root at the optimum, the fast path's ranking is not trusted
+/// and the fit searches again on the safe path (see `fit::run`) unless a move of
+/// [`OFF_CLIFF_STEPS`] is confirmed: a longer move there would stand in for that search, and
+/// end further from the global optimum.
 pub const FURTHER_OFF_CLIFF_STEPS: [f64; 2] = [3e-3, 1e-2];
 
 /// Points just off a grazing cliff next to `x`, to be tried in turn. Where χ² falls towards a
 /// cliff (see [`Pieces`]) the search's optimum sits on its edge, and there the search path and
 /// the reference path can take roots on either side of it. Just off the edge, on the side the
-/// search path rates lower, they agree: on WM10081 of `bench --verify 200 --network-seed
-/// 848709` the optimum at c_P = 563.45 m/s has χ² 12.19 on the search path and 13.11 on the
-/// reference path; at c_P × (1 − 1e-4) both give 12.19. For each step of [`OFF_CLIFF_STEPS`],
+/// search path rates lower, they agree: an optimum at c_P = 563.45 m/s had χ² 12.19 on the
+/// search path and 13.11 on the reference path; at c_P × (1 − 1e-4) both give 12.19. For each
+/// step of [`OFF_CLIFF_STEPS`],
 /// and of [`FURTHER_OFF_CLIFF_STEPS`] when `rooted` (the reference path has roots at `x`), the
 /// side the search path rates lower.
 pub(super) fn off_cliff(pieces: &Pieces<'_, '_>, x: &[f64], rooted: bool) -> Vec<Vec<f64>> {
@@ -991,8 +960,8 @@ mod tests {
         }
     }
 
-    /// WM10084 of `bench --verify 200 --network-seed 848857 --materials plastic-heavy` (MDPE),
-    /// where fit algorithm 13 ended (χ² 15.80, c_P 3,676 m/s, c_S 164 m/s, ξ 0.65): the
+    /// An MDPE pipe of a plastic-heavy bench network, where a search without the gap scan
+    /// ended (χ² 15.80, c_P 3,676 m/s, c_S 164 m/s, ξ 0.65): the
     /// exhaustive search's piece lies between the measured phase speeds 490 and 494 m/s at
     /// c_S 161 m/s and ξ 0.87 (χ² 14.68). The grazing probe's own starts keep the best's c_S
     /// and try three ξ, and reach no lower than 15.5; the gap scan's start there reaches
@@ -1024,8 +993,8 @@ mod tests {
         assert!(at_piece < 14.8, "the piece's valley: {at_piece}");
     }
 
-    /// WM10027 of `bench --verify 200 --network-seed 848854` (ductile iron), where fit
-    /// algorithm 13 ended: χ² 5.32 on ν_m's upper bound (c_P 1,370 m/s, c_S 61.2 m/s, ξ 0.36).
+    /// A ductile-iron pipe of a bench network, where a search without the gap scan
+    /// ended: χ² 5.32 on ν_m's upper bound (c_P 1,370 m/s, c_S 61.2 m/s, ξ 0.36).
     /// The exhaustive search's 3.63 is on the bound too, at c_P 1,342 m/s (just below the
     /// highest measured phase speed, 1,343.5 m/s), c_S 59.95 m/s, ξ 0.34. At a c_P below the
     /// best's its c_S would need ν_m above the bound, so the scan starts each target within ν_m's
@@ -1101,8 +1070,8 @@ mod tests {
         assert_eq!(with_distinct(vec![], vec![1.0], 4e-3), [1.0]);
     }
 
-    /// WM10332 of `bench --verify 200 --network-seed 848920 --materials plastic-heavy` (MDPE)
-    /// and the soil where fit algorithm 15's search ended there (χ² 14.38, c_P 366.4 m/s).
+    /// An MDPE pipe of a plastic-heavy bench network and the soil where a search without the
+    /// targets above grazing ended there (χ² 14.38, c_P 366.4 m/s).
     fn wm10332_search_optimum() -> (crate::invert::SegmentData, Vec<f64>) {
         let data = bench_segment(848920, MaterialMix::PlasticHeavy, "WM10332");
         let x = vec![
@@ -1113,8 +1082,7 @@ mod tests {
         (data, x)
     }
 
-    /// On WM10332 of `bench --verify 200 --network-seed 848920 --materials plastic-heavy`
-    /// (MDPE), from the soil where the search ended (χ² 14.38, c_P 366.4 m/s), the fourth
+    /// On that MDPE pipe, from the soil where the search ended (χ² 14.38, c_P 366.4 m/s), the fourth
     /// frequency's target lands in the dip just above its model phase speed, 0.2 % wide, where
     /// the best's own c_S and ξ already fit at 11.25; the targets next to the measured phase
     /// speeds 442.5 and 458.9 m/s lie outside it.
@@ -1146,8 +1114,8 @@ mod tests {
         }
     }
 
-    /// `near_grazing` is the root flag of P44 at the search path's roots: on WM10332's search
-    /// optimum above (c_P 366.4 m/s, its highest model phase speed more than 10 % above c_P and
+    /// `near_grazing` is the root flag of P44 at the search path's roots: on that MDPE pipe's
+    /// search optimum above (c_P 366.4 m/s, its highest model phase speed more than 10 % above c_P and
     /// c_S) no frequency is within 2 % of c_P or c_S; with c_P moved to 1 % above the highest
     /// model phase speed one is, and at 5 % above none is.
     #[test]
@@ -1170,10 +1138,9 @@ mod tests {
         assert!(!pieces.near_grazing(&moved(1.05)));
     }
 
-    /// WM10103 of `bench --verify 200 --network-seed 848782`, where fit algorithm 10 ended
-    /// (χ² 8.74): on the edge of a cliff, which a polish does not leave, while the edge probe
+    /// A bench-network pipe where a search without the edge probe ended (χ² 8.74): on the edge of a cliff, which a polish does not leave, while the edge probe
     /// walks along it to within 0.1 of the exhaustive search's 8.376, moving mostly ξ. At a
-    /// smooth minimum (WM10110 of network 848607, at ξ's upper bound) the probe finds no edge
+    /// smooth minimum (another pipe's, at ξ's upper bound) the probe finds no edge
     /// and spends only its test's evaluations.
     #[test]
     fn the_edge_probe_walks_along_a_cliff_where_the_polish_stops() {
@@ -1236,8 +1203,8 @@ mod tests {
     }
 
     /// The grazing probe from a best that did not move (a later round, or the scan again near
-    /// grazing) finds what it found before without polishing or walking again: on WM10350 of
-    /// plastic-heavy network 849902 (MDPE), from the best its first round leaves, the probe
+    /// grazing) finds what it found before without polishing or walking again: on an MDPE pipe
+    /// of a plastic-heavy bench network, from the best its first round leaves, the probe
     /// polishes and walks from two starts near grazing (573 evaluations), and the second time
     /// costs only the ranking of its starts (39, one evaluation each).
     #[test]

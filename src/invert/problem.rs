@@ -1,5 +1,5 @@
 //! The inversion problem of one segment: the measurements, the parameter space and the
-//! objective (spec §7.1–7.2 for the paper's method; chi-square for the default).
+//! objective (model §7.1–7.2 for the paper's method; chi-square for the default).
 
 use std::cell::{Cell, RefCell};
 
@@ -11,7 +11,7 @@ use crate::physics::inputs::{check_range, MAX_SOIL_POISSON};
 use crate::physics::solver::{refine_near, solve_curve, Continuation, Tolerance};
 use crate::physics::{ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System};
 
-/// One measured wavenumber (spec C6: k = k_re − i·att).
+/// One measured wavenumber (P5: k = k_re − i·att).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measurement {
     /// Angular frequency ω, rad/s.
@@ -65,7 +65,7 @@ pub struct SegmentData {
     pub fluid: Fluid,
     /// The pipe wall (nominal thickness, material values or overrides).
     pub pipe: Pipe,
-    /// Soil density ρ_m from a soil test, kg/m³ (fixed, never fitted: spec §7.5).
+    /// Soil density ρ_m from a soil test, kg/m³ (fixed, never fitted: model §7.5).
     pub soil_density: f64,
     /// The material, when known (used to judge whether measured speeds are plausible).
     pub material: Option<Material>,
@@ -80,7 +80,7 @@ pub enum Method {
     /// Levenberg–Marquardt polish, restarts for a multiple-minima check.
     #[default]
     Default,
-    /// The paper's algorithm exactly (spec §7.1–7.3).
+    /// The paper's algorithm exactly (model §7.1–7.3).
     Paper,
 }
 
@@ -114,7 +114,7 @@ pub const PAPER_W_RE: f64 = 1.0;
 /// Paper weight of the attenuation term (P53).
 pub const PAPER_W_IM: f64 = 5.0;
 /// Objective value of a failed forward solve in the paper's objective (the reference's 1e3,
-/// spec §5.6).
+/// model §5.6).
 pub const FAILED_SOLVE_OBJECTIVE: f64 = 1e3;
 /// Paper bounds on E_m, Pa (P51).
 pub const E_BOUNDS: (f64, f64) = (1e3, 1e10);
@@ -432,7 +432,7 @@ impl<'a> Problem<'a> {
     }
 
     /// The roots at the measured frequencies by the reference path (29-point ramp, reference
-    /// tolerance, spec §5.3–5.4), for checking and reporting the search's answer; `None` when
+    /// tolerance, model §5.3–5.4), for checking and reporting the search's answer; `None` when
     /// one is not found or is a growing wave under `reciprocal`/`blend`.
     pub fn reference_roots(&self, sys: &System) -> Option<Vec<crate::physics::Root>> {
         let res = solve_curve(sys, &self.omegas, Continuation::default());
@@ -471,8 +471,8 @@ impl<'a> Problem<'a> {
 
     /// Model wavenumbers at the measured frequencies at search point x. Counts one evaluation,
     /// except at the last point solved on the fast path, whose wavenumbers it returns again:
-    /// the probes take a scan's or a polish's answer, often the point LM solved last (on
-    /// `bench --network 200 --network-seed 848911`, 16 such repeats a fit).
+    /// the probes take a scan's or a polish's answer, often the point LM solved last (on a
+    /// realistic network, about 16 such repeats a fit).
     pub fn predict(&self, x: &[f64]) -> Option<Vec<Complex64>> {
         if self.path == SolvePath::Fast {
             if let Some((_, lk)) = self.last.borrow().as_ref().filter(|(lx, _)| lx == x) {
@@ -557,7 +557,7 @@ impl<'a> Problem<'a> {
 }
 
 /// The roots as wavenumbers, or `None` if one failed or is a growing wave under `reciprocal` or
-/// `blend` (a bug or a branch jump there, spec §5.6).
+/// `blend` (a bug or a branch jump there, model §5.6).
 fn accept_roots(
     sys: &System,
     res: &[Result<crate::physics::Root, crate::physics::SolveError>],
@@ -568,7 +568,7 @@ fn accept_roots(
 }
 
 /// Whether a root is an answer: not a growing wave, unless the contact is read as printed
-/// (spec §5.6).
+/// (model §5.6).
 fn acceptable(sys: &System, root: &crate::physics::Root) -> bool {
     !root.flags.growing_wave || sys.contact_mode == ContactMode::Printed
 }
@@ -578,11 +578,10 @@ fn acceptable(sys: &System, root: &crate::physics::Root) -> bool {
 ///
 /// The ramp changes only the path up to the lowest frequency: where the direct start there
 /// took another root, it can help; where the lowest frequency was solved and a higher one
-/// failed, the ramp arrives at the same root and the continuation above fails again. On
-/// `bench --network 200` with seeds 848701 (both mixes), 848751 and 848752 (plastic-heavy)
-/// the ramp ran 584 times: it answered 12 times, each after a failure at the lowest frequency,
-/// and never in the 572 runs after a failure higher up, which each cost about 1 ms (9 % of the
-/// plastic-heavy network's fitting time).
+/// failed, the ramp arrives at the same root and the continuation above fails again. On four
+/// realistic networks the ramp ran 584 times: it answered 12 times, each after a failure at the
+/// lowest frequency, and never in the 572 runs after a failure higher up, which each cost about
+/// 1 ms (9 % of a plastic-heavy network's fitting time).
 pub fn predict_fast(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
     predict_fast_to(sys, omegas, Tolerance::FAST)
 }
@@ -610,10 +609,10 @@ fn predict_fast_to(sys: &System, omegas: &[f64], tolerance: Tolerance) -> Option
 
 /// Wavenumbers of `sys` at `omegas` with the inversion's solver settings: the lowest frequency
 /// straight from its in-vacuo root when the root stays within 10 % of it, otherwise (or if any
-/// solve fails) an 8-point continuation ramp (spec §5.4 allows a shorter ramp for the inversion).
+/// solve fails) an 8-point continuation ramp (model §5.4 allows a shorter ramp for the inversion).
 pub fn predict(sys: &System, omegas: &[f64]) -> Option<Vec<Complex64>> {
     // Muller rather than Newton on this path: it is the fallback when the fast path tracked
-    // another root, and Muller's start from three points is the spec's, validated iteration.
+    // another root, and Muller's start from three points is the validated iteration of model §5.3.
     let tolerance = Tolerance {
         method: crate::physics::solver::RootMethod::Muller,
         ..Tolerance::FAST
@@ -799,10 +798,10 @@ mod tests {
         assert_eq!(safe.evaluations(), 2);
     }
 
-    /// The fast path keeps its ramp for what the ramp is for: on WM10145 of `bench --network 200
-    /// --network-seed 848701`, at a point a polish evaluated, the direct start at the lowest
-    /// frequency (421 rad/s) finds no root and the 8-point ramp answers, with decaying waves.
-    /// (Fit algorithm 10 runs the ramp only after such a failure.)
+    /// The fast path keeps its ramp for what the ramp is for: on a bench-network pipe, at a
+    /// point a polish evaluated, the direct start at the lowest frequency (421 rad/s) finds no
+    /// root and the 8-point ramp answers, with decaying waves. (The ramp runs only after such a
+    /// failure.)
     #[test]
     fn the_ramp_answers_where_the_lowest_frequency_fails() {
         let net = bench_network(200, 848701, MaterialMix::Default);

@@ -1,4 +1,4 @@
-//! What the data determine (spec §7.10): the soil's compressional and shear speeds c_P and c_S
+//! What the data determine (model §7.10): the soil's compressional and shear speeds c_P and c_S
 //! (P63–P64) with one-sigma errors (P65), 95 % intervals for every fitted parameter (a
 //! construction standing in for the profile likelihood P66), and the errors of the predicted
 //! curves.
@@ -400,7 +400,7 @@ pub fn determine(
 pub const VALLEY_POINTS: usize = 8;
 
 /// Scan the profile misfit along the two lines through the optimum on which the data are least
-/// informative (spec §7.10): c_P held at its fitted value with c_S varying (the valley of a
+/// informative (model §7.10): c_P held at its fitted value with c_S varying (the valley of a
 /// metal pipe) and c_S held with c_P varying, each across the whole range of ν_m inside the
 /// box. Returns the points (in speed coordinates, with the search coordinates of their profile
 /// minimum) whose profile misfit (`cost_at`: minimised over the other coordinates) is within
@@ -623,7 +623,7 @@ mod tests {
 
     #[test]
     fn speeds_round_trip_and_match_closed_forms() {
-        // Loam of spec §3.4-like values: E = 2e7 Pa, ν = 0.3, ρ = 1800.
+        // Loam of model §3.4-like values: E = 2e7 Pa, ν = 0.3, ρ = 1800.
         let (cp, cs) = soil_speeds(2e7, 0.3, 1800.0);
         // M = E(1−ν)/((1+ν)(1−2ν)) = 2e7·0.7/(1.3·0.4) = 2.6923e7; c_P = √(M/ρ) = 122.30.
         assert!((cp - (2e7 * 0.7 / (1.3 * 0.4) / 1800.0f64).sqrt()).abs() < 1e-9);

@@ -194,7 +194,7 @@ impl NetworkTables {
         self.segments.iter().map(|s| s.measurements.len()).sum()
     }
 
-    /// `segments.csv` as text (interface.md column order; `soil_zone` only when some segment
+    /// `segments.csv` as text (docs/interface.md column order; `soil_zone` only when some segment
     /// has one, the fluid columns only when some segment overrides the water).
     pub fn segments_csv(&self) -> String {
         let zoned = self.segments.iter().any(|s| s.soil_zone.is_some());

@@ -1,7 +1,7 @@
 //! How well a calibration recovered the known soil of a synthetic network: the latest fits
 //! against `truth.csv`.
 //!
-//! What the data determine (physics §7.10) is judged over every fitted segment: the relative
+//! What the data determine (model §7.10) is judged over every fitted segment: the relative
 //! error of the soil's compressional speed c_P, and how often the truth lies inside the fit's
 //! stated uncertainty (c_P and c_S within 2σ, E_m, ν_m and ξ inside their 95 % intervals).
 //! The errors of E_m, ν_m and ξ themselves are reported for the fits with status `ok` (median

@@ -1,4 +1,4 @@
-//! Wave-speed and attenuation curves over a frequency grid (spec C2): the form every later part
+//! Wave-speed and attenuation curves over a frequency grid (model §2, P2): the form every later part
 //! stores and exports.
 
 use super::inputs::System;
@@ -13,7 +13,7 @@ pub const STANDARD_GRID_HZ: [f64; 32] = [
     1400.0, 1500.0, 1600.0, 1800.0, 2000.0,
 ];
 
-/// The typical leak-noise band a correlator operator uses, Hz (issue 5). Its mean speed is
+/// The typical leak-noise band a correlator operator uses, Hz. Its mean speed is
 /// [`band_mean`].
 pub const LEAK_BAND_HZ: (f64, f64) = (100.0, 800.0);
 

@@ -1,4 +1,4 @@
-//! The dispersion relation of the fluid-dominated s = 1 wave, spec §4 (eqs. P8–P39).
+//! The dispersion relation of the fluid-dominated s = 1 wave, model §4 (eqs. P8–P39).
 //!
 //! [`Evaluator`] holds every quantity that depends only on the system and ω (P8–P14), so that
 //! the residual F(k1) of eq. P32, evaluated 5–10 times per root, recomputes only what depends on
@@ -86,7 +86,7 @@ impl SoilWaves {
 
     /// Bonded soil stiffness at r = a for axial wavenumber k1, eqs. P15–P21.
     ///
-    /// Forms D (P17) once; K21 is set to −K12 exactly (spec §5.7).
+    /// Forms D (P17) once; K21 is set to −K12 exactly (model §5.7).
     pub fn stiffness(&self, k1: Complex64, a: f64) -> Result<SoilStiffness, SpecialError> {
         let k1sq = k1 * k1;
         let qp = sqrt_plus(self.kp2 - k1sq); // P15

@@ -1,4 +1,4 @@
-//! Extensions of the model ("effects"), spec §8: inputs the effects change.
+//! Extensions of the model ("effects"), model §8: inputs the effects change.
 //!
 //! Each effect changes one forward-model input: soil damping the soil loss factor η_m (E1,
 //! eq. P13), pipe loss the wall loss factor η_p (E2, eq. P9), air in the water the fluid's bulk
@@ -10,19 +10,19 @@
 
 use super::inputs::{check_range, Fluid, InputError, Model, Pipe, System};
 
-/// Specific gas constant of air, J/(kg·K) (spec P61).
+/// Specific gas constant of air, J/(kg·K) (P61).
 pub const R_AIR: f64 = 287.05;
-/// Default absolute line pressure, Pa (3 bar gauge; spec §8 E3 example).
+/// Default absolute line pressure, Pa (3 bar gauge; model §8 E3 example).
 pub const DEFAULT_LINE_PRESSURE_PA: f64 = 4e5;
-/// Default polytropic index of the bubbles (isothermal), spec §8 E3.
+/// Default polytropic index of the bubbles (isothermal), model §8 E3.
 pub const DEFAULT_POLYTROPIC_INDEX: f64 = 1.0;
-/// Default water temperature, K (15 °C), spec §8 E3.
+/// Default water temperature, K (15 °C), model §8 E3.
 pub const DEFAULT_TEMPERATURE_K: f64 = 288.15;
-/// Largest air volume fraction the effect allows (spec §8 E3).
+/// Largest air volume fraction the effect allows (model §8 E3).
 pub const MAX_AIR_FRACTION: f64 = 0.02;
-/// Smallest effective / nominal wall thickness ratio (spec §8 E4).
+/// Smallest effective / nominal wall thickness ratio (model §8 E4).
 pub const MIN_WALL_RATIO: f64 = 0.3;
-/// Largest exponent n of the power-law wall modulus (spec §8 E7: η_p = tan(nπ/2) ≤ 0.32).
+/// Largest exponent n of the power-law wall modulus (model §8 E7: η_p = tan(nπ/2) ≤ 0.32).
 pub const MAX_VISCOELASTIC_EXPONENT: f64 = 0.2;
 
 /// The exponent n of the power-law wall modulus whose loss factor tan(nπ/2) equals η (eq. P71
@@ -31,7 +31,7 @@ pub fn exponent_of_loss_factor(eta: f64) -> f64 {
     eta.atan() / std::f64::consts::FRAC_PI_2
 }
 
-/// Free air in the water (spec §8 E3).
+/// Free air in the water (model §8 E3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AirContent {
     /// Air volume fraction φ at line pressure, 0–0.02.
@@ -119,7 +119,7 @@ pub fn thinned(pipe: &Pipe, ratio: f64) -> Result<Pipe, InputError> {
 mod tests {
     use super::*;
 
-    /// Spec Appendix A.4 footnote 2: B_eff = 339673913.04347825 Pa, ρ_eff = 999.0048359724293.
+    /// Model Appendix A.4 footnote 2: B_eff = 339673913.04347825 Pa, ρ_eff = 999.0048359724293.
     #[test]
     fn wood_equation_matches_appendix_a4() {
         let air = AirContent::new(1e-3, 4e5, 1.0, 288.15).unwrap();
@@ -138,7 +138,7 @@ mod tests {
     }
 }
 
-/// The effects that extend the model, by their canonical names (interface.md, "Effects").
+/// The effects that extend the model, by their canonical names (docs/interface.md, "Effects").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Effect {
     /// E1: soil material loss η_m.

@@ -1,7 +1,7 @@
 //! Checked physical inputs: the fluid, the pipe wall, the soil and the model options.
 //!
 //! Every type is built by a constructor that returns `Result`, so the numerical kernels can
-//! assume valid input. Ranges are those of spec §3.1 ("valid range (reject outside)").
+//! assume valid input. Ranges are those of model §3.1 ("valid range (reject outside)").
 
 use std::fmt;
 use std::str::FromStr;
@@ -51,7 +51,7 @@ pub enum InputError {
     },
 }
 
-/// The valid range of one input quantity (spec §3.1, "reject outside"). Each range is written
+/// The valid range of one input quantity (model §3.1, "reject outside"). Each range is written
 /// once, below; the checked constructors, the importer (which names the offending column) and
 /// the synthetic networks all read these.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,56 +78,56 @@ impl ValidRange {
     }
 }
 
-/// Fluid density ρ_f, kg/m³ (spec §3.1).
+/// Fluid density ρ_f, kg/m³ (model §3.1).
 pub const FLUID_DENSITY_RANGE: ValidRange = ValidRange {
     name: "fluid density (kg/m3)",
     lo: 500.0,
     hi: 1100.0,
     text: "500 - 1100",
 };
-/// Fluid bulk modulus B_f, Pa (spec §3.1).
+/// Fluid bulk modulus B_f, Pa (model §3.1).
 pub const FLUID_BULK_MODULUS_RANGE: ValidRange = ValidRange {
     name: "fluid bulk modulus (Pa)",
     lo: 1e6,
     hi: 2.5e9,
     text: "1e6 - 2.5e9",
 };
-/// Pipe Young's modulus E_p, Pa (spec §3.1).
+/// Pipe Young's modulus E_p, Pa (model §3.1).
 pub const PIPE_YOUNGS_MODULUS_RANGE: ValidRange = ValidRange {
     name: "pipe Young's modulus (Pa)",
     lo: 1e8,
     hi: 3e11,
     text: "1e8 - 3e11",
 };
-/// Pipe Poisson's ratio ν_p (spec §3.1).
+/// Pipe Poisson's ratio ν_p (model §3.1).
 pub const PIPE_POISSON_RANGE: ValidRange = ValidRange {
     name: "pipe Poisson's ratio",
     lo: 0.0,
     hi: 0.49,
     text: "0 - 0.49",
 };
-/// Pipe density ρ_p, kg/m³ (spec §3.1).
+/// Pipe density ρ_p, kg/m³ (model §3.1).
 pub const PIPE_DENSITY_RANGE: ValidRange = ValidRange {
     name: "pipe density (kg/m3)",
     lo: 500.0,
     hi: 9000.0,
     text: "500 - 9000",
 };
-/// Pipe loss factor η_p (spec §3.1).
+/// Pipe loss factor η_p (model §3.1).
 pub const PIPE_LOSS_FACTOR_RANGE: ValidRange = ValidRange {
     name: "pipe loss factor",
     lo: 0.0,
     hi: 0.3,
     text: "0 - 0.3",
 };
-/// Mean radius a, m (spec §3.1).
+/// Mean radius a, m (model §3.1).
 pub const MEAN_RADIUS_RANGE: ValidRange = ValidRange {
     name: "mean radius (m)",
     lo: 0.005,
     hi: 1.5,
     text: "0.005 - 1.5",
 };
-/// Soil density ρ_m, kg/m³ (spec §3.1: from a soil test, never fitted).
+/// Soil density ρ_m, kg/m³ (model §3.1: from a soil test, never fitted).
 pub const SOIL_DENSITY_RANGE: ValidRange = ValidRange {
     name: "soil density (kg/m3)",
     lo: 1000.0,
@@ -157,17 +157,17 @@ pub(crate) fn check_range(
 pub struct Fluid {
     /// Density ρ_f, kg/m³.
     pub density: f64,
-    /// Bulk modulus B_f, Pa (real: the fluid is lossless, spec C5).
+    /// Bulk modulus B_f, Pa (real: the fluid is lossless, model §2).
     pub bulk_modulus: f64,
 }
 
-/// Density of water, kg/m³ (spec §3.1 default).
+/// Density of water, kg/m³ (model §3.1 default).
 pub const WATER_DENSITY: f64 = 1000.0;
-/// Bulk modulus of water, Pa (spec §3.1 default).
+/// Bulk modulus of water, Pa (model §3.1 default).
 pub const WATER_BULK_MODULUS: f64 = 2.25e9;
 
 impl Fluid {
-    /// A checked fluid: ρ_f in 500–1100 kg/m³, B_f in 1e6–2.5e9 Pa (spec §3.1).
+    /// A checked fluid: ρ_f in 500–1100 kg/m³, B_f in 1e6–2.5e9 Pa (model §3.1).
     pub fn new(density: f64, bulk_modulus: f64) -> Result<Self, InputError> {
         FLUID_DENSITY_RANGE.check(density)?;
         FLUID_BULK_MODULUS_RANGE.check(bulk_modulus)?;
@@ -206,7 +206,7 @@ pub struct Pipe {
     pub mean_radius: f64,
     /// Wall thickness h, m.
     pub wall_thickness: f64,
-    /// Exponent n of the causal power-law wall modulus of spec §8 E7 (eq. P70); 0 means the
+    /// Exponent n of the causal power-law wall modulus of model §8 E7 (eq. P70); 0 means the
     /// constant-loss wall of eq. P9 (the default). When n > 0 it replaces `loss_factor`.
     pub viscoelastic_exponent: f64,
 }
@@ -226,7 +226,7 @@ impl Pipe {
         Complex64::new(storage, storage * (n * std::f64::consts::FRAC_PI_2).tan())
     }
 
-    /// A checked pipe (spec §3.1): E_p 1e8–3e11 Pa, ν_p 0–0.49, ρ_p 500–9000 kg/m³,
+    /// A checked pipe (model §3.1): E_p 1e8–3e11 Pa, ν_p 0–0.49, ρ_p 500–9000 kg/m³,
     /// η_p 0–0.3, a 0.005–1.5 m, h > 0 and h/a ≤ 0.25.
     pub fn new(
         youngs_modulus: f64,
@@ -314,13 +314,13 @@ impl Pipe {
     }
 }
 
-/// Largest wall thickness to mean radius ratio of the thin-shell model (spec §3.2, P7).
+/// Largest wall thickness to mean radius ratio of the thin-shell model (model §3.2, P7).
 pub const MAX_WALL_RATIO: f64 = 0.25;
-/// Above this h/a the thin-shell model loses accuracy; a warning, not a rejection (spec §3.1).
+/// Above this h/a the thin-shell model loses accuracy; a warning, not a rejection (model §3.1).
 pub const WARN_WALL_RATIO: f64 = 0.15;
 
 /// The soil: an isotropic elastic full space outside the pipe. `youngs_modulus = 0` means no soil
-/// (in vacuo, spec §3.1).
+/// (in vacuo, model §3.1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Soil {
     /// Young's modulus E_m, Pa (0 = no soil).
@@ -333,11 +333,11 @@ pub struct Soil {
     pub loss_factor: f64,
 }
 
-/// Largest soil Poisson's ratio: ν_m = 0.5 makes λ_m infinite (spec §3.1, §7.1).
+/// Largest soil Poisson's ratio: ν_m = 0.5 makes λ_m infinite (model §3.1, §7.1).
 pub const MAX_SOIL_POISSON: f64 = 0.499;
 
 impl Soil {
-    /// A checked soil (spec §3.1): E_m 0 (no soil) or 1e3–1e10 Pa, ν_m 0–0.499,
+    /// A checked soil (model §3.1): E_m 0 (no soil) or 1e3–1e10 Pa, ν_m 0–0.499,
     /// ρ_m 1000–2600 kg/m³, η_m 0–0.3.
     pub fn new(
         youngs_modulus: f64,
@@ -359,7 +359,7 @@ impl Soil {
     }
 
     /// A soil checked only for physical sense (finite, E_m ≥ 0, ρ_m ≥ 0, 0 ≤ ν_m ≤ 0.499,
-    /// 0 ≤ η_m ≤ 0.3), not for the typical ranges. For limit studies such as E_m → 0 (spec T3).
+    /// 0 ≤ η_m ≤ 0.3), not for the typical ranges. For limit studies such as E_m → 0 (model §6 T3).
     pub fn new_unbounded(
         youngs_modulus: f64,
         poisson: f64,
@@ -414,7 +414,7 @@ impl Soil {
         )
     }
 
-    /// Compressional and shear wave speeds (c_P, c_S), m/s, with real moduli (spec §3.4).
+    /// Compressional and shear wave speeds (c_P, c_S), m/s, with real moduli (model §3.4).
     pub fn wave_speeds(&self) -> (f64, f64) {
         let (lambda, mu) = self.lame();
         (
@@ -424,7 +424,7 @@ impl Soil {
     }
 }
 
-/// Model variant, spec §4.9.
+/// Model variant, model §4.9.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Model {
     /// Exact fluid loading ψ (P24) and axial wall inertia (δ = 1). The default.
@@ -434,7 +434,7 @@ pub enum Model {
     Seed,
 }
 
-/// Reading of the contact coefficient ξ, spec §4.10.
+/// Reading of the contact coefficient ξ, model §4.10.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum ContactMode {
     /// ξ scales the interface shear traction in the axial equation (P34). The default.
@@ -549,7 +549,7 @@ impl System {
     }
 }
 
-/// Typical properties of a pipe material (spec §3.3).
+/// Typical properties of a pipe material (model §3.3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MaterialProps {
     /// Young's modulus E_p, Pa.
@@ -562,7 +562,7 @@ pub struct MaterialProps {
     pub loss_factor: f64,
 }
 
-/// Pipe materials of the inventory (spec §3.3; interface `segments.csv` codes).
+/// Pipe materials of the inventory (model §3.3; interface `segments.csv` codes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Material {
     /// Grey cast iron.
@@ -582,7 +582,7 @@ pub enum Material {
 }
 
 impl Material {
-    /// All materials, in the order of the spec's table.
+    /// All materials, in the order of the table of model §3.3.
     pub const ALL: [Material; 7] = [
         Material::CastIron,
         Material::DuctileIron,
@@ -624,7 +624,7 @@ impl Material {
         matches!(self, Material::Pvc | Material::Mdpe | Material::Hdpe)
     }
 
-    /// Typical properties, spec §3.3. Sources: [M1] Fuji Tecom LC-50 manual; [M2] AMES Web;
+    /// Typical properties, model §3.3. Sources: [M1] Fuji Tecom LC-50 manual; [M2] AMES Web;
     /// [M3] MakeItFrom; [M4] ASTM A48 table; [M5] steel constants; [M6] Uni-Bell / PPI via
     /// Aegion; [M7] asbestos-cement density; [M8] Muggleton group MDPE fits [R3, R4];
     /// [M9] Graf et al. 2014 (HDPE). Loss factors of DI, ST, PVC and AC are assumed (no source).
@@ -646,7 +646,7 @@ impl Material {
         }
     }
 
-    /// Plausible range of the pipe Young's modulus, Pa (spec §3.3), used to judge whether a
+    /// Plausible range of the pipe Young's modulus, Pa (model §3.3), used to judge whether a
     /// measured speed is possible for this material.
     pub fn youngs_modulus_range(self) -> (f64, f64) {
         match self {

@@ -1,4 +1,4 @@
-//! The physical model of spec §2–§6 and §8: inputs, soil stiffness, dispersion relation, root
+//! The physical model of model §2–§6 and §8: inputs, soil stiffness, dispersion relation, root
 //! solver, wave-speed and attenuation curves, and the effects that extend the model.
 pub mod curves;
 pub mod dispersion;

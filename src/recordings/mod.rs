@@ -1,4 +1,4 @@
-//! Field wavenumbers from hydrant-test recordings (physics §10, eqs. P72–P77).
+//! Field wavenumbers from hydrant-test recordings (model §10, eqs. P72–P77).
 //!
 //! A field team opens a hydrant (a broadband noise source at x = 0) and records sensors on the
 //! pipe at signed positions. This module turns those recordings into the `measurements.csv`
@@ -30,7 +30,7 @@ pub use layout::{read_layout, Layout, SegmentLayout, Sensor};
 use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::units::sig;
 
-/// Columns of the written measurements (interface.md `measurements.csv`; `import` accepts no
+/// Columns of the written measurements (docs/interface.md `measurements.csv`; `import` accepts no
 /// other columns).
 pub const MEASUREMENT_COLUMNS: [&str; 7] = [
     "segment_id",
@@ -44,8 +44,8 @@ pub const MEASUREMENT_COLUMNS: [&str; 7] = [
 
 /// The one place the `wavenumbers` output file is written: one row per band. A band's notes
 /// (`reflection_suspected`, ...) go in brackets after `campaign` in the campaign cell, because
-/// interface.md's `measurements.csv` has no notes column. Text cells follow the
-/// spreadsheet-safety rule of every CSV pipewave writes (issue 17).
+/// docs/interface.md's `measurements.csv` has no notes column. Text cells follow the
+/// spreadsheet-safety rule of every CSV pipewave writes.
 pub fn write_measurements(
     path: &Path,
     results: &[SegmentWavenumbers],

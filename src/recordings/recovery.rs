@@ -12,7 +12,7 @@
 //! (`segments.csv`) and the measurements written by the wavenumbers step; the truth is read
 //! only to judge the result. The other [`Feed`]s are controls that put the truth into the
 //! measurements on purpose, to tell the errors of the wavenumbers step from those of the fit.
-//! This is issue 15's last acceptance item: "the resulting measurements calibrate without a
+//! The acceptance of the wavenumbers step: "the resulting measurements calibrate without a
 //! failed fit, and give c_P within its 2σ for ≥ 90 % of metal pipes".
 
 use std::collections::HashMap;

@@ -1,4 +1,4 @@
-//! Synthetic hydrant-test recordings from the forward model (physics §10, eq. P72), with their
+//! Synthetic hydrant-test recordings from the forward model (model §10, eq. P72), with their
 //! truth, so that `pipewave wavenumbers` can be tested and tried.
 //!
 //! The source is broadband flow noise: a complex Gaussian spectrum, flat between
@@ -26,7 +26,7 @@ pub const SOURCE_LO_HZ: f64 = 2.0;
 /// Highest source frequency, Hz: hydrant flow noise is broadband well above the leak band.
 pub const SOURCE_HI_HZ: f64 = 2500.0;
 /// The source band stops below this fraction of the pipe's ring frequency (where the s = 1 wave
-/// ceases to be the only one, spec §1), as the synthetic networks do.
+/// ceases to be the only one, model §1), as the synthetic networks do.
 pub const RING_FRACTION: f64 = 0.45;
 /// Relative width of the upper taper of the source spectrum.
 pub const TOP_TAPER_FRACTION: f64 = 0.1;
@@ -384,7 +384,7 @@ pub fn sensor_range_m(material: crate::physics::Material) -> (f64, f64) {
 pub const DEFAULT_SECONDS: f64 = 15.0;
 /// Default sample rate of the synthetic recordings, Hz.
 pub const DEFAULT_SAMPLE_RATE: u32 = 8000;
-/// Default sensor noise, fraction of the source channel's RMS (issue 15).
+/// Default sensor noise, fraction of the source channel's RMS.
 pub const DEFAULT_NOISE_FRACTION: f64 = 0.3;
 
 /// FNV-1a hash of a segment id, to give each recorded segment its own seed.

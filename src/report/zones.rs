@@ -1,4 +1,4 @@
-//! The audit report's soil-zone section (issue 12, physics §7.11): each zone's estimate of
+//! The audit report's soil-zone section (model §7.11): each zone's estimate of
 //! E_m and ν_m with its 95 % interval against the median and range of its segments' single
 //! fits, the scatter used, χ²/dof, flags and the segments that disagree with their zone.
 

@@ -1,4 +1,4 @@
-//! The Cramér–Rao bound of a zone's soil (physics §7.11, P67–P68): how well any unbiased
+//! The Cramér–Rao bound of a zone's soil (model §7.11, P67–P68): how well any unbiased
 //! estimator can know (log10 E_z, ν_z) from the zone's members' pipes, frequency plans and noise.
 //!
 //! Each member s contributes its Fisher information H_s of (log10 E_s, ν_s) at its true

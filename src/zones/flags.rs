@@ -1,4 +1,4 @@
-//! What a zone estimate tells a user to act on (physics §7.11): the zone's own flags
+//! What a zone estimate tells a user to act on (model §7.11): the zone's own flags
 //! (`zone_fits.flags`) and its verdict on a member segment, `zone_outlier`, with the evidence.
 //!
 //! A segment's fit flags (`fits.flags`, src/invert) describe its own data. The zone verdict is a
@@ -21,7 +21,7 @@ pub enum ZoneFlag {
     /// such members (named in `zone_fits.outliers`).
     Outlier,
     /// On a zone: it holds only metal or only plastic pipes, so its data fix c_P or c_S but not
-    /// both (physics §7.10): E_m and ν_m are known only along a valley.
+    /// both (model §7.10): E_m and ν_m are known only along a valley.
     SinglePipeKind,
     /// On a zone: its χ²/dof exceeds [`POOR_FIT_CHI2_PER_DOF`]: the scatter between its
     /// segments is larger than assumed, or it is more than one soil.

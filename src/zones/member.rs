@@ -128,7 +128,7 @@ pub fn member_from_fit(
             }
             // Widen where the real misfit rises less than the model says (the valley flattens,
             // e.g. toward a soft soil's small c_S), as the single fit's uncertainty does
-            // (physics §7.10): probe on both sides.
+            // (model §7.10): probe on both sides.
             let real = [1.0, -1.0]
                 .iter()
                 .filter_map(|sgn| {
@@ -249,7 +249,7 @@ pub fn soil_information(
 /// The information `h` of (ln c_P, ln c_S) with each coordinate's marginal variance raised to
 /// at least the single fit's own (`rstd`, relative one-sigma errors of c_P and c_S), the
 /// correlation kept: H′ = D⁻¹ H D⁻¹ with D = diag(max(1, σ_fit / σ_model)). The quadratic model is
-/// local; where the misfit has a cusp (a root near grazing, physics §7.10) it can claim c_P or
+/// local; where the misfit has a cusp (a root near grazing, model §7.10) it can claim c_P or
 /// c_S to a fraction of a per cent while the single fit's own analysis finds it undetermined,
 /// and such a member would pull its whole zone.
 ///

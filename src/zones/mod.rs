@@ -1,4 +1,4 @@
-//! Soil zones (physics §7.10–7.11, issue 12): segments in one soil unit share E_m and ν_m up to
+//! Soil zones (model §7.10–7.11): segments in one soil unit share E_m and ν_m up to
 //! a small scatter. Metal pipes fix the soil's c_P, plastic pipes its c_S, so a zone that holds
 //! both determines E_m and ν_m, which no single segment does.
 //!

@@ -1,4 +1,4 @@
-//! The hierarchical model of one soil zone (physics §7.11, P67–P68), on per-segment models
+//! The hierarchical model of one soil zone (model §7.11, P67–P68), on per-segment models
 //! of the misfit in the soil speeds u = (ln c_P, ln c_S) (P63–P64).
 //!
 //! Each member s brings its single fit's speeds û_s and, along the two principal axes of its
@@ -19,12 +19,12 @@ use crate::invert::problem::E_BOUNDS;
 use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_from_speeds, soil_speeds, DCHI2_95};
 use crate::physics::inputs::MAX_SOIL_POISSON;
 
-/// Typical scatter of log10 E_m between segments of one soil unit, decades (physics §7.11:
+/// Typical scatter of log10 E_m between segments of one soil unit, decades (model §7.11:
 /// "about 0.04 decade", i.e. about 10 % in E).
 pub const TAU_E_DECADES: f64 = 0.04;
-/// Typical scatter of ν_m between segments of one soil unit (physics §7.11: about 0.01).
+/// Typical scatter of ν_m between segments of one soil unit (model §7.11: about 0.01).
 pub const TAU_NU: f64 = 0.01;
-/// Members with a fit a zone needs before it is estimated (issue 12).
+/// Members with a fit a zone needs before it is estimated.
 pub const MIN_MEMBERS: usize = 3;
 /// χ²₂ quantile at 0.999: a member whose misfit at the zone (measurement error and scatter
 /// allowed for) exceeds it is a `zone_outlier` (false-alarm rate 0.1 % per segment).
@@ -449,7 +449,7 @@ fn minimum(points: &[(f64, f64, f64)]) -> (f64, f64, f64) {
     )
 }
 
-/// Search box of the zone coordinates: the single-segment fit's (physics §7.1).
+/// Search box of the zone coordinates: the single-segment fit's (model §7.1).
 fn search_box() -> ((f64, f64), (f64, f64)) {
     (
         (E_BOUNDS.0.log10(), E_BOUNDS.1.log10()),

@@ -1,6 +1,6 @@
 //! The zones of a database: after the segment fits of a `calibrate` run, every zone with at
 //! least [`MIN_MEMBERS`] fitted segments whose member fits changed since its last estimate is
-//! estimated again (physics §7.11) and stored in `zone_fits` / `zone_members`.
+//! estimated again (model §7.11) and stored in `zone_fits` / `zone_members`.
 
 use std::collections::BTreeMap;
 use std::time::Instant;

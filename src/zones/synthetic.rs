@@ -1,4 +1,4 @@
-//! Zone estimation on a zoned synthetic network with known truth (issue 12's acceptance): fit
+//! Zone estimation on a zoned synthetic network with known truth (the acceptance trial): fit
 //! every segment, estimate every zone, and compare with the zones' true soils. Used by the
 //! `zones` test and the `zones_acceptance` example (which prints the figures and the timing).
 

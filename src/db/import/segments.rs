@@ -82,7 +82,7 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
     },
 ];
 
-// Valid ranges of spec §3.1, from `physics::inputs` (their one place); checking each override
+// Valid ranges of model §3.1, from `physics::inputs` (their one place); checking each override
 // here names the offending column. The pipe and the fluid are then built by the checked
 // constructors, which remain the authority.
 use crate::physics::inputs::{

@@ -107,7 +107,7 @@ impl CsvRows {
         let mut cells = Vec::with_capacity(width);
         for (i, raw) in rec.iter().enumerate() {
             match std::str::from_utf8(raw) {
-                // Our own CSV output neutralises formula-like text with a `'` (issue 17):
+                // Our own CSV output neutralises formula-like text with a `'`:
                 // read it back as written.
                 Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
                 Err(_) => {
@@ -694,7 +694,7 @@ impl<'t> RowCheck<'t> {
         }
     }
 
-    /// Keep `v` only if it is within `range` (spec §3.1 ranges).
+    /// Keep `v` only if it is within `range` (model §3.1 ranges).
     pub fn in_range(
         &mut self,
         col: &'static str,

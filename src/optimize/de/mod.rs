@@ -3,7 +3,7 @@
 //! Two methods share one builder, [`DifferentialEvolution`]:
 //!
 //! * [`DeMethod::Paper`] reproduces the optimiser of Lu et al. (Sensors 2022) as written
-//!   down in the spec (docs/physics.md §7, equations P54–P59): classic DE/rand/1/bin with
+//!   down in docs/model.md (§7, equations P54–P59): classic DE/rand/1/bin with
 //!   `NP = 50`, `CR = 0.5`, `G_max = 300`, the decreasing mutation factor
 //!   `F_g = 2 − g/300`, clamping of the donor to the bounds, greedy selection and a
 //!   stagnation stop. Everything the paper leaves open is fixed here and documented in
@@ -32,7 +32,7 @@ use super::{
 /// Which differential-evolution variant to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum DeMethod {
-    /// The paper's classic DE/rand/1/bin (spec P54–P59), see [`paper`].
+    /// The paper's classic DE/rand/1/bin (P54–P59), see [`paper`].
     Paper,
     /// SHADE (Tanabe & Fukunaga 2013) with Latin-hypercube initialisation, linear population
     /// size reduction and a spread-based convergence test, see [`shade`]. The default.
@@ -225,7 +225,7 @@ impl DifferentialEvolution {
         self
     }
 
-    /// Stagnation stop (spec P59): stop when `|best_g − best_{g−t}| < eps`, with
+    /// Stagnation stop (P59): stop when `|best_g − best_{g−t}| < eps`, with
     /// `generations = t ≥ 1` and `eps ≥ 0` in objective units.
     pub fn stagnation(mut self, generations: usize, eps: f64) -> Result<Self, OptimizeError> {
         if generations == 0 {

@@ -1,4 +1,4 @@
-//! The paper's differential evolution (Lu et al., Sensors 2022; spec docs/physics.md §7),
+//! The paper's differential evolution (Lu et al., Sensors 2022; docs/model.md §7),
 //! classic DE/rand/1/bin of Storn & Price 1997:
 //!
 //! * initialisation: `NP` points drawn uniformly in the box;
