@@ -239,27 +239,41 @@ fn field_run_from_row(r: &Row<'_>) -> rusqlite::Result<FieldRunRow> {
     })
 }
 
-/// Store a field update in one transaction: its run row and classes, and every segment's row
-/// and prediction in place of the previous update's. Returns the field run's id.
-pub fn replace_field(
-    conn: &mut Connection,
-    run: &FieldRunRow,
-    classes: &[FieldClassRow],
-    segments: &[FieldSegmentRow],
-    predictions: &[Prediction],
-) -> Result<i64, DbError> {
-    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+/// Start storing a field update inside the caller's transaction `tx`: insert its run row
+/// (counts completed by [`finish_field`]) and clear the previous update's classes, segment rows
+/// and predictions. Returns the field run's id.
+pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
     tx.execute(
         "INSERT INTO field_runs (run_id, fingerprint, n_segments, n_measured, n_classes, \
-         n_predicted, n_class_mean_only, n_without_speed, neighbours, correlation_length_m, \
-         correlation_length_lo_m, correlation_length_hi_m, field_var_ln_cp, \
-         field_cov_ln_cp_ln_cs, field_var_ln_cs, scatter_var_ln_cp, scatter_var_ln_cs, \
-         log_likelihood, hyper_source, loo_z_std, n_field_outliers, n_labels_rejected, \
-         elapsed_s) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, \
-         ?16, ?17, ?18, ?19, ?20, ?21, ?22, ?23)",
+         n_predicted, n_class_mean_only, n_without_speed, neighbours, hyper_source) \
+         VALUES (?1, ?2, 0, 0, 0, 0, 0, 0, 0, ?3)",
+        params![run.run_id, run.fingerprint, run.hyper_source],
+    )?;
+    let id = tx.last_insert_rowid();
+    // Only the latest update's classes, segments and predictions are kept.
+    tx.execute("DELETE FROM field_classes", [])?;
+    tx.execute("DELETE FROM field_segments", [])?;
+    tx.execute("DELETE FROM predictions", [])?;
+    Ok(id)
+}
+
+/// Complete the run row `field_run_id` and store its classes.
+pub fn finish_field(
+    tx: &Connection,
+    field_run_id: i64,
+    run: &FieldRunRow,
+    classes: &[FieldClassRow],
+) -> Result<(), DbError> {
+    tx.execute(
+        "UPDATE field_runs SET n_segments = ?2, n_measured = ?3, n_classes = ?4, \
+         n_predicted = ?5, n_class_mean_only = ?6, n_without_speed = ?7, neighbours = ?8, \
+         correlation_length_m = ?9, correlation_length_lo_m = ?10, \
+         correlation_length_hi_m = ?11, field_var_ln_cp = ?12, field_cov_ln_cp_ln_cs = ?13, \
+         field_var_ln_cs = ?14, scatter_var_ln_cp = ?15, scatter_var_ln_cs = ?16, \
+         log_likelihood = ?17, hyper_source = ?18, loo_z_std = ?19, n_field_outliers = ?20, \
+         n_labels_rejected = ?21, elapsed_s = ?22 WHERE id = ?1",
         params![
-            run.run_id,
-            run.fingerprint,
+            field_run_id,
             run.n_segments,
             run.n_measured,
             run.n_classes,
@@ -283,32 +297,34 @@ pub fn replace_field(
             run.elapsed_s,
         ],
     )?;
-    let field_run_id = tx.last_insert_rowid();
-    // Only the latest update's classes are kept, as its segments and predictions are.
-    tx.execute("DELETE FROM field_classes", [])?;
-    {
-        let mut ins = tx.prepare(
-            "INSERT INTO field_classes (field_run_id, soil_class, n_segments, n_measured, \
-             mean_ln_cp, mean_ln_cs, std_ln_cp, std_ln_cs) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
-        )?;
-        for c in classes {
-            ins.execute(params![
-                field_run_id,
-                c.soil_class,
-                c.n_segments,
-                c.n_measured,
-                c.mean[0],
-                c.mean[1],
-                c.std[0],
-                c.std[1],
-            ])?;
-        }
+    let mut ins = tx.prepare_cached(
+        "INSERT INTO field_classes (field_run_id, soil_class, n_segments, n_measured, \
+         mean_ln_cp, mean_ln_cs, std_ln_cp, std_ln_cs) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
+    )?;
+    for c in classes {
+        ins.execute(params![
+            field_run_id,
+            c.soil_class,
+            c.n_segments,
+            c.n_measured,
+            c.mean[0],
+            c.mean[1],
+            c.std[0],
+            c.std[1],
+        ])?;
     }
-    tx.execute("DELETE FROM field_segments", [])?;
-    tx.execute("DELETE FROM predictions", [])?;
+    Ok(())
+}
+
+/// Store a page of segment rows and predictions of the update `field_run_id`.
+pub fn insert_field_rows(
+    tx: &Connection,
+    field_run_id: i64,
+    segments: &[FieldSegmentRow],
+    predictions: &[Prediction],
+) -> Result<(), DbError> {
     {
-        let mut ins = tx.prepare(
+        let mut ins = tx.prepare_cached(
             "INSERT INTO field_segments (segment_id, field_run_id, label, soil_class, \
              label_rejected, measured, field_leak_band_speed_m_per_s, \
              field_leak_band_speed_std_m_per_s, loo_z, field_outlier, note) \
@@ -331,7 +347,7 @@ pub fn replace_field(
         }
     }
     {
-        let mut ins = tx.prepare(
+        let mut ins = tx.prepare_cached(
             "INSERT INTO predictions (segment_id, run_id, soil_p_wave_speed_m_per_s, \
              soil_p_wave_speed_std_m_per_s, soil_s_wave_speed_m_per_s, \
              soil_s_wave_speed_std_m_per_s, soil_youngs_modulus_pa, soil_youngs_modulus_lo_pa, \
@@ -341,7 +357,7 @@ pub fn replace_field(
              VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, \
              ?17, ?18, ?19)",
         )?;
-        let mut curve = tx.prepare(
+        let mut curve = tx.prepare_cached(
             "INSERT INTO prediction_curves (segment_id, frequency_hz, phase_speed_m_per_s, \
              phase_speed_std_m_per_s, attenuation_db_per_m, attenuation_std_db_per_m) \
              VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
@@ -382,8 +398,19 @@ pub fn replace_field(
             }
         }
     }
+    Ok(())
+}
+
+/// Run `f` in one immediate transaction of `conn`: everything it stores is committed together,
+/// or nothing when it fails.
+pub fn in_transaction<T>(
+    conn: &mut Connection,
+    f: impl FnOnce(&Connection) -> Result<T, DbError>,
+) -> Result<T, DbError> {
+    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+    let out = f(&tx)?;
     tx.commit()?;
-    Ok(field_run_id)
+    Ok(out)
 }
 
 /// A segment's prediction with its curve (by increasing frequency), if it has one.

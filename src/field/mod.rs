@@ -524,66 +524,28 @@ pub fn update_field(
     let field = in_pool(&pool, || {
         (n_members > 0).then(|| Field::fit(obs, names.len(), ell_bounds))
     });
-    // Every site's result, a page of the inventory at a time.
-    let by_id: BTreeMap<&str, usize> = sites
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (s.segment_id.as_str(), i))
-        .collect();
-    let mut rows: Vec<Option<FieldSegmentRow>> = vec![None; sites.len()];
-    let mut predictions: Vec<Prediction> = Vec::new();
-    let mut after: Option<String> = None;
-    loop {
-        let page = pages::segments_page(conn, after.as_deref(), PAGE)?;
-        let Some(last) = page.last() else {
-            break;
-        };
-        after = Some(last.segment_id.clone());
-        let full = page.len() >= PAGE;
-        let results: Vec<(usize, SiteResult)> = in_pool(&pool, || {
-            page.par_iter()
-                .filter_map(|rec| by_id.get(rec.segment_id.as_str()).map(|&i| (i, rec)))
-                .map(|(i, rec)| {
-                    (
-                        i,
-                        site_result(
-                            &sites[i],
-                            Some(rec),
-                            field.as_ref(),
-                            &names,
-                            settings,
-                            run_id,
-                        ),
-                    )
-                })
-                .collect()
-        });
-        for (i, r) in results {
-            rows[i] = Some(r.row);
-            predictions.extend(r.prediction);
-        }
-        if !full {
-            break;
-        }
-    }
-    let rows: Vec<FieldSegmentRow> = rows
-        .into_iter()
-        .zip(&sites)
-        .map(|(r, s)| {
-            r.unwrap_or_else(|| site_result(s, None, field.as_ref(), &names, settings, run_id).row)
-        })
-        .collect();
-    let z: Vec<f64> = rows.iter().filter_map(|r| r.loo_z).collect();
-    let z_std = (z.len() >= 2).then(|| {
-        let m = z.iter().sum::<f64>() / z.len() as f64;
-        (z.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (z.len() - 1) as f64).sqrt()
-    });
-    let n_predicted = predictions.len();
-    let n_class_mean_only = predictions
-        .iter()
-        .filter(|p| sites[by_id[p.0.segment_id.as_str()]].pos.is_none())
-        .count();
-    let n_with_fit = sites.iter().filter(|s| s.fitted_speed.is_some()).count();
+    let h = field.as_ref().map(|f| f.hyper);
+    let mut run = FieldRunRow {
+        id: None,
+        run_id,
+        fingerprint: fp,
+        n_segments: sites.len() as i64,
+        n_measured: n_members as i64,
+        n_classes: names.len() as i64,
+        neighbours: NEIGHBOURS as i64,
+        correlation_length_m: h.map(|h| h.ell),
+        correlation_length_lo_m: Some(ell_bounds.0),
+        correlation_length_hi_m: Some(ell_bounds.1),
+        field_cov: [h.map(|h| h.b.pp), h.map(|h| h.b.ps), h.map(|h| h.b.ss)],
+        scatter_var: [h.map(|h| h.t.pp), h.map(|h| h.t.ss)],
+        log_likelihood: field.as_ref().and_then(|f| f.log_likelihood),
+        hyper_source: field
+            .as_ref()
+            .map_or(model::HyperSource::Defaults, |f| f.source)
+            .as_str()
+            .to_string(),
+        ..FieldRunRow::default()
+    };
     let mut classes: Vec<FieldClassRow> = Vec::new();
     for (k, name) in names.iter().enumerate() {
         let members: Vec<&Site> = sites.iter().filter(|s| s.class == Some(k)).collect();
@@ -602,38 +564,81 @@ pub fn update_field(
             std: [cov.pp.max(0.0).sqrt(), cov.ss.max(0.0).sqrt()],
         });
     }
-    let h = field.as_ref().map(|f| f.hyper);
-    let run = FieldRunRow {
-        id: None,
-        run_id,
-        fingerprint: fp,
-        n_segments: sites.len() as i64,
-        n_measured: n_members as i64,
-        n_classes: names.len() as i64,
-        n_predicted: n_predicted as i64,
-        n_class_mean_only: n_class_mean_only as i64,
-        n_without_speed: (sites.len() - n_predicted - n_with_fit) as i64,
-        neighbours: NEIGHBOURS as i64,
-        correlation_length_m: h.map(|h| h.ell),
-        correlation_length_lo_m: Some(ell_bounds.0),
-        correlation_length_hi_m: Some(ell_bounds.1),
-        field_cov: [h.map(|h| h.b.pp), h.map(|h| h.b.ps), h.map(|h| h.b.ss)],
-        scatter_var: [h.map(|h| h.t.pp), h.map(|h| h.t.ss)],
-        log_likelihood: field.as_ref().and_then(|f| f.log_likelihood),
-        hyper_source: field
-            .as_ref()
-            .map_or(model::HyperSource::Defaults, |f| f.source)
-            .as_str()
-            .to_string(),
-        loo_z_std: z_std,
-        n_field_outliers: rows.iter().filter(|r| r.field_outlier).count() as i64,
-        n_labels_rejected: rows.iter().filter(|r| r.label_rejected).count() as i64,
-        elapsed_s: None,
-        created_at: None,
-    };
-    let mut run = run;
-    run.elapsed_s = Some(started.elapsed().as_secs_f64());
-    let id = store::replace_field(conn, &run, &classes, &rows, &predictions)?;
+    let by_id: BTreeMap<&str, usize> = sites
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.segment_id.as_str(), i))
+        .collect();
+    let n_with_fit = sites.iter().filter(|s| s.fitted_speed.is_some()).count();
+    // Every site's result, a page of the inventory at a time, stored as it comes (flat memory),
+    // all in one transaction: the previous update stays whole until this one is.
+    let id = store::in_transaction(conn, |tx| {
+        let id = store::start_field(tx, &run)?;
+        let mut z: Vec<f64> = Vec::new();
+        let (mut predicted, mut class_mean_only, mut outliers, mut rejected) = (0, 0, 0, 0);
+        let mut tally = |rows: &[FieldSegmentRow], preds: &[Prediction]| {
+            for r in rows {
+                z.extend(r.loo_z);
+                outliers += usize::from(r.field_outlier);
+                rejected += usize::from(r.label_rejected);
+            }
+            for p in preds {
+                predicted += 1;
+                class_mean_only += usize::from(sites[by_id[p.0.segment_id.as_str()]].pos.is_none());
+            }
+        };
+        let mut after: Option<String> = None;
+        loop {
+            let page = pages::segments_page(tx, after.as_deref(), PAGE)?;
+            let Some(last) = page.last() else {
+                break;
+            };
+            after = Some(last.segment_id.clone());
+            let full = page.len() >= PAGE;
+            let results: Vec<(usize, SiteResult)> = in_pool(&pool, || {
+                page.par_iter()
+                    .filter_map(|rec| by_id.get(rec.segment_id.as_str()).map(|&i| (i, rec)))
+                    .map(|(i, rec)| {
+                        (
+                            i,
+                            site_result(
+                                &sites[i],
+                                Some(rec),
+                                field.as_ref(),
+                                &names,
+                                settings,
+                                run_id,
+                            ),
+                        )
+                    })
+                    .collect()
+            });
+            let mut rows = Vec::with_capacity(results.len());
+            let mut preds = Vec::new();
+            for (_, r) in results {
+                rows.push(r.row);
+                preds.extend(r.prediction);
+            }
+            tally(&rows, &preds);
+            store::insert_field_rows(tx, id, &rows, &preds)?;
+            if !full {
+                break;
+            }
+        }
+        let z_std = (z.len() >= 2).then(|| {
+            let m = z.iter().sum::<f64>() / z.len() as f64;
+            (z.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (z.len() - 1) as f64).sqrt()
+        });
+        run.n_predicted = predicted as i64;
+        run.n_class_mean_only = class_mean_only as i64;
+        run.n_without_speed = (sites.len() - predicted - n_with_fit) as i64;
+        run.loo_z_std = z_std;
+        run.n_field_outliers = outliers as i64;
+        run.n_labels_rejected = rejected as i64;
+        run.elapsed_s = Some(started.elapsed().as_secs_f64());
+        store::finish_field(tx, id, &run, &classes)?;
+        Ok(id)
+    })?;
     run.id = Some(id);
     Ok(FieldUpdate {
         up_to_date: false,

@@ -1,9 +1,11 @@
 //! A pipe's speed from the field's posterior of its soil (P81): the forward model averaged over
-//! u ~ N(m*, S*) and the contact ξ ~ U[0, 1], by a small product quadrature: the unscented
-//! transform in u (5 points, κ = 1: exact for the mean and variance of a function quadratic in
-//! u) times 3-point Gauss–Legendre in ξ. Fifteen curves of the pipe, each the very curve a fit
-//! stores ([`crate::physics::curves::curve`] on the standard grid, its leak-band mean by
-//! [`band_mean`]).
+//! u ~ N(m*, S*) and the contact ξ ~ U[0, 1] by the unscented transform in (u, ξ) with κ = 0:
+//! six sigma points at ±√3 standard deviations along the principal axes, each of weight 1/6
+//! (exact for the mean and variance of a function quadratic in (u, ξ)). Along ξ, whose uniform
+//! prior has σ = 1/√12, they fall exactly on its ends 0 and 1. The curve at the centre (the
+//! posterior mean, ξ = ½) is computed by continuation, as a fit's stored curve
+//! ([`crate::physics::curves::curve`] on the standard grid, its leak-band mean by
+//! [`band_mean`]), and starts every other point's roots: seven curves of the pipe in all.
 
 use crate::db::CurvePoint;
 use crate::invert::uncertainty::{shear_to_compressional, soil_from_speeds, WithError};
@@ -17,17 +19,11 @@ use num_complex::Complex64;
 
 use super::model::Sym2;
 
-/// κ of the unscented transform in two dimensions (n + κ = 3: the fourth moment of each
-/// coordinate is right too).
-const UT_KAPPA: f64 = 1.0;
+/// Dimensions of the unscented transform: ln c_P, ln c_S and ξ.
+const UT_DIM: f64 = 3.0;
 
-/// Gauss–Legendre nodes on [0, 1] (3 points: exact for polynomials of degree 5 in ξ) and their
-/// weights.
-const XI_NODES: [(f64, f64); 3] = [
-    (0.112_701_665_379_258_3, 5.0 / 18.0),
-    (0.5, 8.0 / 18.0),
-    (0.887_298_334_620_741_7, 5.0 / 18.0),
-];
+/// Standard deviation of ξ under its uniform prior on [0, 1]: 1/√12.
+const XI_SD: f64 = 0.288_675_134_594_812_9;
 
 /// Fraction of the quadrature weight that may be lost to nodes without a root at a frequency
 /// before that point (or the band mean) is left empty rather than averaged over the rest.
@@ -70,13 +66,14 @@ pub fn predict_speed(
     cov: Sym2,
 ) -> SpeedPrediction {
     let problem = Problem::new(data, Method::Default, model, contact_mode, &[]);
-    let spread = (2.0 + UT_KAPPA).sqrt();
+    let spread = UT_DIM.sqrt();
     let l = cov
         .cholesky()
         .unwrap_or([cov.pp.max(0.0).sqrt(), 0.0, cov.ss.max(0.0).sqrt()]);
-    // Sigma points: the mean, then ± along each column of L.
+    // Sigma points (u, ξ, weight): ± along each column of L in u at ξ = ½, and ξ at its ends.
     let cols = [[l[0], l[1]], [0.0, l[2]]];
-    let mut points = vec![(mean, UT_KAPPA / (2.0 + UT_KAPPA))];
+    let w = 1.0 / (2.0 * UT_DIM);
+    let mut points: Vec<([f64; 2], f64, f64)> = Vec::new();
     for c in cols {
         for sign in [1.0, -1.0] {
             points.push((
@@ -84,9 +81,13 @@ pub fn predict_speed(
                     mean[0] + sign * spread * c[0],
                     mean[1] + sign * spread * c[1],
                 ],
-                0.5 / (2.0 + UT_KAPPA),
+                0.5,
+                w,
             ));
         }
+    }
+    for sign in [1.0, -1.0] {
+        points.push((mean, (0.5 + sign * spread * XI_SD).clamp(0.0, 1.0), w));
     }
     let nf = STANDARD_GRID_HZ.len();
     let system_of = |u: [f64; 2], xi: f64| {
@@ -120,53 +121,44 @@ pub fn predict_speed(
     // (as a fit's stored curve); every other node starts each frequency's root from it (as the
     // fit's curve errors do), and falls back to its own continuation where that fails.
     let reference = system_of(mean, 0.5).map(|s| full_curve(&s));
-    // Per node: weight, wavenumber per frequency, band mean.
     let mut nodes: Vec<Node> = Vec::new();
-    // Band mean per sigma point, averaged over ξ (for the gradient).
-    let mut band_by_point = vec![Some(0.0); points.len()];
-    for (pi, (u, wu)) in points.iter().enumerate() {
-        for &(xi, wx) in &XI_NODES {
-            let ks: Vec<Option<Complex64>> = match system_of(*u, xi) {
-                Some(sys) => {
-                    let from_guess: Option<Vec<Option<Complex64>>> = reference.as_ref().map(|r| {
-                        r.iter()
-                            .zip(STANDARD_GRID_HZ)
-                            .map(|(g, f)| {
-                                g.and_then(|g| {
-                                    solve_from_guess_tol(&sys, hz_to_omega(f), g, Tolerance::FAST)
-                                        .ok()
-                                        .map(|root| root.k1)
-                                })
+    for &(u, xi, weight) in &points {
+        let ks: Vec<Option<Complex64>> = match system_of(u, xi) {
+            Some(sys) => {
+                let from_guess: Option<Vec<Option<Complex64>>> = reference.as_ref().map(|r| {
+                    r.iter()
+                        .zip(STANDARD_GRID_HZ)
+                        .map(|(g, f)| {
+                            g.and_then(|g| {
+                                solve_from_guess_tol(&sys, hz_to_omega(f), g, Tolerance::FAST)
+                                    .ok()
+                                    .map(|root| root.k1)
                             })
-                            .collect()
-                    });
-                    match from_guess {
-                        Some(k) if k.iter().all(Option::is_some) => k,
-                        _ => full_curve(&sys),
-                    }
+                        })
+                        .collect()
+                });
+                match from_guess {
+                    Some(k) if k.iter().all(Option::is_some) => k,
+                    _ => full_curve(&sys),
                 }
-                None => vec![None; nf],
-            };
-            let pts: Vec<Option<(f64, f64)>> = ks
-                .iter()
-                .zip(STANDARD_GRID_HZ)
-                .map(|(k, f)| {
-                    k.filter(|k| k.re > 0.0)
-                        .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
-                })
-                .collect();
-            let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
-                .iter()
-                .zip(&pts)
-                .map(|(&f, p)| (f, p.map(|v| v.0)))
-                .collect();
-            let band = band_mean(&speeds, LEAK_BAND_HZ);
-            band_by_point[pi] = match (band_by_point[pi], band) {
-                (Some(acc), Some(b)) => Some(acc + wx * b),
-                _ => None,
-            };
-            nodes.push((wu * wx, pts, band));
-        }
+            }
+            None => vec![None; nf],
+        };
+        let pts: Vec<Option<(f64, f64)>> = ks
+            .iter()
+            .zip(STANDARD_GRID_HZ)
+            .map(|(k, f)| {
+                k.filter(|k| k.re > 0.0)
+                    .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
+            })
+            .collect();
+        let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
+            .iter()
+            .zip(&pts)
+            .map(|(&f, p)| (f, p.map(|v| v.0)))
+            .collect();
+        let band = band_mean(&speeds, LEAK_BAND_HZ);
+        nodes.push((weight, pts, band));
     }
     let moments = |vals: &mut dyn Iterator<Item = (f64, Option<f64>)>| -> Option<WithError> {
         let v: Vec<(f64, f64)> = vals.filter_map(|(w, x)| x.map(|x| (w, x))).collect();
@@ -198,8 +190,9 @@ pub fn predict_speed(
         .collect();
     let band = moments(&mut nodes.iter().map(|n| (n.0, n.2)));
     // Gradient: (b(+j) − b(−j)) / (2·spread) = g·L e_j, so g = L⁻ᵀ d.
-    let band_gradient = match band_by_point[..] {
-        [_, Some(p1), Some(m1), Some(p2), Some(m2)] if l[0] > 0.0 && l[2] > 0.0 => {
+    let band_of = |i: usize| nodes.get(i).and_then(|n| n.2);
+    let band_gradient = match (band_of(0), band_of(1), band_of(2), band_of(3)) {
+        (Some(p1), Some(m1), Some(p2), Some(m2)) if l[0] > 0.0 && l[2] > 0.0 => {
             let d = [(p1 - m1) / (2.0 * spread), (p2 - m2) / (2.0 * spread)];
             // Lᵀ g = d with L = [[l0, 0], [l1, l2]]: g1 = d1/l2, g0 = (d0 − l1 g1)/l0.
             let g1 = d[1] / l[2];
