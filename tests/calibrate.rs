@@ -581,10 +581,15 @@ fn run_does_everything_once_and_nothing_the_second_time() {
     let lines: Vec<&str> = out.lines().collect();
     assert!(lines[0].starts_with("imported: segments 6 new"), "{out}");
     assert!(lines[1].starts_with("calibrate: 6 fitted"), "{out}");
-    assert!(lines[2].starts_with("export: 6 segments -> "), "{out}");
-    assert!(lines[2].ends_with("segments.gpkg"), "{out}");
-    assert!(lines[3].ends_with("out/segments.csv"), "{out}");
-    assert!(lines[4].starts_with("audit: 6 segments -> "), "{out}");
+    // The soil field learns from the six (physics §7.12); every segment is measured.
+    assert!(
+        lines[2].starts_with("field: 0 segments predicted from 6 measured"),
+        "{out}"
+    );
+    assert!(lines[3].starts_with("export: 6 segments -> "), "{out}");
+    assert!(lines[3].ends_with("segments.gpkg"), "{out}");
+    assert!(lines[4].ends_with("out/segments.csv"), "{out}");
+    assert!(lines[5].starts_with("audit: 6 segments -> "), "{out}");
     for f in ["segments.gpkg", "segments.csv", "report.html"] {
         let p = net.join("out").join(f);
         assert!(
@@ -620,6 +625,7 @@ fn run_does_everything_once_and_nothing_the_second_time() {
     );
     assert!(out.contains("calibrate: 0 fitted"), "{out}");
     assert!(out.contains("6 up to date"), "{out}");
+    assert!(out.contains("field: up to date"), "{out}");
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 6);
 }
 

@@ -98,7 +98,7 @@ pub fn write_paged(
             worst.push((r, v));
         }
     }
-    let map = map_section(&records, &mut t)?;
+    let map = map_section(&records, &mut t)? + &super::field::section(db)?;
     let encode = |e: ChartError| ExportError::Encode {
         path: out_path.to_path_buf(),
         message: e.to_string(),

@@ -7,6 +7,7 @@
 
 pub mod audit;
 pub mod charts;
+pub mod field;
 pub mod svg;
 pub mod zones;
 
