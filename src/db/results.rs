@@ -173,6 +173,11 @@ pub struct FitRow {
     pub leak_band_speed_m_per_s: Option<f64>,
     /// Its one-sigma error, m/s.
     pub leak_band_speed_std_m_per_s: Option<f64>,
+    /// `model`, or `model+discrepancy` where the misfit is significant and the curve and the
+    /// leak-band speed are corrected by a fitted discrepancy (physics §7.13).
+    pub curve_source: String,
+    /// How far the leak band reaches beyond the measured frequencies, octaves.
+    pub leak_band_extrapolation_octaves: Option<f64>,
     /// Objective value at the optimum.
     pub misfit: Option<f64>,
     /// χ² per degree of freedom, when measurement standard deviations are known.
@@ -256,6 +261,8 @@ impl FitRow {
             contact_hi: None,
             leak_band_speed_m_per_s: None,
             leak_band_speed_std_m_per_s: None,
+            curve_source: "model".into(),
+            leak_band_extrapolation_octaves: None,
             misfit: None,
             chi2_per_dof: None,
             n_measurements: None,
@@ -290,6 +297,11 @@ pub struct CurvePoint {
     pub phase_speed_std_m_per_s: Option<f64>,
     /// One-sigma error of the attenuation, dB/m.
     pub attenuation_std_db_per_m: Option<f64>,
+    /// The model's phase speed, m/s: `phase_speed_m_per_s` unless the fit's curve is corrected
+    /// by a discrepancy (`fits.curve_source`).
+    pub model_phase_speed_m_per_s: Option<f64>,
+    /// The model's attenuation, dB/m.
+    pub model_attenuation_db_per_m: Option<f64>,
 }
 
 fn seed_to_sql(seed: u64) -> i64 {
@@ -434,8 +446,9 @@ pub fn insert_fit_with_curves(
     {
         let mut ins = tx.prepare_cached(
             "INSERT INTO curves (segment_id, run_id, frequency_hz, phase_speed_m_per_s, \
-             attenuation_db_per_m, phase_speed_std_m_per_s, attenuation_std_db_per_m) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+             attenuation_db_per_m, phase_speed_std_m_per_s, attenuation_std_db_per_m, \
+             model_phase_speed_m_per_s, model_attenuation_db_per_m) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
         )?;
         for p in curve {
             ins.execute(params![
@@ -446,6 +459,8 @@ pub fn insert_fit_with_curves(
                 p.attenuation_db_per_m,
                 p.phase_speed_std_m_per_s,
                 p.attenuation_std_db_per_m,
+                p.model_phase_speed_m_per_s,
+                p.model_attenuation_db_per_m,
             ])?;
         }
     }
@@ -523,6 +538,11 @@ fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
             "leak_band_speed_std_m_per_s",
             real(f.leak_band_speed_std_m_per_s),
         ),
+        ("curve_source", text(&f.curve_source)),
+        (
+            "leak_band_extrapolation_octaves",
+            real(f.leak_band_extrapolation_octaves),
+        ),
         ("misfit", real(f.misfit)),
         ("chi2_per_dof", real(f.chi2_per_dof)),
         ("n_measurements", int(f.n_measurements)),
@@ -586,6 +606,8 @@ fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
     f.contact_hi = r.get("contact_hi")?;
     f.leak_band_speed_m_per_s = r.get("leak_band_speed_m_per_s")?;
     f.leak_band_speed_std_m_per_s = r.get("leak_band_speed_std_m_per_s")?;
+    f.curve_source = r.get("curve_source")?;
+    f.leak_band_extrapolation_octaves = r.get("leak_band_extrapolation_octaves")?;
     f.misfit = r.get("misfit")?;
     f.chi2_per_dof = r.get("chi2_per_dof")?;
     f.n_measurements = r.get("n_measurements")?;
@@ -636,6 +658,25 @@ pub fn latest_fits(conn: &Connection, ids: Option<&[String]>) -> Result<Vec<FitR
     Ok(out)
 }
 
+/// The newest fit of a segment made with `settings_hash` from the inputs `inputs_hash` that
+/// did not fail, if any: the base a fit with effects starts from.
+pub fn fit_with_settings(
+    conn: &Connection,
+    segment_id: &str,
+    settings_hash: &str,
+    inputs_hash: &str,
+) -> Result<Option<FitRow>, DbError> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT * FROM fits WHERE segment_id = ?1 AND settings_hash = ?2 AND inputs_hash = ?3 \
+         AND status != 'failed' ORDER BY id DESC LIMIT 1",
+    )?;
+    let mut rows = stmt.query(params![segment_id, settings_hash, inputs_hash])?;
+    match rows.next()? {
+        Some(r) => Ok(Some(fit_from_row(r)?)),
+        None => Ok(None),
+    }
+}
+
 /// The curve of one segment's fit in one run, by increasing frequency.
 pub fn curves_for(
     conn: &Connection,
@@ -644,7 +685,8 @@ pub fn curves_for(
 ) -> Result<Vec<CurvePoint>, DbError> {
     let mut stmt = conn.prepare_cached(
         "SELECT frequency_hz, phase_speed_m_per_s, attenuation_db_per_m, \
-         phase_speed_std_m_per_s, attenuation_std_db_per_m FROM curves \
+         phase_speed_std_m_per_s, attenuation_std_db_per_m, model_phase_speed_m_per_s, \
+         model_attenuation_db_per_m FROM curves \
          WHERE segment_id = ?1 AND run_id = ?2 ORDER BY frequency_hz",
     )?;
     let rows = stmt.query_map(params![segment_id, run_id], |r| {
@@ -654,6 +696,8 @@ pub fn curves_for(
             attenuation_db_per_m: r.get("attenuation_db_per_m")?,
             phase_speed_std_m_per_s: r.get("phase_speed_std_m_per_s")?,
             attenuation_std_db_per_m: r.get("attenuation_std_db_per_m")?,
+            model_phase_speed_m_per_s: r.get("model_phase_speed_m_per_s")?,
+            model_attenuation_db_per_m: r.get("model_attenuation_db_per_m")?,
         })
     })?;
     Ok(rows.collect::<Result<_, _>>()?)
