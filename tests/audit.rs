@@ -182,6 +182,8 @@ fn lead_sections_match_the_database() {
             attenuation_db_per_m: Some(0.01),
             phase_speed_std_m_per_s: Some(150.0),
             attenuation_std_db_per_m: Some(0.001),
+            model_phase_speed_m_per_s: None,
+            model_attenuation_db_per_m: None,
         })
         .collect();
     db::insert_fit_with_curves(database.conn_mut(), &fit, &curve).unwrap();

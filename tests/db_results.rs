@@ -120,6 +120,8 @@ fn runs_fits_and_curves_round_trip() {
             attenuation_db_per_m: Some(0.04),
             phase_speed_std_m_per_s: Some(6.0),
             attenuation_std_db_per_m: Some(0.003),
+            model_phase_speed_m_per_s: Some(1100.0),
+            model_attenuation_db_per_m: None,
         },
         CurvePoint {
             frequency_hz: 100.0,
@@ -127,6 +129,8 @@ fn runs_fits_and_curves_round_trip() {
             attenuation_db_per_m: None,
             phase_speed_std_m_per_s: None,
             attenuation_std_db_per_m: None,
+            model_phase_speed_m_per_s: None,
+            model_attenuation_db_per_m: None,
         },
     ];
     let id = insert_fit_with_curves(database.conn_mut(), &f, &curve).unwrap();
@@ -174,6 +178,8 @@ fn a_fit_and_its_curve_are_stored_together_or_not_at_all() {
         attenuation_db_per_m: Some(0.1),
         phase_speed_std_m_per_s: None,
         attenuation_std_db_per_m: None,
+        model_phase_speed_m_per_s: None,
+        model_attenuation_db_per_m: None,
     };
     // The same frequency twice violates the curve's primary key after the fit row is written.
     assert!(insert_fit_with_curves(database.conn_mut(), &f, &[p, p]).is_err());

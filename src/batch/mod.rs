@@ -36,7 +36,7 @@ use crate::db::{
     self, CurvePoint, DbError, FitRow, FitState, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
 };
-use crate::invert::{fit_segment, FitSettings, Method};
+use crate::invert::{fit_with_effects, FitSettings, Method, Param};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, Model};
 use crate::seed::splitmix64;
@@ -369,6 +369,9 @@ struct Job {
     settings: FitSettings,
     /// Hash of `settings`.
     settings_hash: String,
+    /// With effects: the fitted values of the segment's stored fit without them, made from
+    /// the same inputs (`None`: there is none, the base is fitted first).
+    base: Option<Vec<(Param, f64)>>,
 }
 
 /// One segment computed by a worker, ready for the writer.
@@ -653,6 +656,33 @@ impl<'a> Selection<'a> {
         })
     }
 
+    /// The fitted values of the segment's newest fit under the run's settings without any
+    /// effect, made from its current inputs: the base optimum a fit with effects also starts
+    /// from (nested fits).
+    fn stored_base(
+        &self,
+        conn: &Connection,
+        record: &SegmentRecord,
+    ) -> Result<Option<Vec<(Param, f64)>>, BatchError> {
+        let opts = self.opts;
+        let hash = settings_hash(opts.method, opts.model, opts.contact_mode, &[]);
+        let Some(f) = db::fit_with_settings(conn, &record.segment_id, &hash, &record.inputs_hash)?
+        else {
+            return Ok(None);
+        };
+        let values = [
+            (Param::SoilModulus, f.soil_youngs_modulus_pa),
+            (Param::SoilPoisson, f.soil_poisson),
+            (Param::Contact, f.contact),
+        ];
+        Ok(Some(
+            values
+                .into_iter()
+                .filter_map(|(p, v)| Some((p, v?)))
+                .collect(),
+        ))
+    }
+
     /// Count the segments in scope and to fit, reading the inventory a page at a time.
     fn count(&self, conn: &Connection) -> Result<Tally, BatchError> {
         let mut tally = Tally::default();
@@ -738,11 +768,17 @@ impl<'s> Feed<'s> {
                 let Some(record) = db::load_segment(conn, &st.segment_id)? else {
                     continue;
                 };
+                let base = if settings.effects.is_empty() {
+                    None
+                } else {
+                    self.selection.stored_base(conn, &record)?
+                };
                 self.ready.push_back(Job {
                     seed: segment_seed(run_seed, &record.segment_id),
                     record,
                     settings: settings.clone(),
                     settings_hash: settings_hash.clone(),
+                    base,
                 });
             }
             self.tally.add(&verdict);
@@ -894,7 +930,9 @@ fn compute(job: &Job, run_id: i64) -> Computed {
             let result = if settings.effects.contains(&Effect::InventoryError) {
                 crate::diagnose::inventory::fit_with_records(&data, settings, job.seed).fit
             } else {
-                fit_segment(&data, settings, job.seed)
+                // With effects: also from the base optimum (nested fits), one path with the
+                // diagnosis's refits.
+                fit_with_effects(&data, settings, job.seed, job.base.clone())
             };
             let curve = curve_points(&result);
             (result, curve)

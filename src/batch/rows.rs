@@ -40,6 +40,8 @@ pub fn curve_points(r: &FitResult) -> Vec<CurvePoint> {
             attenuation_db_per_m: p.attenuation_db,
             phase_speed_std_m_per_s: p.phase_speed_std.and_then(finite),
             attenuation_std_db_per_m: p.attenuation_db_std.and_then(finite),
+            model_phase_speed_m_per_s: p.model_phase_speed,
+            model_attenuation_db_per_m: p.model_attenuation_db,
         })
         .collect()
 }
@@ -135,6 +137,8 @@ pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
             f.soil_information_ss,
         ) = (finite(pp), finite(ps), finite(ss));
     }
+    f.curve_source = r.curve_source.as_str().to_string();
+    f.leak_band_extrapolation_octaves = r.leak_band_extrapolation_octaves.and_then(finite);
     f.misfit = not_nan(r.misfit);
     f.chi2_per_dof = r.chi2_per_dof.and_then(not_nan);
     f.n_measurements = i64::try_from(r.n_measurements).ok();

@@ -96,6 +96,12 @@ static STOP: AtomicBool = AtomicBool::new(false);
 /// First Ctrl-C: stop scheduling, finish the segments in flight. Second: quit at once (what
 /// was committed is kept; the lock is left stale and taken over by the next run).
 fn install_interrupt_handler() {
+    // Once per process: `run --diagnose` calibrates twice.
+    static INSTALL: std::sync::Once = std::sync::Once::new();
+    INSTALL.call_once(install_interrupt_handler_now);
+}
+
+fn install_interrupt_handler_now() {
     let installed = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::SeqCst) {
             eprintln!("\ninterrupted again: quitting now (fits already stored are kept)");

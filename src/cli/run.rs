@@ -63,7 +63,15 @@ pub struct RunDirArgs {
     db: Option<PathBuf>,
     #[command(flatten)]
     run: RunArgs,
+    /// After calibrating, diagnose the fitted segments, switch on for each the effect the
+    /// diagnosis names and refit, all before the export (default: off). The diagnosis report
+    /// goes to DIR/out/diagnosis/.
+    #[arg(long)]
+    diagnose: bool,
 }
+
+/// Directory of the diagnosis report inside the output directory (`run --diagnose`).
+pub const DIAGNOSIS_DIR: &str = "diagnosis";
 
 /// Import, calibrate, then the later steps.
 pub fn run(args: &RunDirArgs) -> anyhow::Result<Outcome> {
@@ -74,11 +82,52 @@ pub fn run(args: &RunDirArgs) -> anyhow::Result<Outcome> {
         seed: args.run.seed,
         ..CalibrateOptions::default()
     };
-    let outcome = calibrate::execute(&mut database, &opts)?;
+    let mut outcome = calibrate::execute(&mut database, &opts)?;
     if outcome == Outcome::Interrupted {
         return Ok(outcome);
     }
+    if args.diagnose {
+        outcome = diagnose_and_refit(&mut database, &args.dir, &opts)?;
+        if outcome == Outcome::Interrupted {
+            return Ok(outcome);
+        }
+    }
     write_outputs(&database, &args.dir.join(OUT_DIR))?;
+    Ok(outcome)
+}
+
+/// Diagnose every fitted segment, store the extended fits and switch the named effects on
+/// (as `diagnose` does), then calibrate again: a segment whose effects changed is refitted
+/// with them, so the exports that follow reflect them. Prints what it did.
+fn diagnose_and_refit(
+    database: &mut Database,
+    dir: &Path,
+    opts: &CalibrateOptions,
+) -> anyhow::Result<Outcome> {
+    use pipewave::diagnose::run::{diagnose_database, DiagnoseOptions};
+    let out_dir = dir.join(OUT_DIR).join(DIAGNOSIS_DIR);
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("cannot create the directory {}", out_dir.display()))?;
+    let d = diagnose_database(
+        database.conn_mut(),
+        &DiagnoseOptions {
+            segments: None,
+            jobs: opts.worker_count(),
+            apply: true,
+            candidates: pipewave::physics::effects::Effect::ALL.to_vec(),
+            out_dir,
+            group_by: Default::default(),
+        },
+    )?;
+    println!("{}", d.line());
+    let outcome = calibrate::execute(database, opts)?;
+    let named: usize = d.named.values().sum();
+    println!(
+        "run --diagnose: {} segments diagnosed, an effect named and switched on for {named}; \
+         {} extended fits stored by the diagnosis; the calibration above refitted what they \
+         left stale, so the exports below reflect the effects",
+        d.diagnosed, d.stored
+    );
     Ok(outcome)
 }
 

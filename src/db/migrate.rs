@@ -62,6 +62,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0008_predictions.sql",
         sql: include_str!("../../migrations/0008_predictions.sql"),
     },
+    Migration {
+        version: 9,
+        name: "0009_honest_errors.sql",
+        sql: include_str!("../../migrations/0009_honest_errors.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

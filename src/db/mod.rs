@@ -38,9 +38,9 @@ pub use inventory::{
 };
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{
-    curves_for, finish_run, fit_states_page, insert_fit_with_curves, latest_fits, load_run,
-    segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun, RunCounts, RunRow,
-    RunStatus,
+    curves_for, finish_run, fit_states_page, fit_with_settings, insert_fit_with_curves,
+    latest_fits, load_run, segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun,
+    RunCounts, RunRow, RunStatus,
 };
 
 /// How long a statement waits for another connection's write lock before giving up. A calibrate

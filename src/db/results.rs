@@ -180,6 +180,11 @@ pub struct FitRow {
     pub soil_information_ps: Option<f64>,
     /// Its information about ln c_S.
     pub soil_information_ss: Option<f64>,
+    /// `model`, or `model+discrepancy` where the misfit is significant and the curve and the
+    /// leak-band speed are corrected by a fitted discrepancy (physics §7.13).
+    pub curve_source: String,
+    /// How far the leak band reaches beyond the measured frequencies, octaves.
+    pub leak_band_extrapolation_octaves: Option<f64>,
     /// Objective value at the optimum.
     pub misfit: Option<f64>,
     /// χ² per degree of freedom, when measurement standard deviations are known.
@@ -266,6 +271,8 @@ impl FitRow {
             soil_information_pp: None,
             soil_information_ps: None,
             soil_information_ss: None,
+            curve_source: "model".into(),
+            leak_band_extrapolation_octaves: None,
             misfit: None,
             chi2_per_dof: None,
             n_measurements: None,
@@ -300,6 +307,11 @@ pub struct CurvePoint {
     pub phase_speed_std_m_per_s: Option<f64>,
     /// One-sigma error of the attenuation, dB/m.
     pub attenuation_std_db_per_m: Option<f64>,
+    /// The model's phase speed, m/s: `phase_speed_m_per_s` unless the fit's curve is corrected
+    /// by a discrepancy (`fits.curve_source`).
+    pub model_phase_speed_m_per_s: Option<f64>,
+    /// The model's attenuation, dB/m.
+    pub model_attenuation_db_per_m: Option<f64>,
 }
 
 fn seed_to_sql(seed: u64) -> i64 {
@@ -444,8 +456,9 @@ pub fn insert_fit_with_curves(
     {
         let mut ins = tx.prepare_cached(
             "INSERT INTO curves (segment_id, run_id, frequency_hz, phase_speed_m_per_s, \
-             attenuation_db_per_m, phase_speed_std_m_per_s, attenuation_std_db_per_m) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+             attenuation_db_per_m, phase_speed_std_m_per_s, attenuation_std_db_per_m, \
+             model_phase_speed_m_per_s, model_attenuation_db_per_m) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
         )?;
         for p in curve {
             ins.execute(params![
@@ -456,6 +469,8 @@ pub fn insert_fit_with_curves(
                 p.attenuation_db_per_m,
                 p.phase_speed_std_m_per_s,
                 p.attenuation_std_db_per_m,
+                p.model_phase_speed_m_per_s,
+                p.model_attenuation_db_per_m,
             ])?;
         }
     }
@@ -536,6 +551,11 @@ fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
         ("soil_information_pp", real(f.soil_information_pp)),
         ("soil_information_ps", real(f.soil_information_ps)),
         ("soil_information_ss", real(f.soil_information_ss)),
+        ("curve_source", text(&f.curve_source)),
+        (
+            "leak_band_extrapolation_octaves",
+            real(f.leak_band_extrapolation_octaves),
+        ),
         ("misfit", real(f.misfit)),
         ("chi2_per_dof", real(f.chi2_per_dof)),
         ("n_measurements", int(f.n_measurements)),
@@ -602,6 +622,8 @@ fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
     f.soil_information_pp = r.get("soil_information_pp")?;
     f.soil_information_ps = r.get("soil_information_ps")?;
     f.soil_information_ss = r.get("soil_information_ss")?;
+    f.curve_source = r.get("curve_source")?;
+    f.leak_band_extrapolation_octaves = r.get("leak_band_extrapolation_octaves")?;
     f.misfit = r.get("misfit")?;
     f.chi2_per_dof = r.get("chi2_per_dof")?;
     f.n_measurements = r.get("n_measurements")?;
@@ -652,6 +674,25 @@ pub fn latest_fits(conn: &Connection, ids: Option<&[String]>) -> Result<Vec<FitR
     Ok(out)
 }
 
+/// The newest fit of a segment made with `settings_hash` from the inputs `inputs_hash` that
+/// did not fail, if any: the base a fit with effects starts from.
+pub fn fit_with_settings(
+    conn: &Connection,
+    segment_id: &str,
+    settings_hash: &str,
+    inputs_hash: &str,
+) -> Result<Option<FitRow>, DbError> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT * FROM fits WHERE segment_id = ?1 AND settings_hash = ?2 AND inputs_hash = ?3 \
+         AND status != 'failed' ORDER BY id DESC LIMIT 1",
+    )?;
+    let mut rows = stmt.query(params![segment_id, settings_hash, inputs_hash])?;
+    match rows.next()? {
+        Some(r) => Ok(Some(fit_from_row(r)?)),
+        None => Ok(None),
+    }
+}
+
 /// The curve of one segment's fit in one run, by increasing frequency.
 pub fn curves_for(
     conn: &Connection,
@@ -660,7 +701,8 @@ pub fn curves_for(
 ) -> Result<Vec<CurvePoint>, DbError> {
     let mut stmt = conn.prepare_cached(
         "SELECT frequency_hz, phase_speed_m_per_s, attenuation_db_per_m, \
-         phase_speed_std_m_per_s, attenuation_std_db_per_m FROM curves \
+         phase_speed_std_m_per_s, attenuation_std_db_per_m, model_phase_speed_m_per_s, \
+         model_attenuation_db_per_m FROM curves \
          WHERE segment_id = ?1 AND run_id = ?2 ORDER BY frequency_hz",
     )?;
     let rows = stmt.query_map(params![segment_id, run_id], |r| {
@@ -670,6 +712,8 @@ pub fn curves_for(
             attenuation_db_per_m: r.get("attenuation_db_per_m")?,
             phase_speed_std_m_per_s: r.get("phase_speed_std_m_per_s")?,
             attenuation_std_db_per_m: r.get("attenuation_std_db_per_m")?,
+            model_phase_speed_m_per_s: r.get("model_phase_speed_m_per_s")?,
+            model_attenuation_db_per_m: r.get("model_attenuation_db_per_m")?,
         })
     })?;
     Ok(rows.collect::<Result<_, _>>()?)

@@ -32,6 +32,8 @@ pub struct Trial {
     pub true_pipe: (Material, f64, f64),
     /// The hidden effect and its value, if any.
     pub hidden: Option<(Effect, f64)>,
+    /// The system that made the measurements (the truth, effect applied).
+    pub true_system: System,
 }
 
 /// Measure a pipe of `material` (outside diameter and wall in mm) in a random soil of the
@@ -82,6 +84,7 @@ pub fn trial<R: Rng + ?Sized>(
         data: segment_data(record.0, rec_pipe, rho, &meas),
         true_pipe: (material, true_size.0, true_size.1),
         hidden,
+        true_system: sys,
     })
 }
 

@@ -782,6 +782,19 @@ pub const PROPERTIES: &[Property] = &[
         get: |r| Value::real(r.leak_band_speed_std()),
     },
     Property {
+        name: "curve_source",
+        kind: Kind::Text,
+        doc: "model, or model+discrepancy where the model does not explain the data and the \
+              speeds and their errors include a discrepancy fitted to the residuals (physics \
+              §7.13)",
+        get: |r| Value::text(r.fit.as_ref().map(|f| f.curve_source.as_str())),
+    },
+    fit_real!(
+        "leak_band_extrapolation_octaves",
+        leak_band_extrapolation_octaves,
+        "how far the leak band 100-800 Hz reaches beyond the measured frequencies, octaves"
+    ),
+    Property {
         name: "soil_zone",
         kind: Kind::Text,
         doc: "the soil unit of the inventory (model §7.11)",
@@ -944,6 +957,8 @@ mod tests {
                 attenuation_db_per_m: Some(f * 1e-4),
                 phase_speed_std_m_per_s: None,
                 attenuation_std_db_per_m: None,
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             })
             .collect()
     }

@@ -9,6 +9,10 @@ use num_complex::Complex64;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use super::discrepancy::{
+    extrapolation_octaves, Discrepancy, Residual, ASSUMED_RELATIVE_ATTENUATION_STD,
+    ASSUMED_RELATIVE_SPEED_STD,
+};
 use super::flags::{assess, Evidence, Flag, FlagCode, Separated, Severity};
 use super::probes;
 use super::problem::{
@@ -185,6 +189,30 @@ pub struct PredictedPoint {
     pub attenuation_db: Option<f64>,
     /// Its one-sigma error, dB/m.
     pub attenuation_db_std: Option<f64>,
+    /// The model's phase speed, m/s: `phase_speed` unless the curve is corrected by a
+    /// discrepancy ([`CurveSource::ModelPlusDiscrepancy`]).
+    pub model_phase_speed: Option<f64>,
+    /// The model's attenuation, dB/m.
+    pub model_attenuation_db: Option<f64>,
+}
+
+/// What a fit's curve is (`fits.curve_source`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CurveSource {
+    /// The fitted model's curve: the model explains the data.
+    Model,
+    /// The model plus the discrepancy fitted to its residuals (P89): the misfit is significant.
+    ModelPlusDiscrepancy,
+}
+
+impl CurveSource {
+    /// Name used in the database and the exports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            CurveSource::Model => "model",
+            CurveSource::ModelPlusDiscrepancy => "model+discrepancy",
+        }
+    }
 }
 
 /// The result of fitting one segment.
@@ -245,6 +273,10 @@ pub struct FitResult {
     /// the misfit's variance factor (R_B², P88): (I_PP, I_PS, I_SS), eq. P79. What the soil
     /// field of the network learns from this fit. None for a failed fit or unknown curvature.
     pub soil_information: Option<[f64; 3]>,
+    /// Whether `curve` and `leak_band_speed` are the model's or corrected by a discrepancy.
+    pub curve_source: CurveSource,
+    /// How far [`LEAK_BAND_HZ`] reaches beyond the measured frequencies, octaves.
+    pub leak_band_extrapolation_octaves: Option<f64>,
     /// Wall-clock time of building the result after the search (uncertainty, curve with
     /// errors, findings), s: what reporting what the data determine costs (`pipewave bench`).
     pub result_seconds: f64,
@@ -307,6 +339,8 @@ impl FitResult {
             curve: Vec::new(),
             leak_band_speed: None,
             soil_information: None,
+            curve_source: CurveSource::Model,
+            leak_band_extrapolation_octaves: None,
             result_seconds: 0.0,
         }
     }
@@ -336,25 +370,99 @@ pub fn fit_segment(data: &SegmentData, settings: &FitSettings, seed: u64) -> Fit
     fit_from(data, settings, seed, None)
 }
 
-/// Fit one segment with effects beyond those of a `base` fit of the same segment:
-/// besides the usual search, start from the base optimum with every added effect at its
-/// neutral value, and keep the better. The extended model contains the base model, so the
-/// result's misfit is never above the base fit's (up to the solver's tolerance), whatever the
-/// search does.
+/// The optimum of a base fit of a segment (the same settings without the added effects), from
+/// which a fit with effects also starts: its parameter values and its fitted system.
+#[derive(Debug, Clone)]
+pub struct BaseOptimum {
+    /// (parameter, value in physical units) of every fitted parameter of the base.
+    values: Vec<(Param, f64)>,
+    /// The base's system, for the effects' neutral values (a pipe's own loss factor).
+    system: System,
+}
+
+impl BaseOptimum {
+    /// The optimum of a fit; `None` for a failed fit.
+    pub fn of(fit: &FitResult) -> Option<BaseOptimum> {
+        if fit.status == FitStatus::Failed {
+            return None;
+        }
+        Some(BaseOptimum {
+            values: fit.estimates.iter().map(|e| (e.param, e.value)).collect(),
+            system: fit.system.clone()?,
+        })
+    }
+
+    /// The optimum of a stored base fit of `data` made with `settings`: the values of its
+    /// fitted parameters (physical units). `None` when one is missing or gives no system.
+    pub fn from_values(
+        data: &SegmentData,
+        settings: &FitSettings,
+        values: Vec<(Param, f64)>,
+    ) -> Option<BaseOptimum> {
+        let problem = problem_for(data, settings);
+        let x: Vec<f64> = problem
+            .specs
+            .iter()
+            .map(|s| {
+                let v = values.iter().find(|v| v.0 == s.param)?.1;
+                v.is_finite().then(|| s.coordinate(v))
+            })
+            .collect::<Option<_>>()?;
+        let system = problem.system_at(&x)?;
+        Some(BaseOptimum { values, system })
+    }
+
+    fn get(&self, p: Param) -> Option<f64> {
+        self.values.iter().find(|v| v.0 == p).map(|v| v.1)
+    }
+}
+
+/// Fit one segment with effects beyond those of a `base` fit of the same segment: besides the
+/// usual search, start from the base optimum with every added effect at its neutral value,
+/// and keep the better. Where the extended model contains the base model (soil_damping,
+/// air_in_water, wall_thinning, pipe_loss), the result's misfit is never above the base fit's
+/// (up to the solver's tolerance), whatever the search does.
 pub fn fit_extended(
     data: &SegmentData,
     settings: &FitSettings,
     seed: u64,
     base: &FitResult,
 ) -> FitResult {
-    fit_from(data, settings, seed, Some(base))
+    fit_from(data, settings, seed, BaseOptimum::of(base).as_ref())
+}
+
+/// Fit one segment with `settings.effects` through the nested-fit guarantee of
+/// [`fit_extended`] (the one path of every fit with effects): from `stored_base`, the values of
+/// a stored fit of the same inputs without effects, when given and usable; otherwise the base
+/// is fitted first (its evaluations are counted in the result's).
+pub fn fit_with_effects(
+    data: &SegmentData,
+    settings: &FitSettings,
+    seed: u64,
+    stored_base: Option<Vec<(Param, f64)>>,
+) -> FitResult {
+    if settings.effects.is_empty() {
+        return fit_segment(data, settings, seed);
+    }
+    let base_settings = FitSettings {
+        effects: Vec::new(),
+        ..settings.clone()
+    };
+    if let Some(base) = stored_base.and_then(|v| BaseOptimum::from_values(data, &base_settings, v))
+    {
+        return fit_from(data, settings, seed, Some(&base));
+    }
+    let base_fit = fit_segment(data, &base_settings, seed);
+    let mut r = fit_from(data, settings, seed, BaseOptimum::of(&base_fit).as_ref());
+    r.evaluations += base_fit.evaluations;
+    r
 }
 
 fn fit_from(
     data: &SegmentData,
     settings: &FitSettings,
     seed: u64,
-    base: Option<&FitResult>,
+    base: Option<&BaseOptimum>,
 ) -> FitResult {
     let problem = problem_for(data, settings);
     let n_meas = data.measurements.len();
@@ -462,17 +570,14 @@ fn fit_once(
 }
 
 /// The base optimum in this problem's coordinates, every added effect at its neutral value.
-fn nested_start(problem: &Problem<'_>, base: &FitResult) -> Option<Vec<f64>> {
-    if base.status == FitStatus::Failed {
-        return None;
-    }
+fn nested_start(problem: &Problem<'_>, base: &BaseOptimum) -> Option<Vec<f64>> {
     problem
         .specs
         .iter()
         .map(|s| {
             let v = match (base.get(s.param), s.param) {
-                (Some(b), _) => b.value,
-                (None, Param::Effect(e)) => e.neutral_value(base.system.as_ref()?)?,
+                (Some(b), _) => b,
+                (None, Param::Effect(e)) => e.neutral_value(&base.system)?,
                 (None, _) => return None,
             };
             let c = s.coordinate(v);
@@ -889,7 +994,8 @@ fn assemble(
         _ => None,
     };
     let scale = match problem.weighting {
-        Weighting::ChiSquare => chi2_per_dof.map(|c| c.max(1.0)).unwrap_or(1.0),
+        // Errors widened by the Birge ratio (P88) where the misfit exceeds the noise.
+        Weighting::ChiSquare => crate::stats::birge_ratio(ss, m, n).powi(2),
         Weighting::Relative if dof > 0 => ss / dof as f64,
         Weighting::Relative => 1.0,
     };
@@ -949,6 +1055,30 @@ fn assemble(
     let (flags, notes): (Vec<Flag>, Vec<Flag>) = findings
         .into_iter()
         .partition(|f| f.code.severity() == Severity::Flag);
+    let mut curve = curve;
+    let curve_source = if flags.iter().any(|f| f.code == FlagCode::HighMisfit) {
+        // The discrepancy now carries the misfit: the model's part of the errors is that of the
+        // measurement noise alone, not widened by the Birge ratio again.
+        let unwiden = match problem.weighting {
+            Weighting::ChiSquare => 1.0 / scale.max(1.0).sqrt(),
+            Weighting::Relative => 1.0,
+        };
+        correct_by_discrepancy(
+            problem,
+            &predicted,
+            unwiden,
+            &mut curve,
+            &mut leak_band_speed,
+        )
+    } else {
+        CurveSource::Model
+    };
+    let measured_hz: Vec<f64> = problem
+        .data
+        .measurements
+        .iter()
+        .map(|m| m.omega / std::f64::consts::TAU)
+        .collect();
     Ok(FitResult {
         status: if flags.is_empty() {
             FitStatus::Ok
@@ -982,6 +1112,8 @@ fn assemble(
         curve,
         leak_band_speed,
         soil_information,
+        curve_source,
+        leak_band_extrapolation_octaves: extrapolation_octaves(LEAK_BAND_HZ, &measured_hz),
         result_seconds: started.elapsed().as_secs_f64(),
     })
 }
@@ -1226,11 +1358,100 @@ fn predicted_curve(
                 phase_speed_std: phase_speed.and(sigma(&d_speed[i])),
                 attenuation_db,
                 attenuation_db_std: attenuation_db.and(sigma(&d_att[i])),
+                model_phase_speed: phase_speed,
+                model_attenuation_db: attenuation_db,
             }
         })
         .collect();
     let band = band0.and_then(|v| sigma(&d_band).map(|s| WithError { value: v, std: s }));
     (points, band)
+}
+
+/// The residuals of the phase speed and of the attenuation in ln q at the measured
+/// frequencies (P89), with the stated relative errors or the assumed ones.
+fn log_residuals(problem: &Problem<'_>, predicted: &[Complex64]) -> (Vec<Residual>, Vec<Residual>) {
+    let mut speed = Vec::new();
+    let mut att = Vec::new();
+    for (m, k) in problem.data.measurements.iter().zip(predicted) {
+        let f = m.omega / std::f64::consts::TAU;
+        // c = ω/Re k, so ln(c_meas/c_model) = ln(Re k_model / Re k_meas).
+        speed.push(Residual {
+            frequency_hz: f,
+            ln_ratio: (k.re / m.k_re).ln(),
+            sigma: m
+                .k_re_std
+                .map_or(ASSUMED_RELATIVE_SPEED_STD, |s| s / m.k_re),
+        });
+        if m.attenuation > 0.0 && -k.im > 0.0 {
+            att.push(Residual {
+                frequency_hz: f,
+                ln_ratio: (m.attenuation / -k.im).ln(),
+                sigma: m
+                    .attenuation_std
+                    .map_or(ASSUMED_RELATIVE_ATTENUATION_STD, |s| s / m.attenuation),
+            });
+        }
+    }
+    (speed, att)
+}
+
+/// Where the misfit is significant: the curve becomes the model times exp(δ̂) of the
+/// discrepancy fitted to each quantity's residuals (P89), its errors include the
+/// discrepancy's, and the leak-band speed is the corrected curve's band mean, its error the
+/// model's and the band mean of the discrepancy's one-sigma (taken fully correlated across the
+/// band, since a discrepancy is smooth in frequency). The model's errors are multiplied by
+/// `model_std_factor` (1/R_B: the discrepancy explains the misfit). The model's values stay in
+/// `model_phase_speed` and `model_attenuation_db`.
+fn correct_by_discrepancy(
+    problem: &Problem<'_>,
+    predicted: &[Complex64],
+    model_std_factor: f64,
+    curve: &mut [PredictedPoint],
+    leak_band_speed: &mut Option<WithError>,
+) -> CurveSource {
+    let (speed_res, att_res) = log_residuals(problem, predicted);
+    let Some(speed) = Discrepancy::fit(&speed_res) else {
+        return CurveSource::Model;
+    };
+    let att = Discrepancy::fit(&att_res);
+    let correct = |v: Option<f64>, s: Option<f64>, d: &Discrepancy, f: f64| {
+        let (mean, var) = d.at(f);
+        let v = v?;
+        let c = v * mean.exp();
+        let model_std = s.unwrap_or(0.0) * model_std_factor * mean.exp();
+        Some((
+            c,
+            (model_std * model_std + c * c * var).sqrt(),
+            c * var.sqrt(),
+        ))
+    };
+    let mut band_pts = Vec::with_capacity(curve.len());
+    let mut band_disc = Vec::with_capacity(curve.len());
+    for p in curve.iter_mut() {
+        let f = p.frequency_hz;
+        let corrected = correct(p.model_phase_speed, p.phase_speed_std, &speed, f);
+        p.phase_speed = corrected.map(|c| c.0);
+        p.phase_speed_std = corrected.map(|c| c.1);
+        band_pts.push((f, p.phase_speed));
+        band_disc.push((f, corrected.map(|c| c.2)));
+        if let Some(a) = &att {
+            let corrected = correct(p.model_attenuation_db, p.attenuation_db_std, a, f);
+            p.attenuation_db = corrected.map(|c| c.0);
+            p.attenuation_db_std = corrected.map(|c| c.1);
+        }
+    }
+    let model_band_std = leak_band_speed.map_or(0.0, |b| b.std * model_std_factor);
+    *leak_band_speed = match (
+        band_mean(&band_pts, LEAK_BAND_HZ),
+        band_mean(&band_disc, LEAK_BAND_HZ),
+    ) {
+        (Some(v), Some(s)) => Some(WithError {
+            value: v,
+            std: (model_band_std * model_band_std + s * s).sqrt(),
+        }),
+        _ => None,
+    };
+    CurveSource::ModelPlusDiscrepancy
 }
 
 /// The DE configured for the method.
@@ -1342,7 +1563,7 @@ fn polish_with(
 }
 
 /// Mean phase speed over [`LEAK_BAND_HZ`] of `sys`, m/s.
-fn leak_band_speed_of(sys: &System) -> Option<f64> {
+pub fn leak_band_speed_of(sys: &System) -> Option<f64> {
     let band: Vec<f64> = STANDARD_GRID_HZ
         .iter()
         .copied()

@@ -14,15 +14,17 @@
 //! unvisited (across a grazing cliff, towards ν_m → ½ and back along a valley of constant c_P,
 //! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure
 //! functions of what the search found.
+pub mod discrepancy;
 pub mod fit;
 pub mod flags;
+pub mod honesty;
 pub mod probes;
 pub mod problem;
 pub mod uncertainty;
 
 pub use fit::{
-    fit_extended, fit_segment, Estimate, FitResult, FitSettings, FitStatus, PredictedPoint,
-    FIT_ALGORITHM_VERSION,
+    fit_extended, fit_segment, fit_with_effects, BaseOptimum, CurveSource, Estimate, FitResult,
+    FitSettings, FitStatus, PredictedPoint, FIT_ALGORITHM_VERSION,
 };
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};

@@ -1085,7 +1085,7 @@ fn worst_fits(
             write!(
             h,
             "<figure id=\"worst-{}\"><figcaption><b>{}</b> — {} {}, {} mm; {name} {}; status {}; \
-             flags {}; leak-band speed {} m/s; c_P {} m/s, c_S {} m/s; notes {}</figcaption>",
+             flags {}; leak-band speed {} m/s (curve: {}); c_P {} m/s, c_S {} m/s; notes {}</figcaption>",
             escape(r.id()),
             escape(r.id()),
             r.segment.material.code(),
@@ -1098,6 +1098,7 @@ fn worst_fits(
                 _ => "none",
             }),
             pm_opt(speed_with_std(r)),
+            escape(&fit.curve_source),
             pm_opt(fit.soil_p_wave_speed_m_per_s.map(|v| (v, fit.soil_p_wave_speed_std_m_per_s))),
             pm_opt(fit.soil_s_wave_speed_m_per_s.map(|v| (v, fit.soil_s_wave_speed_std_m_per_s))),
             escape(if fit.notes.is_empty() { "none" } else { &fit.notes }),

@@ -302,6 +302,8 @@ pub fn build(path: &Path, n: usize) -> Database {
                     attenuation_db_per_m: Some(0.002 * f.sqrt()),
                     phase_speed_std_m_per_s: Some(0.004 * (c0 + slope * f)),
                     attenuation_std_db_per_m: Some(0.0002 * f.sqrt()),
+                    model_phase_speed_m_per_s: None,
+                    model_attenuation_db_per_m: None,
                 })
                 .collect()
         };
