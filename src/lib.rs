@@ -7,6 +7,7 @@ pub mod diagnose;
 pub mod export;
 pub mod forward;
 pub mod invert;
+pub mod locate;
 pub mod network;
 pub mod optimize;
 pub mod physics;
