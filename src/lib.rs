@@ -8,6 +8,7 @@ pub mod export;
 pub mod field;
 pub mod forward;
 pub mod invert;
+pub mod locate;
 pub mod network;
 pub mod optimize;
 pub mod physics;

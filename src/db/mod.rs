@@ -20,6 +20,7 @@ pub mod lock;
 pub mod migrate;
 pub mod pages;
 pub mod results;
+pub mod speeds;
 pub mod wkt;
 pub mod zones;
 

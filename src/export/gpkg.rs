@@ -193,8 +193,32 @@ fn srs_rows(srid: Option<i64>, warnings: &mut Vec<String>) -> Vec<SrsRow> {
     rows
 }
 
+/// Insert the mandatory `gpkg_spatial_ref_sys` rows and that of EPSG:`srid`, each unless
+/// present (so a layer can be added to an existing GeoPackage).
+pub(crate) fn ensure_srs(
+    tx: &rusqlite::Transaction<'_>,
+    srid: Option<i64>,
+    warnings: &mut Vec<String>,
+) -> rusqlite::Result<()> {
+    for r in srs_rows(srid, warnings) {
+        tx.execute(
+            "INSERT OR IGNORE INTO gpkg_spatial_ref_sys (srs_name, srs_id, organization, \
+             organization_coordsys_id, definition, description) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            params![
+                r.name,
+                r.id,
+                r.organization,
+                r.org_id,
+                r.definition,
+                r.description
+            ],
+        )?;
+    }
+    Ok(())
+}
+
 /// The required tables (12-128r18 Annex C, tables 29, 30, 31 and the extensions table).
-const SCHEMA: &str = "
+pub(crate) const SCHEMA: &str = "
 CREATE TABLE gpkg_spatial_ref_sys (
   srs_name TEXT NOT NULL,
   srs_id INTEGER PRIMARY KEY,
@@ -361,21 +385,7 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
     let tx = conn.transaction().map_err(sql)?;
     tx.execute_batch(SCHEMA).map_err(sql)?;
     let mut srs_warnings = Vec::new();
-    for r in srs_rows(srid, &mut srs_warnings) {
-        tx.execute(
-            "INSERT INTO gpkg_spatial_ref_sys (srs_name, srs_id, organization, \
-             organization_coordsys_id, definition, description) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-            params![
-                r.name,
-                r.id,
-                r.organization,
-                r.org_id,
-                r.definition,
-                r.description
-            ],
-        )
-        .map_err(sql)?;
-    }
+    ensure_srs(&tx, srid, &mut srs_warnings).map_err(sql)?;
 
     let columns: Vec<String> = PROPERTIES
         .iter()

@@ -132,7 +132,7 @@ pub fn truth_curve(sys: &System, hi_hz: f64) -> Result<TruthCurve, SynthRecordin
 }
 
 /// Amplitude of the source spectrum at `f`: cosine tapers at both ends of [lo, hi].
-fn source_amplitude(f: f64, hi: f64) -> f64 {
+pub(crate) fn source_amplitude(f: f64, hi: f64) -> f64 {
     let lo = SOURCE_LO_HZ;
     if f <= lo || f >= hi {
         return 0.0;

@@ -1,0 +1,662 @@
+//! The delay a correlator measures for a leak on a path of several segments (P85), its
+//! inversion for the position (P86) and the error of that position term by term.
+//!
+//! Each segment s contributes its own wavenumber k_s(ω) = ω/c_s(f) − i α_s(f) from its curve.
+//! For a leak at path position x the cross-spectrum of the two sensors is
+//! S₁₂ ∝ exp(−i Re(ψ₂ − ψ₁)) exp(Im ψ₁ + Im ψ₂) (P85), and the predicted delay T(x) is the peak
+//! of the band-weighted correlation R₁₂(τ) = Σ_ω A(ω) cos(ωτ − Re(ψ₂ − ψ₁)), where A is the
+//! magnitude of W S₁₂: the path's attenuation e^{Im ψ₁ + Im ψ₂} for a plain correlator (which
+//! does not depend on x: the two stretches always add up to the whole path), one for PHAT, the
+//! measured coherence for SCOT. No phase or group speed is chosen: the peak is found.
+
+use num_complex::Complex64;
+
+use crate::db::results::CurvePoint;
+use crate::units::{db_to_np, hz_to_omega};
+
+/// Frequencies of the model's band grid: enough to follow the phase of the longest path
+/// smoothly, while one predicted delay stays a few tens of microseconds (the correlation is
+/// searched only within a carrier period of the group delay, far inside its 1/Δf period).
+pub const MODEL_GRID_POINTS: usize = 160;
+/// Steps of the coarse search per carrier period of the band centre.
+const SEARCH_STEPS_PER_PERIOD: f64 = 24.0;
+/// Newton refinements of the correlation peak.
+const NEWTON_STEPS: usize = 6;
+/// Iterations of the position solve (Illinois regula falsi on a nearly linear T(x)).
+const SOLVE_ITERATIONS: usize = 60;
+/// The position solve stops when the delay matches to this, s.
+const SOLVE_TOLERANCE_S: f64 = 1e-9;
+/// Two-sided 95 % quantile of the normal distribution.
+pub const Z95: f64 = 1.959_963_984_540_054;
+
+/// How the correlation is weighted over frequency (Knapp & Carter 1976).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weighting {
+    /// The plain cross-correlation of band-filtered signals (a correlator's usual setting).
+    Plain,
+    /// Phase transform: every frequency of the band counts the same.
+    Phat,
+    /// Smoothed coherence transform: each frequency by its coherence.
+    Scot,
+}
+
+impl Weighting {
+    /// Name on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Weighting::Plain => "plain",
+            Weighting::Phat => "phat",
+            Weighting::Scot => "scot",
+        }
+    }
+}
+
+impl std::str::FromStr for Weighting {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "plain" | "cc" => Ok(Weighting::Plain),
+            "phat" => Ok(Weighting::Phat),
+            "scot" => Ok(Weighting::Scot),
+            _ => Err(format!(
+                "'{s}' is not a weighting; expected plain, phat or scot"
+            )),
+        }
+    }
+}
+
+/// A segment's speed curve: slowness interpolated by a monotone cubic (Fritsch & Carlson 1980)
+/// so that the group delay it implies is continuous, attenuation and relative speed error
+/// linearly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpeedCurve {
+    freq: Vec<f64>,
+    slowness: Vec<f64>,
+    tangent: Vec<f64>,
+    att_np: Vec<f64>,
+    rel_std: Vec<f64>,
+    /// Whether the stored curve gave a speed error.
+    pub has_std: bool,
+}
+
+impl SpeedCurve {
+    /// From stored curve points (frequency, phase speed, its error, attenuation); points
+    /// without a speed are skipped. `None` when fewer than two remain.
+    pub fn from_points(points: &[CurvePoint]) -> Option<SpeedCurve> {
+        let mut pts: Vec<(f64, f64, Option<f64>, f64)> = points
+            .iter()
+            .filter_map(|p| {
+                let c = p
+                    .phase_speed_m_per_s
+                    .filter(|c| c.is_finite() && *c > 0.0)?;
+                Some((
+                    p.frequency_hz,
+                    c,
+                    p.phase_speed_std_m_per_s
+                        .filter(|s| s.is_finite() && *s >= 0.0),
+                    db_to_np(p.attenuation_db_per_m.unwrap_or(0.0).max(0.0)),
+                ))
+            })
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pts.dedup_by(|a, b| a.0 == b.0);
+        if pts.len() < 2 {
+            return None;
+        }
+        let freq: Vec<f64> = pts.iter().map(|p| p.0).collect();
+        let slowness: Vec<f64> = pts.iter().map(|p| 1.0 / p.1).collect();
+        Some(SpeedCurve {
+            tangent: pchip_tangents(&freq, &slowness),
+            freq,
+            slowness,
+            att_np: pts.iter().map(|p| p.3).collect(),
+            rel_std: pts.iter().map(|p| p.2.unwrap_or(0.0) / p.1).collect(),
+            has_std: pts.iter().all(|p| p.2.is_some()),
+        })
+    }
+
+    /// The frequency range the curve covers, Hz.
+    pub fn range_hz(&self) -> (f64, f64) {
+        (self.freq[0], *self.freq.last().expect("two points"))
+    }
+
+    /// (phase speed m/s, relative error, attenuation Np/m) at `f` (clamped to the range).
+    pub fn at(&self, f: f64) -> (f64, f64, f64) {
+        let n = self.freq.len();
+        let f = f.clamp(self.freq[0], self.freq[n - 1]);
+        let i = self.freq.partition_point(|&v| v <= f).clamp(1, n - 1) - 1;
+        let h = self.freq[i + 1] - self.freq[i];
+        let t = (f - self.freq[i]) / h;
+        let (t2, t3) = (t * t, t * t * t);
+        let s = (2.0 * t3 - 3.0 * t2 + 1.0) * self.slowness[i]
+            + (t3 - 2.0 * t2 + t) * h * self.tangent[i]
+            + (-2.0 * t3 + 3.0 * t2) * self.slowness[i + 1]
+            + (t3 - t2) * h * self.tangent[i + 1];
+        let lin = |v: &[f64]| v[i] + t * (v[i + 1] - v[i]);
+        (1.0 / s, lin(&self.rel_std), lin(&self.att_np))
+    }
+
+    /// The mean phase speed over a band, m/s (for messages).
+    pub fn mean_speed(&self, band: (f64, f64)) -> f64 {
+        let n = 20;
+        (0..=n)
+            .map(|i| self.at(band.0 + (band.1 - band.0) * i as f64 / n as f64).0)
+            .sum::<f64>()
+            / (n + 1) as f64
+    }
+}
+
+/// Fritsch–Carlson tangents of a monotone piecewise cubic through (x, y).
+fn pchip_tangents(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let d: Vec<f64> = (0..n - 1)
+        .map(|i| (y[i + 1] - y[i]) / (x[i + 1] - x[i]))
+        .collect();
+    let mut m = vec![0.0; n];
+    m[0] = d[0];
+    m[n - 1] = d[n - 2];
+    for i in 1..n - 1 {
+        if d[i - 1] * d[i] <= 0.0 {
+            m[i] = 0.0;
+        } else {
+            let (h0, h1) = (x[i] - x[i - 1], x[i + 1] - x[i]);
+            let (w1, w2) = (2.0 * h1 + h0, h1 + 2.0 * h0);
+            m[i] = (w1 + w2) / (w1 / d[i - 1] + w2 / d[i]);
+        }
+    }
+    m
+}
+
+/// One stretch of the path for the model: which curve, and its length, m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelPiece {
+    /// Index into the model's segment curves.
+    pub curve: usize,
+    /// Length, m.
+    pub length_m: f64,
+}
+
+/// The band-weighted correlation model of a path (P85).
+#[derive(Debug, Clone)]
+pub struct DelayModel {
+    omega: Vec<f64>,
+    /// A(ω) without the path's attenuation: the weighting's own magnitude.
+    base_weight: Vec<f64>,
+    /// Multiply A by the path's attenuation (plain correlation).
+    tilt: bool,
+    /// k_s(ω) of each curve on the grid.
+    k: Vec<Vec<Complex64>>,
+    /// Re k_s with the speed one standard error higher.
+    k_fast: Vec<Vec<f64>>,
+    pieces: Vec<ModelPiece>,
+    centre_hz: f64,
+    width_hz: f64,
+}
+
+impl DelayModel {
+    /// The model over the frequencies `freqs_hz` (increasing) with weights `weights` (the
+    /// weighting's own magnitude: ones for PHAT and plain, or |W S₁₂| measured), the segment
+    /// curves and the pieces of the path in order from sensor 1. With `path_attenuation` the
+    /// weights are multiplied by the path's attenuation, as a plain correlation of a flat leak
+    /// spectrum is.
+    pub fn new(
+        freqs_hz: &[f64],
+        weights: &[f64],
+        path_attenuation: bool,
+        curves: &[&SpeedCurve],
+        pieces: Vec<ModelPiece>,
+    ) -> DelayModel {
+        let omega: Vec<f64> = freqs_hz.iter().map(|&f| hz_to_omega(f)).collect();
+        let mut k = Vec::with_capacity(curves.len());
+        let mut k_fast = Vec::with_capacity(curves.len());
+        for c in curves {
+            let mut ks = Vec::with_capacity(freqs_hz.len());
+            let mut kf = Vec::with_capacity(freqs_hz.len());
+            for (&f, &w) in freqs_hz.iter().zip(&omega) {
+                let (c, rel, att) = c.at(f);
+                ks.push(Complex64::new(w / c, -att));
+                kf.push(w / (c * (1.0 + rel)));
+            }
+            k.push(ks);
+            k_fast.push(kf);
+        }
+        let (lo, hi) = (freqs_hz[0], *freqs_hz.last().expect("a band"));
+        DelayModel {
+            omega,
+            base_weight: weights.to_vec(),
+            tilt: path_attenuation,
+            k,
+            k_fast,
+            pieces,
+            centre_hz: 0.5 * (lo + hi),
+            width_hz: (hi - lo).max(1.0),
+        }
+    }
+
+    /// The pieces.
+    pub fn pieces(&self) -> &[ModelPiece] {
+        &self.pieces
+    }
+
+    /// Span D, m.
+    pub fn span_m(&self) -> f64 {
+        self.pieces.iter().map(|p| p.length_m).sum()
+    }
+
+    /// T(x): the predicted delay t₂ − t₁ for a leak `x` m from sensor 1 (P85).
+    pub fn delay(&self, x: f64) -> f64 {
+        self.delay_with(x, None, 0.0)
+    }
+
+    /// T(x) with curve `fast` (if any) one standard error faster, and `extra_m` added to the
+    /// last piece (the span's error, the leak's distance from sensor 1 kept).
+    pub fn delay_with(&self, x: f64, fast: Option<usize>, extra_m: f64) -> f64 {
+        let n = self.omega.len();
+        let mut dphi = vec![0.0; n];
+        let mut log_att = vec![0.0; n];
+        let mut start = 0.0;
+        let last = self.pieces.len() - 1;
+        for (pi, p) in self.pieces.iter().enumerate() {
+            let len = p.length_m + if pi == last { extra_m } else { 0.0 };
+            // Length on sensor 2's side minus length on sensor 1's side.
+            let on1 = (x - start).clamp(0.0, len);
+            let signed = (len - on1) - on1;
+            start += len;
+            let ks = &self.k[p.curve];
+            let re: &[f64] = if fast == Some(p.curve) {
+                &self.k_fast[p.curve]
+            } else {
+                &[]
+            };
+            for i in 0..n {
+                let kr = if re.is_empty() { ks[i].re } else { re[i] };
+                dphi[i] += kr * signed;
+                log_att[i] += ks[i].im * len;
+            }
+        }
+        let w: Vec<f64> = if self.tilt {
+            let m = log_att.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            self.base_weight
+                .iter()
+                .zip(&log_att)
+                .map(|(b, a)| b * (a - m).exp())
+                .collect()
+        } else {
+            self.base_weight.clone()
+        };
+        correlation_peak(&self.omega, &w, &dphi, self.centre_hz, self.width_hz)
+    }
+}
+
+/// The τ at which Σ w cos(ωτ − φ) peaks: near the weighted group delay of φ, by a coarse search
+/// over a carrier period either side, then Newton on the derivative.
+pub fn correlation_peak(
+    omega: &[f64],
+    w: &[f64],
+    phi: &[f64],
+    centre_hz: f64,
+    width_hz: f64,
+) -> f64 {
+    let n = omega.len();
+    let (mut num, mut den) = (0.0, 0.0);
+    for i in 0..n.saturating_sub(1) {
+        let g = (phi[i + 1] - phi[i]) / (omega[i + 1] - omega[i]);
+        let ww = 0.5 * (w[i] + w[i + 1]);
+        num += ww * g;
+        den += ww;
+    }
+    let tg = if den > 0.0 { num / den } else { 0.0 };
+    let r = |tau: f64| -> f64 { (0..n).map(|i| w[i] * (omega[i] * tau - phi[i]).cos()).sum() };
+    let period = 1.0 / centre_hz;
+    let half = period.max(1.0 / width_hz);
+    let step = period / SEARCH_STEPS_PER_PERIOD;
+    let steps = (2.0 * half / step).ceil() as usize;
+    let mut best = (f64::NEG_INFINITY, tg);
+    for j in 0..=steps {
+        let t = tg - half + j as f64 * step;
+        let v = r(t);
+        if v > best.0 {
+            best = (v, t);
+        }
+    }
+    let mut tau = best.1;
+    for _ in 0..NEWTON_STEPS {
+        let (mut d1, mut d2) = (0.0, 0.0);
+        for i in 0..n {
+            let a = omega[i] * tau - phi[i];
+            d1 -= w[i] * omega[i] * a.sin();
+            d2 -= w[i] * omega[i] * omega[i] * a.cos();
+        }
+        if d2 >= 0.0 {
+            break;
+        }
+        let dt = (-d1 / d2).clamp(-step, step);
+        tau += dt;
+        if dt.abs() < 1e-12 {
+            break;
+        }
+    }
+    tau
+}
+
+/// One term of the position's error budget (P86).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TermKind {
+    /// The measured delay.
+    Delay,
+    /// The speed of a curve (index into the model's curves).
+    Speed(usize),
+    /// The span's length.
+    Span,
+}
+
+/// A term: what it is and how far the position moves for one standard error of it, m (signed:
+/// for a speed, the move when that speed is higher).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Term {
+    /// Which input.
+    pub kind: TermKind,
+    /// Position change for +1σ of the input, m.
+    pub shift_m: f64,
+}
+
+/// The position of a leak and its error.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Position {
+    /// Distance from sensor 1 along the path, m.
+    pub x_m: f64,
+    /// Its standard error, m.
+    pub std_m: f64,
+    /// 95 % interval, m from sensor 1 (inside the span).
+    pub lo_m: f64,
+    /// Upper end.
+    pub hi_m: f64,
+    /// ∂T/∂x, s/m.
+    pub dt_dx: f64,
+    /// The terms of the budget.
+    pub terms: Vec<Term>,
+    /// Set when the delay lies just beyond what the span allows (within its error), so the leak
+    /// is put at that sensor.
+    pub at_sensor: Option<u8>,
+}
+
+/// Why no position can be given.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutsideSpan {
+    /// Largest delay the span allows (leak at sensor 1), s.
+    pub t_at_sensor1: f64,
+    /// Smallest (leak at sensor 2), s.
+    pub t_at_sensor2: f64,
+}
+
+/// Solve T(x̂) = τ (P86) and give σ_x term by term. `span_std_m` is the span's error;
+/// `speed_terms` says which curves carry a speed error.
+pub fn solve(
+    model: &DelayModel,
+    tau: f64,
+    tau_std: f64,
+    span_std_m: f64,
+    speed_terms: &[usize],
+) -> Result<Position, OutsideSpan> {
+    let d = model.span_m();
+    let (t0, t1) = (model.delay(0.0), model.delay(d));
+    // T decreases from sensor 1 to sensor 2; a delay outside by more than three of its own
+    // errors is not a leak between the sensors.
+    let slack = 3.0 * tau_std;
+    if tau > t0 + slack || tau < t1 - slack {
+        return Err(OutsideSpan {
+            t_at_sensor1: t0,
+            t_at_sensor2: t1,
+        });
+    }
+    let mut at_sensor = None;
+    let x = if tau >= t0 {
+        at_sensor = Some(1);
+        0.0
+    } else if tau <= t1 {
+        at_sensor = Some(2);
+        d
+    } else {
+        // Illinois regula falsi on f(x) = T(x) − τ, f(0) > 0 > f(D).
+        let (mut a, mut fa, mut b, mut fb) = (0.0, t0 - tau, d, t1 - tau);
+        let mut side = 0i8;
+        let mut x = 0.5 * d;
+        for _ in 0..SOLVE_ITERATIONS {
+            x = (a * fb - b * fa) / (fb - fa);
+            if !(x > a && x < b) {
+                x = 0.5 * (a + b);
+            }
+            let fx = model.delay(x) - tau;
+            if fx.abs() < SOLVE_TOLERANCE_S || (b - a) < 1e-6 {
+                break;
+            }
+            if fx > 0.0 {
+                a = x;
+                fa = fx;
+                if side == 1 {
+                    fb *= 0.5;
+                }
+                side = 1;
+            } else {
+                b = x;
+                fb = fx;
+                if side == -1 {
+                    fa *= 0.5;
+                }
+                side = -1;
+            }
+        }
+        x
+    };
+    let h = (0.005 * d).clamp(1e-3, 0.5);
+    let (xa, xb) = ((x - h).max(0.0), (x + h).min(d));
+    let dt_dx = (model.delay(xb) - model.delay(xa)) / (xb - xa);
+    let base = model.delay(x);
+    let mut terms = vec![Term {
+        kind: TermKind::Delay,
+        shift_m: (tau_std / dt_dx).abs(),
+    }];
+    for &c in speed_terms {
+        let dt = model.delay_with(x, Some(c), 0.0) - base;
+        terms.push(Term {
+            kind: TermKind::Speed(c),
+            shift_m: -dt / dt_dx,
+        });
+    }
+    if span_std_m > 0.0 {
+        let dt = model.delay_with(x, None, span_std_m) - base;
+        terms.push(Term {
+            kind: TermKind::Span,
+            shift_m: -dt / dt_dx,
+        });
+    }
+    let std_m = terms
+        .iter()
+        .map(|t| t.shift_m * t.shift_m)
+        .sum::<f64>()
+        .sqrt();
+    Ok(Position {
+        x_m: x,
+        std_m,
+        lo_m: (x - Z95 * std_m).max(0.0),
+        hi_m: (x + Z95 * std_m).min(d),
+        dt_dx,
+        terms,
+        at_sensor,
+    })
+}
+
+/// The position a correlator would give with one speed per segment (its Korteweg speed, P45),
+/// piecewise: t₂ − t₁ = Σ (ℓ₂ − ℓ₁)/c_s solved for x. `speeds` by piece.
+pub fn table_position(lengths: &[f64], speeds: &[f64], tau: f64) -> f64 {
+    let d: f64 = lengths.iter().sum();
+    let t = |x: f64| {
+        let mut start = 0.0;
+        let mut s = 0.0;
+        for (&l, &c) in lengths.iter().zip(speeds) {
+            let on1 = (x - start).clamp(0.0, l);
+            s += ((l - on1) - on1) / c;
+            start += l;
+        }
+        s
+    };
+    if tau >= t(0.0) {
+        return 0.0;
+    }
+    if tau <= t(d) {
+        return d;
+    }
+    // T is piecewise linear and decreasing: bisection to a micrometre.
+    let (mut a, mut b) = (0.0, d);
+    while b - a > 1e-6 {
+        let m = 0.5 * (a + b);
+        if t(m) > tau {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// An even grid of `n` frequencies over `band`, Hz.
+pub fn band_grid(band: (f64, f64), n: usize) -> Vec<f64> {
+    let n = n.max(2);
+    (0..n)
+        .map(|i| band.0 + (band.1 - band.0) * i as f64 / (n - 1) as f64)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat(c: f64, rel: f64, att_db: f64) -> SpeedCurve {
+        let pts: Vec<CurvePoint> = [50.0, 400.0, 1500.0]
+            .iter()
+            .map(|&f| CurvePoint {
+                frequency_hz: f,
+                phase_speed_m_per_s: Some(c),
+                attenuation_db_per_m: Some(att_db),
+                phase_speed_std_m_per_s: Some(rel * c),
+                attenuation_std_db_per_m: None,
+            })
+            .collect();
+        SpeedCurve::from_points(&pts).unwrap()
+    }
+
+    /// One pipe of uniform speed: x = (D − cτ)/2 and its error terms, P84.
+    #[test]
+    fn single_pipe_is_the_correlators_formula() {
+        let c = flat(1200.0, 0.01, 0.2);
+        let grid = band_grid((100.0, 800.0), MODEL_GRID_POINTS);
+        for weighting in [Weighting::Plain, Weighting::Phat] {
+            let m = DelayModel::new(
+                &grid,
+                &vec![1.0; grid.len()],
+                weighting == Weighting::Plain,
+                &[&c],
+                vec![ModelPiece {
+                    curve: 0,
+                    length_m: 200.0,
+                }],
+            );
+            for x in [0.0, 37.2, 100.0, 163.0, 200.0] {
+                let t = m.delay(x);
+                assert!((t - (200.0 - 2.0 * x) / 1200.0).abs() < 1e-9, "{x}: {t}");
+            }
+            let tau = (200.0 - 2.0 * 37.2) / 1200.0;
+            let p = solve(&m, tau, 1e-4, 2.0, &[0]).unwrap();
+            assert!((p.x_m - 37.2).abs() < 1e-5, "{}", p.x_m);
+            // δx = τ δc / 2 for the speed; σ_D / 2 for the span; c σ_τ / 2 for the delay.
+            let shift = |k: TermKind| p.terms.iter().find(|t| t.kind == k).unwrap().shift_m;
+            let speed = shift(TermKind::Speed(0));
+            let expect = -tau * 12.0 / 2.0 * 1200.0 / 1212.0;
+            assert!(
+                (speed - expect).abs() < 1e-3 * expect.abs(),
+                "{speed} {expect}"
+            );
+            assert!((shift(TermKind::Span) - 1.0).abs() < 1e-6);
+            assert!((shift(TermKind::Delay) - 0.06).abs() < 1e-6);
+        }
+    }
+
+    /// Two segments: the delay is the sum of the pieces' travel times, and the speed terms of
+    /// the two sides have opposite signs.
+    #[test]
+    fn two_segments_add_their_travel_times() {
+        let (a, b) = (flat(400.0, 0.02, 0.0), flat(1250.0, 0.002, 0.0));
+        let grid = band_grid((100.0, 600.0), MODEL_GRID_POINTS);
+        let m = DelayModel::new(
+            &grid,
+            &vec![1.0; grid.len()],
+            false,
+            &[&a, &b],
+            vec![
+                ModelPiece {
+                    curve: 0,
+                    length_m: 60.0,
+                },
+                ModelPiece {
+                    curve: 1,
+                    length_m: 140.0,
+                },
+            ],
+        );
+        let x = 25.0;
+        let expect = (35.0 / 400.0 + 140.0 / 1250.0) - 25.0 / 400.0;
+        assert!((m.delay(x) - expect).abs() < 1e-9);
+        let p = solve(&m, expect, 1e-4, 0.0, &[0, 1]).unwrap();
+        assert!((p.x_m - x).abs() < 1e-5);
+        let s = |k| p.terms.iter().find(|t| t.kind == k).unwrap().shift_m;
+        // A faster segment on sensor 2's side shortens t₂, so every T(x) is smaller and the
+        // same τ is met nearer sensor 1 (a negative shift). Segment 1 lies wholly on sensor 2's
+        // side; segment 0 has 25 m on sensor 1's side and 35 m on sensor 2's: net sensor 2.
+        assert!(s(TermKind::Speed(1)) < 0.0);
+        assert!(s(TermKind::Speed(0)) < 0.0);
+        // Move the leak into segment 1: segment 0 is now wholly on sensor 1's side, and its
+        // term changes sign.
+        let x2 = 120.0;
+        let p2 = solve(&m, m.delay(x2), 1e-4, 0.0, &[0, 1]).unwrap();
+        let s2 = |k| p2.terms.iter().find(|t| t.kind == k).unwrap().shift_m;
+        assert!(s2(TermKind::Speed(0)) > 0.0, "{:?}", p2.terms);
+        assert!(s2(TermKind::Speed(1)) < 0.0, "{:?}", p2.terms);
+        assert!((p2.x_m - x2).abs() < 1e-5);
+        // Outside the span.
+        let e = solve(&m, m.delay(0.0) + 0.01, 1e-4, 0.0, &[]).unwrap_err();
+        assert!((e.t_at_sensor1 - m.delay(0.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn table_position_solves_the_piecewise_travel_times() {
+        let x = table_position(&[60.0, 140.0], &[400.0, 1250.0], 0.1245);
+        let t = (60.0 - x) / 400.0 + 140.0 / 1250.0 - x / 400.0;
+        assert!((t - 0.1245).abs() < 1e-8, "{x}");
+    }
+
+    #[test]
+    fn monotone_interpolation_keeps_the_points() {
+        let pts: Vec<CurvePoint> = [
+            (100.0, 300.0),
+            (200.0, 320.0),
+            (400.0, 330.0),
+            (800.0, 331.0),
+        ]
+        .iter()
+        .map(|&(f, c)| CurvePoint {
+            frequency_hz: f,
+            phase_speed_m_per_s: Some(c),
+            attenuation_db_per_m: Some(0.1),
+            phase_speed_std_m_per_s: None,
+            attenuation_std_db_per_m: None,
+        })
+        .collect();
+        let s = SpeedCurve::from_points(&pts).unwrap();
+        assert!(!s.has_std);
+        for &(f, c) in &[(100.0, 300.0), (200.0, 320.0), (400.0, 330.0)] {
+            assert!((s.at(f).0 - c).abs() < 1e-9);
+        }
+        let mid = s.at(300.0).0;
+        assert!(mid > 320.0 && mid < 330.0, "{mid}");
+    }
+}
