@@ -35,7 +35,7 @@ pub const CSV_COLUMNS: [&str; 20] = [
 ];
 
 /// Columns of `groups.csv` (docs/interface.md).
-pub const GROUP_CSV_COLUMNS: [&str; 8] = [
+pub const GROUP_CSV_COLUMNS: [&str; 11] = [
     "group",
     "n_segments",
     "named_effect",
@@ -44,6 +44,9 @@ pub const GROUP_CSV_COLUMNS: [&str; 8] = [
     "p_value",
     "n_refitted",
     "pooled_by_effect",
+    "statistic_kind",
+    "members_carrying",
+    "members",
 ];
 
 /// A segment's place in the pooled test: the key of its group when that group detected an
@@ -177,8 +180,13 @@ fn value_and_std(d: &Diagnosis) -> (String, String) {
         .unwrap_or_default()
 }
 
-/// Write `groups.csv`, one row per group tested.
-pub fn write_groups_csv(path: &Path, groups: &[GroupTest]) -> Result<(), csv::Error> {
+/// Write `groups.csv`, one row per group tested; `ids[i]` is segment i's id (the members that
+/// carry the detected effect best are listed by id, joined by `;`).
+pub fn write_groups_csv(
+    path: &Path,
+    ids: &[String],
+    groups: &[GroupTest],
+) -> Result<(), csv::Error> {
     let mut w = spreadsheet::writer_from_path(path)?;
     w.write_record(GROUP_CSV_COLUMNS)?;
     for g in groups {
@@ -206,6 +214,16 @@ pub fn write_groups_csv(path: &Path, groups: &[GroupTest]) -> Result<(), csv::Er
                 })
                 .collect::<Vec<_>>()
                 .join("; "),
+            super::group::STATISTIC_KIND.to_string(),
+            g.carrying.len().to_string(),
+            spreadsheet_safe(
+                &g.carrying
+                    .iter()
+                    .map(|&i| ids[i].as_str())
+                    .collect::<Vec<_>>()
+                    .join(";"),
+            )
+            .into_owned(),
         ])?;
     }
     w.flush()?;
@@ -437,7 +455,7 @@ pub fn write_html(
     if !groups.is_empty() {
         let _ = write!(
             h,
-            "<h2>Pooled over groups</h2><p>The pooled score test adds the members' one-sided score statistics for each candidate effect; under \"no effect\" the sum of n members follows the mixture Σ C(n,k)2<sup>−n</sup>χ²<sub>k</sub>. A group detects an effect when its p-value is below {} divided by the number of effects tested; its members are then refitted with the effect. Members with a misfit far above the noise that no physical effect explains (a wrong record, a unit or transcription error) are left out of the sum.</p><table><tr><th>group</th><th>segments</th><th>detected effect</th><th>ambiguous with</th><th>statistic</th><th>p</th><th>refitted</th><th>all effects</th></tr>",
+            "<h2>Pooled over groups</h2><p>The pooled test adds the members' likelihood-ratio gains (the χ² each member's refit with the effect removes; its one-sided score where the effect was not refitted) for each candidate effect; under \"no effect\" the sum of n members follows the mixture Σ C(n,k)2<sup>−n</sup>χ²<sub>k</sub>. A group detects an effect when its p-value is below {} divided by the number of effects tested and by the number of groups; its members are then refitted with the effect. Members with a misfit far above the noise that no physical effect explains (a wrong record, a unit or transcription error) are left out of the sum.</p><table><tr><th>group</th><th>segments</th><th>detected effect</th><th>ambiguous with</th><th>statistic</th><th>p</th><th>refitted</th><th>all effects</th></tr>",
             sig(super::group::GROUP_ALPHA, 2)
         );
         for g in groups {
@@ -563,5 +581,44 @@ mod tests {
             att: vec![1.5, -2.0],
         };
         assert_eq!(residual_runs(&quiet), "no residual beyond 2σ");
+    }
+
+    #[test]
+    fn groups_csv_names_the_statistic_and_the_members_carrying_the_effect() {
+        // Members 1 and 3 carry thinning best (gains 9 and 6 above the others'); member 0's
+        // largest gain is pipe_loss's, member 2's thinning gain is below the carrying cut.
+        let g = |t: f64, l: f64| {
+            vec![
+                (Effect::WallThinning, t),
+                (Effect::PipeLoss, l),
+                (Effect::AirInWater, 0.0),
+            ]
+        };
+        let mut scores = vec![g(5.0, 7.0), g(9.0, 0.0), g(2.0, 0.0), g(6.0, 1.0)];
+        scores.extend((0..16).map(|_| g(4.0, 0.5)));
+        let members: Vec<usize> = (0..4).collect();
+        let t = super::super::group::pooled_score_test("CI 1925-1954", &members, &scores);
+        assert_eq!(t.effect, Some(Effect::WallThinning));
+        assert_eq!(t.carrying, vec![1, 3]);
+        let ids: Vec<String> = (0..20).map(|i| format!("=S{i}")).collect();
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("groups.csv");
+        write_groups_csv(&path, &ids, &[t]).expect("write");
+        let mut r = csv::Reader::from_path(&path).expect("read");
+        let head: Vec<String> = r
+            .headers()
+            .expect("header")
+            .iter()
+            .map(String::from)
+            .collect();
+        assert_eq!(head, GROUP_CSV_COLUMNS);
+        let row = r.records().next().expect("row").expect("record");
+        let col = |n: &str| row[head.iter().position(|h| h == n).expect(n)].to_string();
+        assert_eq!(col("statistic_kind"), "lr_gain_sum");
+        assert_eq!(col("members_carrying"), "2");
+        // Formula-like ids are neutralised for spreadsheets; the list is joined by ';'.
+        assert_eq!(col("members"), "'=S1;=S3");
+        assert_eq!(col("named_effect"), "wall_thinning");
+        assert_eq!(col("n_segments"), "4");
     }
 }

@@ -403,7 +403,7 @@ fn report(
     let ids: Vec<String> = diags.iter().map(|d| d.record.segment_id.clone()).collect();
     let ds: Vec<Diagnosis> = diags.iter().map(|d| d.diagnosis.clone()).collect();
     write_csv(&dir.join("diagnosis.csv"), &ids, &ds, rows).map_err(|e| err(e.to_string()))?;
-    write_groups_csv(&dir.join("groups.csv"), groups).map_err(|e| err(e.to_string()))?;
+    write_groups_csv(&dir.join("groups.csv"), &ids, groups).map_err(|e| err(e.to_string()))?;
     write_html(&dir.join("diagnosis.html"), &ids, &ds, groups, &[])
         .map_err(|e| err(e.to_string()))?;
     Ok(())
