@@ -328,7 +328,7 @@ pub fn default_hidden_range(effect: Effect) -> Option<(f64, f64)> {
         Effect::WallThinning => Some((0.5, 0.85)),
         Effect::PipeLoss => Some((0.04, 0.15)),
         Effect::ViscoelasticWall => Some((0.03, 0.15)),
-        Effect::FullModel | Effect::InventoryError => None,
+        Effect::FullModel | Effect::InventoryError | Effect::MeasurementUnits => None,
     }
 }
 

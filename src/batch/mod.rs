@@ -924,16 +924,43 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     let (settings, settings_hash) = (&job.settings, job.settings_hash.as_str());
     let t0 = Instant::now();
     let rec = &job.record;
+    // An effect the material cannot have (a plastic wall does not thin) is left out, noted.
+    let notes: Vec<String> = settings
+        .effects
+        .iter()
+        .filter_map(|e| e.not_applicable_note(rec.material))
+        .collect();
+    let applicable = FitSettings {
+        effects: settings
+            .effects
+            .iter()
+            .copied()
+            .filter(|e| e.applies_to(rec.material))
+            .collect(),
+        ..settings.clone()
+    };
+    let settings = if notes.is_empty() {
+        settings
+    } else {
+        &applicable
+    };
     let outcome = catch_unwind(AssertUnwindSafe(|| {
         segment_data(rec).map(|data| {
             // inventory_error is a choice among records, not a model input (model §8 E8).
-            let result = if settings.effects.contains(&Effect::InventoryError) {
+            let mut result = if settings.effects.contains(&Effect::InventoryError) {
                 crate::diagnose::inventory::fit_with_records(&data, settings, job.seed).fit
             } else {
                 // With effects: also from the base optimum (nested fits), one path with the
                 // diagnosis's refits.
                 fit_with_effects(&data, settings, job.seed, job.base.clone())
             };
+            if !notes.is_empty() {
+                let mut words = notes.join("; ");
+                if let Some(m) = result.message.take() {
+                    words = format!("{words}; {m}");
+                }
+                result.message = Some(words);
+            }
             let curve = curve_points(&result);
             (result, curve)
         })

@@ -115,7 +115,7 @@ pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
                 (f.viscoelastic_exponent, f.viscoelastic_exponent_std) = (v, s)
             }
             // inventory_error has no parameter (the record chosen is in the fit's message).
-            Effect::FullModel | Effect::InventoryError => {}
+            Effect::FullModel | Effect::InventoryError | Effect::MeasurementUnits => {}
         }
     }
     if let Some(cp) = r.p_wave_speed {

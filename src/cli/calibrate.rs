@@ -68,6 +68,14 @@ pub struct RunArgs {
 impl CalibrateArgs {
     /// Checked options.
     fn options(&self) -> anyhow::Result<CalibrateOptions> {
+        let effects = parse_effects(self.effects.as_deref().unwrap_or(""))?;
+        if effects.contains(&pipewave::physics::effects::Effect::MeasurementUnits) {
+            anyhow::bail!(
+                "--effects measurement_units: a unit mix-up is never applied by calibrate; \
+                 re-import corrected measurements, or confirm the one diagnose names with \
+                 `pipewave diagnose --convert-units ID=MIXUP`"
+            );
+        }
         Ok(CalibrateOptions {
             jobs: self.run.jobs.map(|j| j as usize),
             seed: self.run.seed,
@@ -75,7 +83,7 @@ impl CalibrateArgs {
             method: self.method.parse()?,
             model: self.model.parse()?,
             contact_mode: self.contact_mode.parse()?,
-            effects: parse_effects(self.effects.as_deref().unwrap_or(""))?,
+            effects,
             segments: (!self.segments.is_empty()).then(|| self.segments.clone()),
             wait_for_lock: self.wait,
             chunk_size: batch::DEFAULT_CHUNK_SIZE,

@@ -1,5 +1,6 @@
 //! `pipewave diagnose --db DB [--segment ID]... --out DIR [--candidates NAME,...] [--no-apply]
-//! [--group-by COLUMN] [--jobs N]`: the discrepancy workflow (find, name, add, show).
+//! [--group-by COLUMN] [--jobs N] [--convert-units ID=MIXUP]...`: the discrepancy workflow
+//! (find, name, add, show).
 
 use std::path::PathBuf;
 
@@ -7,6 +8,7 @@ use anyhow::Context;
 use clap::Args;
 use pipewave::diagnose::group::GroupBy;
 use pipewave::diagnose::run::{diagnose_database, DiagnoseOptions};
+use pipewave::diagnose::units::UnitMixUp;
 use pipewave::physics::effects::{parse_effects, Effect};
 
 use super::Outcome;
@@ -35,6 +37,12 @@ pub struct DiagnoseArgs {
     /// install_year (by decade); default: material x age class (30-year classes).
     #[arg(long, value_name = "COLUMN")]
     group_by: Option<String>,
+    /// Confirm a unit mix-up the diagnosis names, and convert that segment's stored
+    /// measurements (repeatable): ID=attenuation_db (attenuation recorded in dB/m),
+    /// attenuation_over_db, omega_as_hz (frequency column holds rad/s) or hz_as_omega. Done only
+    /// when the diagnosis of ID names that mix-up; the next calibrate refits the segment.
+    #[arg(long = "convert-units", value_name = "ID=MIXUP")]
+    convert_units: Vec<String>,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
     jobs: Option<u32>,
@@ -58,6 +66,19 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
             .map_err(|e| anyhow::anyhow!("--group-by: {e}"))?,
         None => GroupBy::default(),
     };
+    let convert_units = args
+        .convert_units
+        .iter()
+        .map(|t| {
+            let (id, mix) = t
+                .rsplit_once('=')
+                .ok_or_else(|| anyhow::anyhow!("--convert-units {t:?}: expected ID=MIXUP"))?;
+            let mix = mix
+                .parse::<UnitMixUp>()
+                .map_err(|e| anyhow::anyhow!("--convert-units {t:?}: {e}"))?;
+            Ok((id.to_string(), mix))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let mut database = super::open_database(&args.db)?;
     let opts = DiagnoseOptions {
         segments: (!args.segments.is_empty()).then(|| args.segments.clone()),
@@ -69,12 +90,16 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
         candidates,
         out_dir: args.out.clone(),
         group_by,
+        convert_units,
     };
     let s = diagnose_database(database.conn_mut(), &opts)?;
     for (id, why) in &s.skipped {
         eprintln!("{}: segment {id}: skipped: {why}", args.db.display());
     }
     println!("{}", s.line());
+    for (id, what) in &s.conversions {
+        println!("{id}: {what}");
+    }
     println!(
         "report: {}, {} and {}",
         args.out.join("diagnosis.csv").display(),

@@ -83,6 +83,9 @@ pub fn field_test(e: Effect) -> &'static str {
             "a trial hole to read the pipe's markings and measure its diameter"
         }
         Effect::FullModel => "none needed: the full model is the default",
+        Effect::MeasurementUnits => {
+            "the units of the measurement export (or the field sheet) checked at its source"
+        }
     }
 }
 

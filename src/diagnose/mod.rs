@@ -18,12 +18,14 @@
 //!    and its value, and a report.
 
 pub mod ambiguity;
+pub mod catalogue;
 pub mod group;
 pub mod inventory;
 pub mod report;
 pub mod run;
 pub mod stats;
 pub mod trial;
+pub mod units;
 
 use num_complex::Complex64;
 
@@ -55,8 +57,9 @@ pub const TIE_LR: f64 = 2.0;
 /// repair); soil damping shows only in stiff soil (model §8 E1); the full model is the default.
 /// A viscoelastic wall is a wall loss with a rising modulus: it comes after the plain loss
 /// factor. The inventory record is listed last, but a tie between a record and a physical
-/// effect is broken by AICc instead (see [`name_effect`]).
-pub const PRIOR_ORDER: [Effect; 7] = [
+/// effect is broken by AICc instead (see [`name_effect`]). A unit mix-up, the other discrete
+/// alternative to the stored inputs, comes last.
+pub const PRIOR_ORDER: [Effect; 8] = [
     Effect::PipeLoss,
     Effect::ViscoelasticWall,
     Effect::WallThinning,
@@ -64,6 +67,7 @@ pub const PRIOR_ORDER: [Effect; 7] = [
     Effect::SoilDamping,
     Effect::FullModel,
     Effect::InventoryError,
+    Effect::MeasurementUnits,
 ];
 /// The leave-one-frequency-out prediction error must fall by at least this fraction.
 pub const MIN_HOLDOUT_GAIN: f64 = 0.2;
@@ -81,6 +85,12 @@ pub struct DiagnoseSettings {
     pub candidates: Vec<Effect>,
     /// Seed of the refits.
     pub seed: u64,
+    /// The utility's inventory: its sizes join the candidate records, and its materials, sizes
+    /// and eras rank a set of records the data cannot tell apart (None: catalogue only,
+    /// ranked by χ² alone).
+    pub inventory: Option<std::sync::Arc<inventory::InventoryProfile>>,
+    /// The segment's installation year, for that ranking.
+    pub install_year: Option<i64>,
 }
 
 impl Default for DiagnoseSettings {
@@ -91,7 +101,31 @@ impl Default for DiagnoseSettings {
             base_effects: Vec::new(),
             candidates: Effect::ALL.to_vec(),
             seed: 1,
+            inventory: None,
+            install_year: None,
         }
+    }
+}
+
+/// One record of a set the data cannot tell apart.
+#[derive(Debug, Clone)]
+pub struct RecordSetMember {
+    /// The record.
+    pub candidate: inventory::RecordCandidate,
+    /// χ² of its fit.
+    pub chi2: f64,
+    /// How likely the inventory makes it ([`inventory::InventoryProfile::prior`]; 1 without
+    /// an inventory).
+    pub prior: f64,
+    /// Its fit.
+    pub fit: FitResult,
+}
+
+impl RecordSetMember {
+    /// The ranking key: χ² − 2 ln(prior), the record's misfit plus what the inventory says
+    /// against it (a posterior ranking; lower is more likely).
+    pub fn rank_key(&self) -> f64 {
+        self.chi2 - 2.0 * self.prior.max(1e-300).ln()
     }
 }
 
@@ -314,6 +348,13 @@ pub struct Diagnosis {
     pub record: Option<(inventory::RecordCandidate, SegmentData)>,
     /// Other records the data do not reject against it ([`inventory::RecordFit::alternatives`]).
     pub record_alternatives: Vec<inventory::RecordCandidate>,
+    /// The best record and those alternatives, most likely first ([`RecordSetMember::rank_key`]).
+    pub record_set: Vec<RecordSetMember>,
+    /// What would separate the records of the set: a frequency band where their fitted
+    /// models differ, or a trial hole.
+    pub record_separation: String,
+    /// The best unit mix-up tried, and the data with it undone.
+    pub units: Option<(units::UnitMixUp, SegmentData)>,
     /// Residuals after adding it.
     pub after: Option<Residuals>,
     /// Leave-one-frequency-out prediction χ² of the base model (computed once, when needed).
@@ -329,10 +370,20 @@ impl Diagnosis {
     /// The segment data an effect's refit was made on: the candidate record's for
     /// `inventory_error`, the segment's otherwise.
     pub fn fit_data(&self, e: Effect) -> &SegmentData {
-        match (&self.record, e) {
-            (Some((_, d)), Effect::InventoryError) => d,
+        match (&self.record, &self.units, e) {
+            (Some((_, d)), _, Effect::InventoryError) => d,
+            (_, Some((_, d)), Effect::MeasurementUnits) => d,
             _ => &self.data,
         }
+    }
+
+    /// The records of the set, in the interface's syntax, joined by ` | `, most likely first.
+    pub fn record_set_text(&self) -> String {
+        self.record_set
+            .iter()
+            .map(|m| m.candidate.label())
+            .collect::<Vec<_>>()
+            .join(" | ")
     }
 
     /// The base model's leave-one-frequency-out prediction χ² (∞ without a base fit).
@@ -369,7 +420,7 @@ impl Diagnosis {
             && !self
                 .candidates
                 .iter()
-                .filter(|c| c.effect != Effect::InventoryError)
+                .filter(|c| !c.effect.is_discrete())
                 .filter_map(|c| c.refit.as_ref())
                 .any(|r| r.explains)
     }
@@ -438,6 +489,9 @@ pub fn diagnose_segment(
         if settings.candidates.contains(&Effect::InventoryError) {
             check_inventory(&mut diag, settings);
         }
+        if settings.candidates.contains(&Effect::MeasurementUnits) {
+            check_units(&mut diag, settings);
+        }
         name_effect(&mut diag);
     }
     diag
@@ -472,6 +526,9 @@ pub fn prepare(
         ambiguity: Vec::new(),
         record: None,
         record_alternatives: Vec::new(),
+        record_set: Vec::new(),
+        record_separation: String::new(),
+        units: None,
         after: None,
         holdout_base: None,
     }
@@ -483,12 +540,16 @@ pub fn needs_explanation(diag: &Diagnosis) -> bool {
 }
 
 /// Step 2a (name, cheaply): the score statistic of every candidate physical effect at the base
-/// fit, best first (`full_model` only for a `seed` base; `inventory_error` is not scored).
+/// fit, best first (`full_model` only for a `seed` base; the discrete alternatives,
+/// `inventory_error` and `measurement_units`, are not scored). An effect the segment's
+/// material cannot have ([`Effect::applies_to`]: a plastic wall does not thin) is no candidate.
 pub fn score_candidates(diag: &Diagnosis, settings: &DiagnoseSettings) -> Vec<Candidate> {
+    let material = diag.data.material;
     let mut cands: Vec<Candidate> = settings
         .candidates
         .iter()
-        .filter(|e| !settings.base_effects.contains(e) && **e != Effect::InventoryError)
+        .filter(|e| !settings.base_effects.contains(e) && !e.is_discrete())
+        .filter(|e| material.is_none_or(|m| e.applies_to(m)))
         .filter(|e| **e != Effect::FullModel || diag.base.model == Model::Seed)
         .map(|&e| Candidate {
             effect: e,
@@ -618,14 +679,38 @@ fn judge(
 /// explaining, whether or not a physical effect was accepted (a thinner wall class looks like
 /// thinning, a thicker one like a stiffer, lossier wall, another material like either). The
 /// best record is tested like an effect, with the number of records tried in the
-/// significance level.
+/// significance level. The records within [`inventory::record_tie`] of it form the set the
+/// data cannot tell apart (the wave sees mainly the hoop stiffness E_p·h/a), ranked by what the
+/// inventory makes likely, with what would separate them.
 pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
     let fs = fit_settings(settings, settings.base_effects.clone());
-    let Some(best) = inventory::fit_best_record(&diag.data, &fs, settings.seed) else {
+    let profile = settings.inventory.as_deref();
+    let Some(best) =
+        inventory::fit_best_record_among(&diag.data, profile, &fs, settings.seed, |_| true)
+    else {
         return;
     };
     let effects = settings.base_effects.clone();
     let n_tests = best.tried.max(1);
+    let prior =
+        |c: &inventory::RecordCandidate| profile.map_or(1.0, |p| p.prior(c, settings.install_year));
+    let mut set: Vec<RecordSetMember> = std::iter::once((best.candidate, &best.fit))
+        .chain(
+            best.alternatives
+                .iter()
+                .copied()
+                .zip(best.alternative_fits.iter().map(|(_, f)| f)),
+        )
+        .map(|(c, f)| RecordSetMember {
+            candidate: c,
+            chi2: f.misfit,
+            prior: prior(&c),
+            fit: f.clone(),
+        })
+        .collect();
+    set.sort_by(|a, b| a.rank_key().total_cmp(&b.rank_key()));
+    diag.record_separation = record_separation(&diag.data, &set);
+    diag.record_set = set;
     let refit = judge(
         diag, settings, &best.data, best.fit, &effects, false, n_tests,
     );
@@ -633,6 +718,87 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
     diag.record_alternatives = best.alternatives;
     diag.candidates.push(Candidate {
         effect: Effect::InventoryError,
+        score: f64::NAN,
+        refit: Some(refit),
+    });
+}
+
+/// What would separate the records of a set from its first: the frequencies (on the grid of
+/// [`ambiguity::separating_band`]) where some member's fitted model differs from the first's by
+/// more than the noise; a trial hole for the members no frequency separates.
+pub fn record_separation(data: &SegmentData, set: &[RecordSetMember]) -> String {
+    let Some(first) = set.first() else {
+        return String::new();
+    };
+    if set.len() == 1 {
+        return String::new();
+    }
+    let mut bands: Vec<(f64, f64)> = Vec::new();
+    let mut inseparable: Vec<String> = Vec::new();
+    for m in &set[1..] {
+        match ambiguity::separating_band(data, &first.fit, &m.fit) {
+            Some(b) => bands.push(b),
+            None => inseparable.push(m.candidate.label()),
+        }
+    }
+    let mut words = Vec::new();
+    if !bands.is_empty() {
+        let lo = bands.iter().map(|b| b.0).fold(f64::INFINITY, f64::min);
+        let hi = bands.iter().map(|b| b.1).fold(0.0, f64::max);
+        words.push(format!(
+            "{} of the {} other records differ from the first by more than {} sigma somewhere \
+             in {}-{} Hz: measure there",
+            bands.len(),
+            set.len() - 1,
+            ambiguity::SEPARATION_SIGMAS,
+            crate::units::sig(lo, 3),
+            crate::units::sig(hi, 3)
+        ));
+    }
+    if !inseparable.is_empty() {
+        words.push(format!(
+            "no frequency separates {} from the first at this noise: {}",
+            inseparable.join(" | "),
+            ambiguity::field_test(Effect::InventoryError)
+        ));
+    }
+    words.join("; ")
+}
+
+/// Step 2c' (measurement units): refit the data with each unit mix-up undone
+/// ([`units::UnitMixUp`]); the best is tested like a record, with the number of mix-ups tried
+/// in the level. The stored measurements are not touched.
+pub fn check_units(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
+    use rayon::prelude::*;
+    let fs = fit_settings(settings, settings.base_effects.clone());
+    let fits: Vec<(units::UnitMixUp, SegmentData, FitResult)> = units::UnitMixUp::ALL
+        .par_iter()
+        .map(|&u| {
+            let d = u.corrected(&diag.data);
+            let f = fit_segment(&d, &fs, settings.seed);
+            (u, d, f)
+        })
+        .collect();
+    let Some((u, d, f)) = fits
+        .into_iter()
+        .filter(|x| x.2.status != FitStatus::Failed && x.2.misfit.is_finite())
+        .min_by(|a, b| a.2.misfit.total_cmp(&b.2.misfit))
+    else {
+        return;
+    };
+    let effects = settings.base_effects.clone();
+    let refit = judge(
+        diag,
+        settings,
+        &d,
+        f,
+        &effects,
+        false,
+        units::UnitMixUp::ALL.len(),
+    );
+    diag.units = Some((u, d));
+    diag.candidates.push(Candidate {
+        effect: Effect::MeasurementUnits,
         score: f64::NAN,
         refit: Some(refit),
     });
@@ -663,7 +829,7 @@ pub fn name_effect(diag: &mut Diagnosis) {
         .enumerate()
         .filter_map(|(i, c)| chi2_of(c).map(|x| (i, x)))
         .collect();
-    let is_record = |i: usize| diag.candidates[i].effect == Effect::InventoryError;
+    let is_record = |i: usize| diag.candidates[i].effect.is_discrete();
     let (top_i, top) = accepted
         .iter()
         .copied()
@@ -694,16 +860,21 @@ pub fn name_effect(diag: &mut Diagnosis) {
             .as_ref()
             .map_or(f64::INFINITY, |r| r.d_aicc)
     };
-    let physical = tied.iter().copied().filter(|&i| !is_record(i));
-    let record = tied.iter().copied().find(|&i| is_record(i));
-    let best_physical_aicc = physical.clone().map(d_aicc).fold(f64::INFINITY, f64::min);
-    let physical_named = physical.min_by_key(rank);
     let chi2 = |i: usize| {
         accepted
             .iter()
             .find(|a| a.0 == i)
             .map_or(f64::INFINITY, |a| a.1)
     };
+    let physical = tied.iter().copied().filter(|&i| !is_record(i));
+    // The discrete alternative (a record or the units) that fits best.
+    let record = tied
+        .iter()
+        .copied()
+        .filter(|&i| is_record(i))
+        .min_by(|&a, &b| chi2(a).total_cmp(&chi2(b)).then(rank(&a).cmp(&rank(&b))));
+    let best_physical_aicc = physical.clone().map(d_aicc).fold(f64::INFINITY, f64::min);
+    let physical_named = physical.min_by_key(rank);
     let corroded_wall = |r: usize| {
         physical_named.is_some_and(|i| {
             diag.candidates[i].effect == Effect::WallThinning && chi2(i) <= chi2(r)

@@ -11,7 +11,7 @@ use crate::report::svg::escape as esc;
 use crate::units::sig;
 
 /// Columns of `diagnosis.csv`: the interface's, then details.
-pub const CSV_COLUMNS: [&str; 20] = [
+pub const CSV_COLUMNS: [&str; 22] = [
     "segment_id",
     "named_effect",
     "effect_value",
@@ -32,6 +32,8 @@ pub const CSV_COLUMNS: [&str; 20] = [
     "group_chi2_per_dof_after",
     "candidates_chi2_per_dof",
     "record_to_check",
+    "record_set",
+    "record_set_separation",
 ];
 
 /// Columns of `groups.csv` (docs/interface.md).
@@ -69,19 +71,56 @@ pub fn record_sentence(d: &Diagnosis) -> Option<String> {
     }
     let (od, wall) = super::inventory::recorded_size(&d.data);
     let mm = |v: f64| ((v * 10.0).round() / 10.0).to_string();
-    let or: String = d
-        .record_alternatives
-        .iter()
-        .map(|a| format!(" (or equally {})", a.label()))
-        .collect();
+    let what = if d.record_set.len() > 1 {
+        format!(
+            "any of {} records ({}; most likely first, by the inventory's materials, sizes and eras)",
+            d.record_set.len(),
+            d.record_set_text()
+        )
+    } else {
+        format!("{} ({})", c.label(), c.change.describe())
+    };
+    let separate = if d.record_separation.is_empty() {
+        String::new()
+    } else {
+        format!("; to tell them apart: {}", d.record_separation)
+    };
     Some(format!(
-        "measured data fit {}{or} far better than the recorded {} OD {} mm, wall {} mm ({}): check the record",
-        c.label(),
+        "measured data fit {what} far better than the recorded {} OD {} mm, wall {} mm: check the record{separate}",
         d.data.material.map(|m| m.code()).unwrap_or("pipe"),
         mm(od),
         mm(wall),
-        c.change.describe()
     ))
+}
+
+/// "attenuation recorded in dB/m, not Np/m: …" for a named unit mix-up, with what to do.
+pub fn units_sentence(id: &str, d: &Diagnosis) -> Option<String> {
+    let (u, _) = d.units.as_ref()?;
+    if d.named != Some(Effect::MeasurementUnits) {
+        return None;
+    }
+    Some(format!(
+        "{}: the data fit with {} divided by {} (chi2/dof {} -> {}); the stored measurements are \
+         unchanged: correct the file and re-import it, or confirm with \
+         `pipewave diagnose --convert-units {id}={}`",
+        u.describe(),
+        u.column(),
+        sig(u.factor(), 4),
+        sig(d.chi2_per_dof_before(), 3),
+        sig(d.chi2_per_dof_after(), 3),
+        u.code()
+    ))
+}
+
+/// The `record_set` column: filled when a record is named or tied with the named effect.
+pub fn record_set_column(d: &Diagnosis) -> String {
+    let in_play = d.named == Some(Effect::InventoryError)
+        || d.ambiguous_with.contains(&Effect::InventoryError);
+    if in_play {
+        d.record_set_text()
+    } else {
+        String::new()
+    }
 }
 
 /// A residual counts as off when it is beyond this many standard deviations.
@@ -166,11 +205,18 @@ pub fn ambiguity_text(d: &Diagnosis) -> String {
 /// The named effect's value for the CSV: its parameter, or the record to check.
 fn value_and_std(d: &Diagnosis) -> (String, String) {
     if d.named == Some(Effect::InventoryError) {
+        let first = d.record_set.first().map(|m| m.candidate);
         return (
-            d.record
-                .as_ref()
-                .map(|(c, _)| c.label())
+            first
+                .or(d.record.as_ref().map(|(c, _)| *c))
+                .map(|c| c.label())
                 .unwrap_or_default(),
+            String::new(),
+        );
+    }
+    if d.named == Some(Effect::MeasurementUnits) {
+        return (
+            d.units.as_ref().map(|(u, _)| u.label()).unwrap_or_default(),
             String::new(),
         );
     }
@@ -305,7 +351,14 @@ pub fn write_csv(
             g.effect.map(|e| e.name()).unwrap_or(""),
             &g.chi2_per_dof_after.map(num).unwrap_or_default(),
             &candidates_chi2(d),
-            &record_sentence(d).unwrap_or_default(),
+            &record_sentence(d)
+                .or_else(|| units_sentence(id, d))
+                .unwrap_or_default(),
+            spreadsheet_safe(&record_set_column(d)).as_ref(),
+            &record_set_column(d)
+                .is_empty()
+                .then(String::new)
+                .unwrap_or_else(|| d.record_separation.clone()),
         ])?;
     }
     w.flush()?;
@@ -509,7 +562,7 @@ pub fn write_html(
             esc(&residual_runs(&d.before)),
             esc(&candidates_chi2(d))
         );
-        if let Some(t) = record_sentence(d) {
+        if let Some(t) = record_sentence(d).or_else(|| units_sentence(id, d)) {
             let _ = write!(h, "<p><strong>{}</strong></p>", esc(&t));
         }
         for a in &d.ambiguity {

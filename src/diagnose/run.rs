@@ -9,7 +9,9 @@ use rayon::prelude::*;
 use rusqlite::Connection;
 
 use super::group::{group_key, member_scores, test_groups, GroupBy, GroupTest};
+use super::inventory::{InventoryPipe, InventoryProfile};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
+use super::units::{convert_measurements, UnitMixUp};
 use super::{diagnose_segment, extended_fit, DiagnoseSettings, Diagnosis};
 use crate::batch::{curve_points, fit_row, segment_data, settings_hash};
 use crate::db::{self, DbError, NewRun, RunCounts, RunStatus, SegmentRecord};
@@ -32,6 +34,9 @@ pub struct DiagnoseOptions {
     pub out_dir: PathBuf,
     /// How segments are grouped for the pooled test.
     pub group_by: GroupBy,
+    /// Unit mix-ups the user confirms (`--convert-units ID=MIXUP`): each segment's stored
+    /// measurements are converted when, and only when, its diagnosis names that mix-up.
+    pub convert_units: Vec<(String, UnitMixUp)>,
 }
 
 /// Errors of a diagnosis run.
@@ -73,6 +78,8 @@ pub struct DiagnoseSummary {
     pub stored: usize,
     /// Groups in which the pooled test detected an effect.
     pub groups_detected: usize,
+    /// Confirmed unit conversions: the segment and what was done (or why it was not).
+    pub conversions: Vec<(String, String)>,
 }
 
 impl DiagnoseSummary {
@@ -110,6 +117,41 @@ fn soil_zones(conn: &Connection) -> Result<Option<BTreeMap<String, String>>, Dia
     Ok(Some(rows))
 }
 
+/// The inventory as the record check sees it: every segment's material, size and year.
+pub fn inventory_profile(conn: &Connection) -> Result<InventoryProfile, DiagnoseError> {
+    let db = |e: rusqlite::Error| DiagnoseError::Db(DbError::from(e));
+    let mut st = conn
+        .prepare(
+            "SELECT material, outer_diameter_mm, wall_thickness_mm, install_year FROM segments \
+             ORDER BY segment_id",
+        )
+        .map_err(db)?;
+    let rows = st
+        .query_map([], |r| {
+            Ok((
+                r.get::<_, String>(0)?,
+                r.get::<_, f64>(1)?,
+                r.get::<_, f64>(2)?,
+                r.get::<_, Option<i64>>(3)?,
+            ))
+        })
+        .and_then(|it| it.collect::<Result<Vec<_>, _>>())
+        .map_err(db)?;
+    Ok(InventoryProfile {
+        pipes: rows
+            .into_iter()
+            .filter_map(|(m, od_mm, wall_mm, install_year)| {
+                Some(InventoryPipe {
+                    material: m.parse().ok()?,
+                    od_mm,
+                    wall_mm,
+                    install_year,
+                })
+            })
+            .collect(),
+    })
+}
+
 /// One diagnosed segment.
 struct Done {
     record: SegmentRecord,
@@ -137,6 +179,7 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
         .into_iter()
         .map(|f| (f.segment_id.clone(), f))
         .collect();
+    let profile = std::sync::Arc::new(inventory_profile(conn)?);
     let mut todo = Vec::new();
     for rec in records {
         match fits.get(&rec.segment_id) {
@@ -155,6 +198,8 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
                     base_effects,
                     candidates: opts.candidates.clone(),
                     seed: f.seed.unwrap_or(1),
+                    inventory: Some(profile.clone()),
+                    install_year: rec.install_year,
                 };
                 // The stored fit's method, so that its refit below reproduces it ("diagnose"
                 // rows were made by the default method).
@@ -259,8 +304,51 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
     if opts.apply {
         store(conn, &diags, opts, &mut summary)?;
     }
+    convert(conn, &diags, opts, &mut summary)?;
     report(&diags, &groups, &rows, &opts.out_dir)?;
     Ok(summary)
+}
+
+/// The unit conversions the user confirmed: done only where the diagnosis names that very
+/// mix-up (so that a repeated command never converts twice); otherwise the reason.
+fn convert(
+    conn: &mut Connection,
+    diags: &[Done],
+    opts: &DiagnoseOptions,
+    summary: &mut DiagnoseSummary,
+) -> Result<(), DiagnoseError> {
+    for (id, mix) in &opts.convert_units {
+        let d = diags.iter().find(|d| &d.record.segment_id == id);
+        let named = d.and_then(|d| {
+            (d.diagnosis.named == Some(Effect::MeasurementUnits))
+                .then_some(d.diagnosis.units.as_ref().map(|u| u.0))
+                .flatten()
+        });
+        let what = match (d, named) {
+            (None, _) => "not converted: the segment was not diagnosed".to_string(),
+            (Some(_), Some(u)) if u == *mix => {
+                let n = convert_measurements(conn, id, *mix)?;
+                format!(
+                    "converted {n} measurements: {} divided by {} ({}); run calibrate to refit",
+                    mix.column(),
+                    crate::units::sig(mix.factor(), 4),
+                    mix.describe()
+                )
+            }
+            (Some(_), Some(u)) => format!(
+                "not converted: the diagnosis names {} ({}), not {}",
+                u.code(),
+                u.describe(),
+                mix.code()
+            ),
+            (Some(_), None) => format!(
+                "not converted: the diagnosis does not name a unit mix-up ({}) for this segment",
+                mix.code()
+            ),
+        };
+        summary.conversions.push((id.clone(), what));
+    }
+    Ok(())
 }
 
 /// Refit the members of every detected group with the group's effect (those whose own
@@ -277,7 +365,7 @@ fn refit_groups(diags: &[Done], groups: &mut [GroupTest]) -> Vec<GroupRow> {
                 if d.diagnosis.named == Some(e) {
                     return (i, Some(d.diagnosis.chi2_per_dof_after()));
                 }
-                if d.diagnosis.base_failed() {
+                if d.diagnosis.base_failed() || !e.applies_to(d.record.material) {
                     return (i, None);
                 }
                 let mut effects = d.settings.base_effects.clone();
@@ -307,15 +395,11 @@ fn store(
     opts: &DiagnoseOptions,
     summary: &mut DiagnoseSummary,
 ) -> Result<(), DiagnoseError> {
-    // An inventory error is reported, not stored: its fit belongs to another record, which a
-    // person must check and correct in the inventory.
+    // An inventory error or a unit mix-up is reported, not stored: its fit belongs to another
+    // record or to converted measurements, which a person must check and correct.
     let named: Vec<&Done> = diags
         .iter()
-        .filter(|d| {
-            d.diagnosis
-                .named
-                .is_some_and(|e| e != Effect::InventoryError)
-        })
+        .filter(|d| d.diagnosis.named.is_some_and(|e| !e.is_discrete()))
         .collect();
     if named.is_empty() {
         return Ok(());

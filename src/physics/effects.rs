@@ -156,11 +156,15 @@ pub enum Effect {
     /// E8: the inventory describes another pipe (no continuous parameter: candidate records
     /// are refitted, [`crate::diagnose::inventory`]).
     InventoryError,
+    /// The measurements were recorded in other units (attenuation in dB/m for Np/m, ω for f or
+    /// f for ω): a measurement error, found by refitting the converted data
+    /// ([`crate::diagnose::units`]), reported and never applied silently.
+    MeasurementUnits,
 }
 
 impl Effect {
     /// Every effect, in the interface's order.
-    pub const ALL: [Effect; 7] = [
+    pub const ALL: [Effect; 8] = [
         Effect::SoilDamping,
         Effect::AirInWater,
         Effect::WallThinning,
@@ -168,6 +172,7 @@ impl Effect {
         Effect::FullModel,
         Effect::ViscoelasticWall,
         Effect::InventoryError,
+        Effect::MeasurementUnits,
     ];
 
     /// The effects that change the physics of the model (every effect but `inventory_error`,
@@ -191,6 +196,7 @@ impl Effect {
             Effect::FullModel => "full_model",
             Effect::ViscoelasticWall => "viscoelastic_wall",
             Effect::InventoryError => "inventory_error",
+            Effect::MeasurementUnits => "measurement_units",
         }
     }
 
@@ -217,8 +223,47 @@ impl Effect {
                 MAX_VISCOELASTIC_EXPONENT,
                 f64::NAN,
             ),
-            Effect::FullModel | Effect::InventoryError => None,
+            Effect::FullModel | Effect::InventoryError | Effect::MeasurementUnits => None,
         }
+    }
+
+    /// Whether a pipe of `material` can have this effect. A polymer wall neither corrodes nor
+    /// graphitises, so it cannot thin (E4 is for iron, steel and cement); only polymers have
+    /// the causal power-law modulus of E7 at leak-noise frequencies. Every other effect applies
+    /// to every material.
+    pub fn applies_to(self, material: crate::physics::Material) -> bool {
+        match self {
+            Effect::WallThinning => !material.is_plastic(),
+            Effect::ViscoelasticWall => material.is_plastic(),
+            _ => true,
+        }
+    }
+
+    /// Why a pipe of `material` cannot have this effect (None when it can): the note a fit
+    /// that leaves the effect out carries.
+    pub fn not_applicable_note(self, material: crate::physics::Material) -> Option<String> {
+        if self.applies_to(material) {
+            return None;
+        }
+        Some(match self {
+            Effect::WallThinning => format!(
+                "{} skipped: a {} wall neither corrodes nor graphitises, so it does not thin \
+                 (a thinner wall is a record to check: inventory_error)",
+                self.name(),
+                material.code()
+            ),
+            _ => format!(
+                "{} skipped: a {} wall has no power-law modulus at leak-noise frequencies",
+                self.name(),
+                material.code()
+            ),
+        })
+    }
+
+    /// True for the effects that are not a change of the model but a discrete alternative to
+    /// the stored inputs (an inventory record, the measurements' units).
+    pub fn is_discrete(self) -> bool {
+        matches!(self, Effect::InventoryError | Effect::MeasurementUnits)
     }
 
     /// The parameter value at which the effect changes the least for `system`: the neutral
@@ -251,6 +296,9 @@ impl Effect {
             Effect::InventoryError => {
                 "the inventory describes another pipe (material, wall class or diameter units)"
             }
+            Effect::MeasurementUnits => {
+                "the measurements were recorded in other units (dB/m for Np/m, rad/s for Hz)"
+            }
         }
     }
 
@@ -280,12 +328,12 @@ impl Effect {
                     "0 - 0.2",
                 )?;
             }
-            Effect::InventoryError => {
+            Effect::InventoryError | Effect::MeasurementUnits => {
                 return Err(InputError::Unknown {
                     what: "model change",
-                    value: "inventory_error".into(),
-                    expected:
-                        "an effect with a parameter (inventory_error refits candidate records)",
+                    value: self.name().into(),
+                    expected: "an effect with a parameter (inventory_error refits candidate \
+                               records, measurement_units converted measurements)",
                 })
             }
         }
@@ -322,7 +370,7 @@ impl std::str::FromStr for Effect {
             .ok_or_else(|| InputError::Unknown {
                 what: "effect",
                 value: s.to_string(),
-                expected: "soil_damping, air_in_water, wall_thinning, pipe_loss, full_model, viscoelastic_wall, inventory_error",
+                expected: "soil_damping, air_in_water, wall_thinning, pipe_loss, full_model, viscoelastic_wall, inventory_error, measurement_units",
             })
     }
 }
