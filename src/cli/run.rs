@@ -117,6 +117,7 @@ fn diagnose_and_refit(
             candidates: pipewave::physics::effects::Effect::ALL.to_vec(),
             out_dir,
             group_by: Default::default(),
+            convert_units: Vec::new(),
         },
     )?;
     println!("{}", d.line());

@@ -475,6 +475,8 @@ pub fn prediction_for(conn: &Connection, segment_id: &str) -> Result<Option<Pred
                 phase_speed_std_m_per_s: r.get(2)?,
                 attenuation_db_per_m: r.get(3)?,
                 attenuation_std_db_per_m: r.get(4)?,
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             })
         })?
         .collect::<Result<_, _>>()?;

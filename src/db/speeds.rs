@@ -57,6 +57,8 @@ pub fn speed_curve(
                 attenuation_db_per_m: r.get(2)?,
                 phase_speed_std_m_per_s: r.get(3)?,
                 attenuation_std_db_per_m: r.get(4)?,
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             })
         })?
         .collect::<Result<Vec<_>, _>>()?;

@@ -185,6 +185,8 @@ pub fn predict_speed(
                 attenuation_db_per_m: a.map(|a| a.value),
                 phase_speed_std_m_per_s: c.map(|c| c.std),
                 attenuation_std_db_per_m: a.map(|a| a.std),
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             }
         })
         .collect();

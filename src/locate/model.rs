@@ -540,6 +540,8 @@ mod tests {
                 attenuation_db_per_m: Some(att_db),
                 phase_speed_std_m_per_s: Some(rel * c),
                 attenuation_std_db_per_m: None,
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             })
             .collect();
         SpeedCurve::from_points(&pts).unwrap()
@@ -649,6 +651,8 @@ mod tests {
             attenuation_db_per_m: Some(0.1),
             phase_speed_std_m_per_s: None,
             attenuation_std_db_per_m: None,
+            model_phase_speed_m_per_s: None,
+            model_attenuation_db_per_m: None,
         })
         .collect();
         let s = SpeedCurve::from_points(&pts).unwrap();

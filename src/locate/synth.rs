@@ -130,6 +130,8 @@ pub fn true_curve(truth: &TruthCurve, band_hz: (f64, f64)) -> Option<SpeedCurve>
                 attenuation_db_per_m: Some(np_to_db(-k.im)),
                 phase_speed_std_m_per_s: Some(0.0),
                 attenuation_std_db_per_m: None,
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
             })
         })
         .collect();
