@@ -28,7 +28,6 @@
 //! the discrepancy's own size per octave, β̂₀² + V₀₀, when there is no trend term).
 
 use crate::optimize::linalg::{cholesky, cholesky_solve};
-use crate::stats::birge_ratio;
 
 /// Fewest measured frequencies for a trend in ln f (two coefficients) rather than a constant:
 /// with three points the trend would leave one degree of freedom to estimate s², too few to
@@ -285,17 +284,6 @@ pub fn extrapolation_octaves(band_hz: (f64, f64), measured_hz: &[f64]) -> Option
         return None;
     }
     Some((lo / band_hz.0).log2().max(0.0) + (band_hz.1 / hi).log2().max(0.0))
-}
-
-/// The Birge ratio R_B of a fit (P88) with the stated noise, or the assumed relative noise
-/// ([`ASSUMED_RELATIVE_SPEED_STD`], [`ASSUMED_RELATIVE_ATTENUATION_STD`]) where none is
-/// stated: `residuals` are the (speed, attenuation) residual pairs in units of σ.
-pub fn birge_of(residuals: &[(Residual, Residual)], n_fitted: usize) -> f64 {
-    let chi2: f64 = residuals
-        .iter()
-        .map(|(a, b)| (a.ln_ratio / a.sigma).powi(2) + (b.ln_ratio / b.sigma).powi(2))
-        .sum();
-    birge_ratio(chi2, 2 * residuals.len(), n_fitted)
 }
 
 #[cfg(test)]

@@ -388,7 +388,7 @@ impl BaseOptimum {
         }
         Some(BaseOptimum {
             values: fit.estimates.iter().map(|e| (e.param, e.value)).collect(),
-            system: fit.system.clone()?,
+            system: fit.system?,
         })
     }
 
