@@ -22,7 +22,7 @@ use pipewave::locate::synth::{
     calibrated_database, case_job, draw_case, leak_recording, network_of, segment_truth,
     true_curve, true_delay, LeakSpec, DEFAULT_LEAK_NOISE_FRACTION, DEFAULT_LEAK_SAMPLE_RATE,
 };
-use pipewave::locate::{DelayInput, LocateOptions, Locator, DEFAULT_BAND_HZ};
+use pipewave::locate::{DelayInput, LocateOptions, Located, Locator, DEFAULT_BAND_HZ};
 use pipewave::recordings::synth::{headroom_gain, write_wav, TruthCurve, WavFormat};
 use pipewave::synth::{generate, normal, SynthOptions};
 use rand::SeedableRng;
@@ -60,6 +60,20 @@ struct Outcome {
     table_err: f64,
     plastic: bool,
     ms: f64,
+}
+
+impl Outcome {
+    /// How a located leak compares with the truth `leak_m`.
+    fn of(l: &Located, leak_m: f64, plastic: bool, ms: f64) -> Outcome {
+        Outcome {
+            err: (l.distance_m - leak_m).abs(),
+            covered: l.lo_m <= leak_m && leak_m <= l.hi_m,
+            width: l.hi_m - l.lo_m,
+            table_err: (l.table_distance_m - leak_m).abs(),
+            plastic,
+            ms,
+        }
+    }
 }
 
 fn main() {
@@ -131,14 +145,12 @@ fn main() {
         let ms = t.elapsed().as_secs_f64() * 1e3;
         match r {
             Ok(l) => {
-                let o = Outcome {
-                    err: (l.distance_m - case.leak_m).abs(),
-                    covered: l.lo_m <= case.leak_m && case.leak_m <= l.hi_m,
-                    width: l.hi_m - l.lo_m,
-                    table_err: (l.table_distance_m - case.leak_m).abs(),
-                    plastic: case.segments.iter().any(|&s| plastic(s)),
+                let o = Outcome::of(
+                    &l,
+                    case.leak_m,
+                    case.segments.iter().any(|&s| plastic(s)),
                     ms,
-                };
+                );
                 if verbose && (!o.covered || o.err > 2.0) {
                     eprintln!(
                         "  {}: span {:.1} {:?} leak {:.2} got {:.2} [{:.2}, {:.2}] table {:.2}; {:?}",
@@ -246,14 +258,7 @@ fn main() {
             let _ = std::fs::remove_file(Path::new(&file));
             match r {
                 Ok(l) => {
-                    let o = Outcome {
-                        err: (l.distance_m - case.leak_m).abs(),
-                        covered: l.lo_m <= case.leak_m && case.leak_m <= l.hi_m,
-                        width: l.hi_m - l.lo_m,
-                        table_err: (l.table_distance_m - case.leak_m).abs(),
-                        plastic: is_plastic,
-                        ms,
-                    };
+                    let o = Outcome::of(&l, case.leak_m, is_plastic, ms);
                     if verbose && (!o.covered || o.err > 1.0) {
                         eprintln!(
                             "  {}: span {:.1} {:?} leak {:.2} got {:.2} [{:.2}, {:.2}] τ {:.6}±{:.1e} {}; {:?}",

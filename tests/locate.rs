@@ -439,37 +439,27 @@ fn bad_input_is_reported_never_a_panic() {
     );
     assert!((num(&rows[2], "band_lo_hz_used") - 200.0).abs() < 1e-9);
     // Unusable files.
-    std::fs::write(&jobs, "job_id,sensor1_segment,sensor2_segment\nj1,A,A\n").unwrap();
-    let o = run(&[
-        "locate",
-        "--db",
-        db,
-        "--jobs",
-        jobs.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(
-        stderr(&o).contains("missing columns sensor1_chainage_m, sensor2_chainage_m"),
-        "{}",
-        stderr(&o)
+    let unusable = |content: &str, want: &str| {
+        std::fs::write(&jobs, content).unwrap();
+        let o = run(&[
+            "locate",
+            "--db",
+            db,
+            "--jobs",
+            jobs.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(stderr(&o).contains(want), "{}", stderr(&o));
+    };
+    unusable(
+        "job_id,sensor1_segment,sensor2_segment\nj1,A,A\n",
+        "missing columns sensor1_chainage_m, sensor2_chainage_m",
     );
-    std::fs::write(&jobs, "job_id,sensor1_segment,sensor1_chainage_m,sensor2_segment,sensor2_chainage_m\nj1,A,1,A,2\n").unwrap();
-    let o = run(&[
-        "locate",
-        "--db",
-        db,
-        "--jobs",
-        jobs.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(o.status.code(), Some(2));
-    assert!(
-        stderr(&o).contains("no delay: give the columns delay_s, delay_std_s"),
-        "{}",
-        stderr(&o)
+    unusable(
+        "job_id,sensor1_segment,sensor1_chainage_m,sensor2_segment,sensor2_chainage_m\nj1,A,1,A,2\n",
+        "no delay: give the columns delay_s, delay_std_s",
     );
 }
 
