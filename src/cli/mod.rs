@@ -11,6 +11,7 @@ mod fit;
 mod forward;
 mod import;
 mod plan;
+mod locate;
 mod run;
 mod synth;
 mod wavenumbers;
@@ -68,6 +69,8 @@ enum Command {
     Wavenumbers(wavenumbers::WavenumbersArgs),
     /// Choose the next segments to measure: the largest expected cut in speed uncertainty.
     Plan(plan::PlanArgs),
+    /// Locate a leak from a correlator's delay or two recordings, with its 95 % interval.
+    Locate(locate::LocateArgs),
 }
 
 /// How a command that ran ended.
@@ -107,6 +110,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Fit(args) => fit::run(&args),
         Command::Wavenumbers(args) => wavenumbers::run(&args),
         Command::Plan(args) => plan::run(&args),
+        Command::Locate(args) => locate::run(&args),
     }
 }
 

@@ -69,6 +69,14 @@ pub struct SynthArgs {
     /// the zone is written to segments.csv (`soil_zone`) and its true soil to truth.csv.
     #[arg(long, value_name = "N", default_value_t = 0)]
     zones: u32,
+    /// Also write N two-sensor leak recordings on paths of 1-4 segments into DIR/leaks/
+    /// (jobs.csv for `locate`, one WAV per job, leaks_truth.csv), made from the true soils.
+    #[arg(long, value_name = "N")]
+    leaks: Option<u32>,
+    /// Length of each leak recording, s.
+    #[arg(long, value_name = "S", requires = "leaks",
+          default_value_t = pipewave::locate::synth::DEFAULT_LEAK_SECONDS)]
+    leak_seconds: f64,
 }
 
 /// Generate and write the network.
@@ -147,6 +155,21 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         );
     }
     let synthetic = generate(&opts);
+    if let Some(n) = args.leaks {
+        let dir = args.out.join("leaks");
+        let written = pipewave::locate::synth::write_leaks(
+            &dir,
+            &synthetic,
+            &opts,
+            n as usize,
+            args.leak_seconds,
+        )
+        .map_err(anyhow::Error::msg)?;
+        println!(
+            "synth: wrote {written} leak recordings to {}",
+            dir.display()
+        );
+    }
     if let Some(ids) = &args.recordings {
         let ids: Vec<String> = ids.split(',').map(|s| s.trim().to_string()).collect();
         let rec = pipewave::recordings::synth::record_network_segments(

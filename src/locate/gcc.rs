@@ -32,6 +32,9 @@ const MIN_COARSE_SEGMENT_S: f64 = 0.25;
 pub const COHERENCE_FLOOR: f64 = 0.1;
 /// Coherence used at most in P87: an estimate of 1 would claim an infinitely precise delay.
 pub const COHERENCE_CAP: f64 = 0.99;
+/// The correlation's peak is told from its neighbours (a carrier period away) when the
+/// envelope's error is below this fraction of a period (a slip is then a 4σ event).
+const PEAK_SEPARATION: f64 = 8.0;
 /// Bins averaged when the coherence is smoothed to find the band's edges.
 const SMOOTH_BINS: usize = 5;
 
@@ -281,20 +284,19 @@ pub fn gcc_delay(
     }
     let (ka, kb) = (k0 + i0, k0 + i1);
     let used = (ka as f64 * df, kb as f64 * df);
-    let requested = format!("{}–{} Hz asked", band_hz.0, band_hz.1);
     let band_note = match (ka > k0 + 1, kb + 1 < k1) {
-        (false, false) => format!("{requested}, all of it coherent"),
+        (false, false) => "all of it coherent".to_string(),
         (true, false) => format!(
-            "{requested}; below {:.0} Hz the coherence is under {COHERENCE_FLOOR}",
+            "coherent from {:.0} Hz (below, the coherence is under {COHERENCE_FLOOR})",
             used.0
         ),
         (false, true) => format!(
-            "{requested}; above {:.0} Hz the coherence is under {COHERENCE_FLOOR} (the path's \
-             attenuation leaves only sensor noise)",
+            "coherent up to {:.0} Hz (above, the coherence is under {COHERENCE_FLOOR}: the \
+             path's attenuation leaves only sensor noise)",
             used.1
         ),
         (true, true) => format!(
-            "{requested}; the coherence is under {COHERENCE_FLOOR} below {:.0} Hz and above {:.0} Hz",
+            "coherent in {:.0}–{:.0} Hz only (outside, the coherence is under {COHERENCE_FLOOR})",
             used.0, used.1
         ),
     };
@@ -303,6 +305,8 @@ pub fn gcc_delay(
     let mut phi = Vec::with_capacity(kb - ka + 1);
     let mut info = 0.0;
     let mut prev: Option<f64> = None;
+    // Phase variance of each bin (P75), for the error of the phase slope (the envelope).
+    let mut inv_var = Vec::with_capacity(kb - ka + 1);
     for k in ka..=kb {
         let z = weighted(&s2, k, weighting);
         let om = hz_to_omega(k as f64 * df);
@@ -318,15 +322,41 @@ pub fn gcc_delay(
         phi.push(p);
         let g = coh[k - k0].min(COHERENCE_CAP);
         info += om * om * g / (1.0 - g);
+        inv_var.push(g.max(1e-6) * 2.0 * s2.n_eff / (1.0 - g));
     }
+    // Error of the weighted slope of φ(ω): the group delay the envelope gives. When it is not
+    // well inside a carrier period the correlation's neighbouring peaks cannot be told apart,
+    // and the delay is only as good as the envelope.
+    let sw: f64 = inv_var.iter().sum();
+    let mean_om = omega.iter().zip(&inv_var).map(|(o, w)| o * w).sum::<f64>() / sw;
+    let sxx: f64 = omega
+        .iter()
+        .zip(&inv_var)
+        .map(|(o, w)| w * (o - mean_om) * (o - mean_om))
+        .sum();
+    let envelope_std = sxx.recip().sqrt();
     let residual = correlation_peak(&omega, &w, &phi, 0.5 * (used.0 + used.1), used.1 - used.0);
     let record_s = a.len() as f64 / fs;
     // eq. P87 with the integral over ω as a sum over bins of width 2π Δf.
     let sum = record_s / std::f64::consts::PI * info * std::f64::consts::TAU * df;
-    let delay_std_s = if sum > 0.0 {
+    let fine_std = if sum > 0.0 {
         sum.recip().sqrt()
     } else {
         f64::INFINITY
+    };
+    let period = 2.0 / (used.0 + used.1);
+    let mut band_note = band_note;
+    let delay_std_s = if envelope_std > period / PEAK_SEPARATION {
+        band_note.push_str(&format!(
+            "; the coherent band is too narrow to tell the correlation's neighbouring peaks \
+             apart (envelope error {:.2} ms against a {:.2} ms period): the delay's error is \
+             the envelope's",
+            envelope_std * 1e3,
+            period * 1e3
+        ));
+        fine_std.hypot(envelope_std)
+    } else {
+        fine_std
     };
     Ok(GccDelay {
         delay_s: coarse / fs + residual,

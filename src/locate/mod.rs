@@ -33,6 +33,11 @@ use network::{Network, SensorPath, SensorSpec};
 
 /// Default correlation band, Hz (the leak band).
 pub const DEFAULT_BAND_HZ: (f64, f64) = (100.0, 800.0);
+/// A coherent band narrower than this (Hz) cannot hold a delay well: with the default band,
+/// its low edge is then lowered.
+pub const MIN_COHERENT_WIDTH_HZ: f64 = 50.0;
+/// The lowest frequency the default band is lowered to, Hz (the fits' curves start at 10 Hz).
+pub const LOW_BAND_FLOOR_HZ: f64 = 10.0;
 /// Default relative error of a span measured along GIS geometry (GIS lengths are good to a few
 /// per cent, physics §11).
 pub const DEFAULT_SPAN_STD_FRACTION: f64 = 0.01;
@@ -349,17 +354,42 @@ impl<'c> Locator<'c> {
                 let probe = DelayModel::new(&grid, &ones, false, &refs, pieces.clone());
                 let (t0, t1) = (probe.delay(0.0), probe.delay(span));
                 let margin = 0.1 * (t0 - t1).abs() + 0.005;
-                let g = gcc_delay(
-                    &rec,
-                    (lo, hi),
-                    self.options.weighting,
-                    (t1 - margin, t0 + margin),
-                )
-                .map_err(|e| LocateError::Recording(format!("job {}: {e}", job.id)))?;
-                band_note = if (lo, hi) == requested {
-                    g.band_note.clone()
-                } else {
-                    format!("{band_note}; then {}", g.band_note)
+                let search = (t1 - margin, t0 + margin);
+                let mut g = gcc_delay(&rec, (lo, hi), self.options.weighting, search);
+                // The default band is the metal pipes' leak band; plastic pipes carry leak
+                // noise mostly below it. When the default band holds (almost) no coherence,
+                // lower its edge to where the curves start, and say so.
+                let default_band = job.band_hz.is_none() && requested == DEFAULT_BAND_HZ;
+                let narrow = g.as_ref().map_or(true, |d| {
+                    d.band_used_hz.1 - d.band_used_hz.0 < MIN_COHERENT_WIDTH_HZ
+                });
+                let floor = curves
+                    .iter()
+                    .map(|c| c.range_hz().0)
+                    .fold(LOW_BAND_FLOOR_HZ, f64::max);
+                let mut widened = None;
+                if default_band && narrow && floor < lo {
+                    if let Ok(d) = gcc_delay(&rec, (floor, hi), self.options.weighting, search) {
+                        let was = match &g {
+                            Ok(d) => format!(
+                                "coherent only in {:.0}–{:.0} Hz",
+                                d.band_used_hz.0, d.band_used_hz.1
+                            ),
+                            Err(_) => "not coherent".to_string(),
+                        };
+                        widened = Some(format!(
+                            "{}–{} Hz (the default) was {was}, so its low edge was lowered to \
+                             {floor:.0} Hz (leak noise in plastic pipes lies mostly below \
+                             100 Hz)",
+                            requested.0, requested.1
+                        ));
+                        g = Ok(d);
+                    }
+                }
+                let g = g.map_err(|e| LocateError::Recording(format!("job {}: {e}", job.id)))?;
+                band_note = match widened {
+                    Some(w) => format!("{w}; {}", g.band_note),
+                    None => format!("{band_note}; {}", g.band_note),
                 };
                 band_note = format!(
                     "{band_note}; {} weighting",

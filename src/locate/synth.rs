@@ -35,6 +35,9 @@ pub const DEFAULT_LEAK_SAMPLE_RATE: u32 = 8000;
 pub const DEFAULT_LEAK_NOISE_FRACTION: f64 = 0.3;
 /// Shortest and longest span of a synthetic leak path, m.
 pub const LEAK_SPAN_M: (f64, f64) = (40.0, 400.0);
+/// Longest stretch of plastic pipe on a path of [`write_leaks`], m: plastics attenuate leak
+/// noise within tens of metres, and correlators are used on plastic spans of 150 m at most.
+pub const MAX_PLASTIC_M: f64 = 150.0;
 /// A synthetic leak lies this fraction of the span or more from either sensor.
 const LEAK_MARGIN_FRACTION: f64 = 0.1;
 
@@ -59,7 +62,7 @@ pub fn leak_recording(
     spec: &LeakSpec,
 ) -> Result<Recording, String> {
     let fs = spec.sample_rate as f64;
-    if pieces.is_empty() || !(spec.seconds > 0.0) || spec.sample_rate < 100 {
+    if pieces.is_empty() || spec.seconds.is_nan() || spec.seconds <= 0.0 || spec.sample_rate < 100 {
         return Err("a leak recording needs a path, a positive length and 100 Hz or more".into());
     }
     let hi = pieces
@@ -283,7 +286,19 @@ pub fn write_leaks(
         .map_err(csv_err)?;
     let mut written = 0;
     for j in 0..count {
-        let Some(case) = draw_case(&net, &mut rng, 4, LEAK_SPAN_M.1, &|_| true) else {
+        // A correlator hears a leak through at most [`MAX_PLASTIC_M`] of plastic pipe.
+        let plastic_m = |c: &LeakCase| -> f64 {
+            c.path
+                .pieces
+                .iter()
+                .filter(|p| network[p.segment].material.is_plastic())
+                .map(|p| p.length_m())
+                .sum()
+        };
+        let Some(case) = (0..100)
+            .filter_map(|_| draw_case(&net, &mut rng, 4, LEAK_SPAN_M.1, &|_| true))
+            .find(|c| plastic_m(c) <= MAX_PLASTIC_M)
+        else {
             break;
         };
         for &s in &case.segments {
@@ -349,3 +364,105 @@ pub fn write_leaks(
 
 /// Stream of the network seed that draws the synthetic leaks.
 const LEAK_SEED_STREAM: u64 = 0x6c65_616b;
+
+/// The job of a synthetic case: the sensors by segment and chainage, its path given explicitly.
+pub fn case_job(
+    net: &Network,
+    case: &LeakCase,
+    id: String,
+    delay: super::DelayInput,
+) -> super::Job {
+    let on = |s: SensorAt| super::network::SensorSpec::OnSegment {
+        segment_id: net.segments[s.segment].id.clone(),
+        chainage_m: s.chainage_m,
+    };
+    super::Job {
+        id,
+        source: std::path::PathBuf::from(LEAK_JOBS_CSV),
+        line: 2,
+        sensor1: on(case.sensor1),
+        sensor2: on(case.sensor2),
+        delay,
+        band_hz: None,
+        path: Some(
+            case.segments
+                .iter()
+                .map(|&s| net.segments[s].id.clone())
+                .collect(),
+        ),
+    }
+}
+
+/// The delay a correlator would measure for a case with the segments' TRUE wavenumbers (P85)
+/// over `band_hz`: a plain correlation of a flat leak spectrum (`path_attenuation`) or a
+/// whitened one. `truths` by segment index.
+pub fn true_delay(
+    case: &LeakCase,
+    truths: &std::collections::HashMap<usize, TruthCurve>,
+    band_hz: (f64, f64),
+    path_attenuation: bool,
+) -> Option<f64> {
+    use super::model::{band_grid, DelayModel, ModelPiece, MODEL_GRID_POINTS};
+    let curves: Vec<SpeedCurve> = case
+        .segments
+        .iter()
+        .map(|s| truths.get(s).and_then(|t| true_curve(t, band_hz)))
+        .collect::<Option<_>>()?;
+    let refs: Vec<&SpeedCurve> = curves.iter().collect();
+    let pieces: Vec<ModelPiece> = case
+        .path
+        .pieces
+        .iter()
+        .map(|p| {
+            Some(ModelPiece {
+                curve: case.segments.iter().position(|&s| s == p.segment)?,
+                length_m: p.length_m(),
+            })
+        })
+        .collect::<Option<_>>()?;
+    let grid = band_grid(band_hz, MODEL_GRID_POINTS);
+    let model = DelayModel::new(
+        &grid,
+        &vec![1.0; grid.len()],
+        path_attenuation,
+        &refs,
+        pieces,
+    );
+    Some(model.delay(case.leak_m))
+}
+
+/// Write a synthetic network into `dir`, import it into `dir/db.sqlite` and calibrate every
+/// segment (the fits see only the inventory and the noisy measurements, never the truth).
+pub fn calibrated_database(
+    dir: &Path,
+    network: &[SynthSegment],
+    opts: &SynthOptions,
+    jobs: usize,
+) -> Result<crate::db::Database, String> {
+    use crate::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
+    NetworkTables::from_synth(network, opts.srid)
+        .write_dir(dir)
+        .map_err(|e| e.to_string())?;
+    let mut database =
+        crate::db::Database::open(dir.join("db.sqlite")).map_err(|e| e.to_string())?;
+    let src = |n: &str| crate::db::ImportSource::from_path(&dir.join(n)).map_err(|e| e.to_string());
+    crate::db::import(
+        database.conn_mut(),
+        Some(&src(SEGMENTS_CSV)?),
+        Some(&src(MEASUREMENTS_CSV)?),
+        crate::db::ImportOptions::default(),
+    )
+    .map_err(|e| e.to_string())?;
+    crate::batch::calibrate(
+        database.conn_mut(),
+        &crate::batch::CalibrateOptions {
+            jobs: Some(jobs.max(1)),
+            seed: opts.seed,
+            ..crate::batch::CalibrateOptions::default()
+        },
+        &mut (),
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(database)
+}

@@ -1,0 +1,318 @@
+//! `pipewave locate --db DB --jobs jobs.csv --out located.csv` or one correlation on the command
+//! line (`--sensor1 ID:CHAINAGE --sensor2 ID:CHAINAGE --delay S --delay-std S`, or
+//! `--recording1 FILE:CH --recording2 FILE:CH`): the leak's position across a path of one or
+//! more segments with its 95 % interval and error budget (physics §11, P84–P87).
+//!
+//! Exit codes: 0 every job located; 1 some jobs failed (each reported on its own row and in
+//! the summary); 2 the command could not run (bad arguments, unusable jobs file or database; a
+//! single correlation that cannot be located).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use pipewave::locate::gcc::RecordingPair;
+use pipewave::locate::jobs::{read_jobs, write_csv, write_geojson, write_gpkg, Answer, RowFailure};
+use pipewave::locate::model::Weighting;
+use pipewave::locate::network::{SensorSpec, DEFAULT_JOIN_TOLERANCE_M, DEFAULT_SNAP_TOLERANCE_M};
+use pipewave::locate::{
+    DelayInput, Job, LocateOptions, Located, Locator, DEFAULT_BAND_HZ, DEFAULT_SPAN_STD_FRACTION,
+};
+
+use super::{open_database, Outcome};
+
+/// Arguments of `locate`.
+#[derive(Debug, Args)]
+pub struct LocateArgs {
+    /// The pipewave database (inventory, fits, predictions).
+    #[arg(long, value_name = "DB")]
+    db: PathBuf,
+    /// A CSV of correlations, one a row (job_id, sensor1_segment, sensor1_chainage_m,
+    /// sensor2_segment, sensor2_chainage_m, then delay_s, delay_std_s or recording1, channel1,
+    /// recording2, channel2; optional band_lo_hz, band_hi_hz, path).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["sensor1", "sensor2", "delay", "recording1"])]
+    jobs: Option<PathBuf>,
+    /// Where to write the answers as CSV.
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Also write the answers as GeoJSON (a point per leak, its 95 % interval as a line).
+    #[arg(long, value_name = "FILE")]
+    geojson: Option<PathBuf>,
+    /// Also write them as two layers of a GeoPackage (added to it if it exists).
+    #[arg(long, value_name = "FILE")]
+    gpkg: Option<PathBuf>,
+    /// Sensor 1: SEGMENT:CHAINAGE (metres along its geometry from the first vertex) or X,Y (map
+    /// coordinates in the network's CRS, snapped to the nearest segment).
+    #[arg(long, value_name = "ID:M | X,Y")]
+    sensor1: Option<String>,
+    /// Sensor 2, as sensor 1.
+    #[arg(long, value_name = "ID:M | X,Y")]
+    sensor2: Option<String>,
+    /// The correlator's delay t(sensor 2) − t(sensor 1), s.
+    #[arg(
+        long,
+        value_name = "S",
+        allow_negative_numbers = true,
+        requires = "delay_std"
+    )]
+    delay: Option<f64>,
+    /// Its standard error, s.
+    #[arg(long, value_name = "S")]
+    delay_std: Option<f64>,
+    /// Sensor 1's recording: FILE or FILE:CHANNEL (WAV, channel from 0).
+    #[arg(
+        long,
+        value_name = "FILE[:CH]",
+        requires = "recording2",
+        conflicts_with = "delay"
+    )]
+    recording1: Option<String>,
+    /// Sensor 2's recording.
+    #[arg(long, value_name = "FILE[:CH]")]
+    recording2: Option<String>,
+    /// The path, segment ids from sensor 1's to sensor 2's (instead of routing).
+    #[arg(long, value_name = "ID,ID,...")]
+    path: Option<String>,
+    /// Correlation band LO,HI in Hz.
+    #[arg(long, value_name = "LO,HI")]
+    band: Option<String>,
+    /// Weighting of the cross-correlation of recordings: phat, scot or plain.
+    #[arg(long, value_name = "NAME", default_value = "scot")]
+    weighting: String,
+    /// How the correlator that measured a given delay weighted it: plain (band-filtered
+    /// cross-correlation), phat or scot.
+    #[arg(long, value_name = "NAME", default_value = "plain")]
+    given_weighting: String,
+    /// Map coordinates farther than this from every segment are off the network, m.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_SNAP_TOLERANCE_M)]
+    snap_tolerance: f64,
+    /// Segment end points closer than this are one junction, m.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_JOIN_TOLERANCE_M)]
+    join_tolerance: f64,
+    /// Relative error of the span measured along the GIS geometry (0 for a measured span).
+    #[arg(long, value_name = "F", default_value_t = DEFAULT_SPAN_STD_FRACTION)]
+    span_std_fraction: f64,
+}
+
+fn sensor(text: &str, name: &str) -> anyhow::Result<SensorSpec> {
+    if let Some((x, y)) = text.split_once(',') {
+        let (x, y) = (x.trim().parse::<f64>(), y.trim().parse::<f64>());
+        if let (Ok(x), Ok(y)) = (x, y) {
+            return Ok(SensorSpec::Map { x, y });
+        }
+    }
+    match text.rsplit_once(':') {
+        Some((id, ch)) if !id.trim().is_empty() => {
+            let c: f64 = ch
+                .trim()
+                .parse()
+                .ok()
+                .filter(|v: &f64| v.is_finite())
+                .with_context(|| {
+                    format!("--{name} '{text}': the chainage '{ch}' is not a number of metres")
+                })?;
+            Ok(SensorSpec::OnSegment {
+                segment_id: id.trim().to_string(),
+                chainage_m: c,
+            })
+        }
+        _ => bail!("--{name} '{text}': expected SEGMENT:CHAINAGE (e.g. WM10231:12.5) or X,Y"),
+    }
+}
+
+fn recording(text: &str) -> anyhow::Result<(PathBuf, u16)> {
+    if let Some((f, c)) = text.rsplit_once(':') {
+        if let Ok(c) = c.parse::<u16>() {
+            return Ok((PathBuf::from(f), c));
+        }
+    }
+    Ok((PathBuf::from(text), 0))
+}
+
+fn parse_band(text: &str) -> anyhow::Result<(f64, f64)> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--band '{text}': expected LO,HI in Hz"))?;
+    match v[..] {
+        [lo, hi] if lo > 0.0 && hi > lo => Ok((lo, hi)),
+        _ => bail!("--band '{text}': expected LO,HI with 0 < LO < HI"),
+    }
+}
+
+/// The one-line answer.
+pub fn summary_line(l: &Located) -> String {
+    format!(
+        "leak at {:.1} m from sensor 1 (95 %: {:.1}–{:.1} m) on {}; table speed would say {:.1} m",
+        l.distance_m, l.lo_m, l.hi_m, l.leak_segment, l.table_distance_m
+    )
+}
+
+fn detail(l: &Located) -> String {
+    let largest = l
+        .budget
+        .first()
+        .map(|t| format!("{} (±{:.2} m)", t.name, t.shift_m.abs()))
+        .unwrap_or_default();
+    format!(
+        "  chainage {:.2} m on {} (span {:.1} m via {}); delay {:.6} s ± {:.2e} s in {:.0}–{:.0} Hz ({}); \
+         largest error: {largest}: {}",
+        l.leak_chainage_m,
+        l.leak_segment,
+        l.span_m,
+        l.path_ids.join(", "),
+        l.delay_s,
+        l.delay_std_s,
+        l.band_used_hz.0,
+        l.band_used_hz.1,
+        l.band_note,
+        l.advice
+    )
+}
+
+/// Locate the correlations and write the answers.
+pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
+    let weighting: Weighting = args.weighting.parse().map_err(anyhow::Error::msg)?;
+    let given_weighting: Weighting = args.given_weighting.parse().map_err(anyhow::Error::msg)?;
+    for (v, name) in [
+        (args.snap_tolerance, "--snap-tolerance"),
+        (args.join_tolerance, "--join-tolerance"),
+        (args.span_std_fraction, "--span-std-fraction"),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{name} {v}: expected a non-negative number");
+        }
+    }
+    let band = match &args.band {
+        Some(b) => parse_band(b)?,
+        None => DEFAULT_BAND_HZ,
+    };
+    let single = args.jobs.is_none();
+    let jobs: Vec<Result<Job, RowFailure>> = match &args.jobs {
+        Some(file) => {
+            if args.out.is_none() {
+                bail!("--jobs needs --out FILE for the answers");
+            }
+            read_jobs(file)?
+        }
+        None => {
+            let (Some(s1), Some(s2)) = (&args.sensor1, &args.sensor2) else {
+                bail!(
+                    "give --jobs FILE --out FILE, or one correlation: --sensor1 ID:M --sensor2 \
+                     ID:M with --delay S --delay-std S or --recording1 FILE:CH --recording2 FILE:CH"
+                );
+            };
+            let delay = match (
+                args.delay,
+                args.delay_std,
+                &args.recording1,
+                &args.recording2,
+            ) {
+                (Some(d), Some(s), None, _) => {
+                    if !(s.is_finite() && s >= 0.0) {
+                        bail!("--delay-std {s}: expected a non-negative number of seconds");
+                    }
+                    DelayInput::Given {
+                        delay_s: d,
+                        std_s: s,
+                    }
+                }
+                (None, _, Some(r1), Some(r2)) => {
+                    let ((file1, channel1), (file2, channel2)) = (recording(r1)?, recording(r2)?);
+                    DelayInput::Recordings(RecordingPair {
+                        file1,
+                        channel1,
+                        file2,
+                        channel2,
+                    })
+                }
+                _ => bail!("give --delay S --delay-std S, or --recording1 and --recording2"),
+            };
+            vec![Ok(Job {
+                id: "1".into(),
+                source: PathBuf::from("the command line"),
+                line: 0,
+                sensor1: sensor(s1, "sensor1")?,
+                sensor2: sensor(s2, "sensor2")?,
+                delay,
+                band_hz: None,
+                path: args
+                    .path
+                    .as_ref()
+                    .map(|p| p.split(',').map(|s| s.trim().to_string()).collect()),
+            })]
+        }
+    };
+    let db = open_database(&args.db)?;
+    let options = LocateOptions {
+        band_hz: band,
+        weighting,
+        given_weighting,
+        snap_tolerance_m: args.snap_tolerance,
+        span_std_fraction: args.span_std_fraction,
+    };
+    let mut locator = Locator::new(db.conn(), options, args.join_tolerance)
+        .with_context(|| format!("cannot read the network of {}", args.db.display()))?;
+    let answers: Vec<Answer> = jobs
+        .into_iter()
+        .map(|j| match j {
+            Err(f) => Err(f),
+            Ok(job) => locator.locate(&job).map_err(|e| RowFailure {
+                job_id: job.id.clone(),
+                message: if single {
+                    e.to_string()
+                } else {
+                    format!("{} line {}: {e}", job.source.display(), job.line)
+                },
+            }),
+        })
+        .collect();
+    if single {
+        match &answers[0] {
+            Ok(l) => {
+                println!("{}", summary_line(l));
+                println!("{}", detail(l));
+                for n in &l.notes {
+                    println!("  note: {n}");
+                }
+            }
+            Err(f) => bail!("{}", f.message),
+        }
+    }
+    if let Some(out) = &args.out {
+        write_csv(out, &answers).map_err(anyhow::Error::msg)?;
+    }
+    let srid = locator.network.srid;
+    let mut warnings = Vec::new();
+    if let Some(p) = &args.geojson {
+        warnings.extend(write_geojson(p, &answers, srid).map_err(anyhow::Error::msg)?);
+    }
+    if let Some(p) = &args.gpkg {
+        warnings.extend(write_gpkg(p, &answers, srid).map_err(anyhow::Error::msg)?);
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let failed: Vec<&RowFailure> = answers.iter().filter_map(|a| a.as_ref().err()).collect();
+    if !single {
+        for f in &failed {
+            eprintln!("job {}: {}", f.job_id, f.message);
+        }
+        println!(
+            "locate: {} of {} jobs located, {} failed{}",
+            answers.len() - failed.len(),
+            answers.len(),
+            failed.len(),
+            args.out
+                .as_ref()
+                .map(|o| format!("; answers in {}", o.display()))
+                .unwrap_or_default()
+        );
+    }
+    Ok(if failed.is_empty() {
+        Outcome::Done
+    } else {
+        Outcome::SomeFailed
+    })
+}
