@@ -337,10 +337,11 @@ pub fn write_csv(
                 .or_else(|| units_sentence(id, d))
                 .unwrap_or_default(),
             spreadsheet_safe(&record_set_column(d)).as_ref(),
-            &record_set_column(d)
-                .is_empty()
-                .then(String::new)
-                .unwrap_or_else(|| d.record_separation.clone()),
+            if record_set_column(d).is_empty() {
+                ""
+            } else {
+                &d.record_separation
+            },
         ])?;
     }
     w.flush()?;
