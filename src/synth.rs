@@ -485,6 +485,9 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             };
             Some((eff, v))
         });
+        // Drawn for every segment (the same stream whatever the material), applied only where
+        // the material can have it: a plastic wall does not thin.
+        let hidden = hidden.filter(|(eff, _)| eff.applies_to(material));
         if let Some((eff, v)) = hidden {
             sys = eff.apply(&sys, v).expect("hidden effect in range");
         }

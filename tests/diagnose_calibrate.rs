@@ -142,12 +142,13 @@ fn calibrate_with_inventory_error_stores_the_record_the_data_choose() {
     ]);
     let w = latest(&db, "WRONG");
     assert_eq!(w.effects, "inventory_error");
-    // The true record is named, alone or with a grey-iron record of the same stiffness per
-    // length (E_p·h), which the data cannot tell from it.
+    // The true material and diameter are named (DI OD 170 mm), alone or with a grey-iron
+    // record of the same stiffness per length (E_p·h), which the data cannot tell from it. The
+    // wall class is not asserted: the catalogue's K9 (6.0 mm) and K10 (6.5 mm) at DN 150 differ
+    // by 8 % in E_p·h, and the 95 % record set can hold either.
     assert!(
         w.message
-            .starts_with("inventory_error: measured data fit material=")
-            && w.message.contains("material=DI; OD 170 mm; wall 6 mm")
+            .starts_with("inventory_error: measured data fit material=DI; OD 170 mm; wall ")
             && w.message
                 .contains("this fit is made with the record material="),
         "{}",

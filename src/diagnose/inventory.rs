@@ -325,17 +325,28 @@ pub struct RecordFit {
     /// How many candidate records were tried (for the significance level).
     pub tried: usize,
     /// The other records fitted in full that the data do not reject against this one: their χ²
-    /// exceeds its χ² by less than [`record_tie`]. Records of about the same hoop stiffness
+    /// exceeds its χ² by less than [`record_set_threshold`]. Records of about the same hoop stiffness
     /// E_p·h/a (and mass per length) are the usual reason: the wave sees little else.
     pub alternatives: Vec<RecordCandidate>,
     /// The full fits of those alternatives, in the same order.
     pub alternative_fits: Vec<(SegmentData, FitResult)>,
 }
 
-/// The χ² gap within which two records explain the data equally: the χ²₁ quantile at the
-/// level [`super::ALPHA`] at which a record is accepted against the recorded one.
+/// The χ² gap that screening allows before a record is refitted in full (times
+/// [`SCREEN_MARGIN`]): the χ²₁ quantile at the level [`super::ALPHA`] at which a record is
+/// accepted against the recorded one.
 pub fn record_tie() -> f64 {
     super::stats::chi2_isf(super::ALPHA, 1.0)
+}
+
+/// Level of the record set: the records whose χ² is within the χ²₁ quantile at this level of
+/// the best (3.84) form a 95 % likelihood-ratio confidence set for the record (its coverage is
+/// measured by `examples/record_trials.rs`).
+pub const RECORD_SET_LEVEL: f64 = 0.05;
+
+/// The χ² gap within which records explain the data equally ([`RECORD_SET_LEVEL`]).
+pub fn record_set_threshold() -> f64 {
+    super::stats::chi2_isf(RECORD_SET_LEVEL, 1.0)
 }
 
 /// Fit every candidate record of `data` with `settings` (screened by a short fit, the
@@ -405,7 +416,7 @@ pub fn fit_best_record_among(
     let best = fits
         .iter()
         .min_by(|a, b| a.fit.misfit.total_cmp(&b.fit.misfit))?;
-    let tie = record_tie();
+    let tie = record_set_threshold();
     let others: Vec<&RecordFit> = fits
         .iter()
         .filter(|f| f.candidate != best.candidate && f.fit.misfit < best.fit.misfit + tie)

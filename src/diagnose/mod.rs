@@ -679,7 +679,7 @@ fn judge(
 /// explaining, whether or not a physical effect was accepted (a thinner wall class looks like
 /// thinning, a thicker one like a stiffer, lossier wall, another material like either). The
 /// best record is tested like an effect, with the number of records tried in the
-/// significance level. The records within [`inventory::record_tie`] of it form the set the
+/// significance level. The records within [`inventory::record_set_threshold`] of it form the set the
 /// data cannot tell apart (the wave sees mainly the hoop stiffness E_p·h/a), ranked by what the
 /// inventory makes likely, with what would separate them.
 pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {

@@ -71,14 +71,18 @@ pub fn record_sentence(d: &Diagnosis) -> Option<String> {
     }
     let (od, wall) = super::inventory::recorded_size(&d.data);
     let mm = |v: f64| ((v * 10.0).round() / 10.0).to_string();
-    let what = if d.record_set.len() > 1 {
-        format!(
-            "any of {} records ({}; most likely first, by the inventory's materials, sizes and eras)",
-            d.record_set.len(),
-            d.record_set_text()
-        )
-    } else {
-        format!("{} ({})", c.label(), c.change.describe())
+    let what = match d.record_set.split_first() {
+        Some((first, rest)) if !rest.is_empty() => format!(
+            "{} (or equally {}: {} records the data cannot tell apart, most likely first by the \
+             inventory's materials, sizes and eras)",
+            first.candidate.label(),
+            rest.iter()
+                .map(|m| m.candidate.label())
+                .collect::<Vec<_>>()
+                .join(" | "),
+            d.record_set.len()
+        ),
+        _ => format!("{} ({})", c.label(), c.change.describe()),
     };
     let separate = if d.record_separation.is_empty() {
         String::new()
@@ -355,10 +359,11 @@ pub fn write_csv(
                 .or_else(|| units_sentence(id, d))
                 .unwrap_or_default(),
             spreadsheet_safe(&record_set_column(d)).as_ref(),
-            &record_set_column(d)
-                .is_empty()
-                .then(String::new)
-                .unwrap_or_else(|| d.record_separation.clone()),
+            if record_set_column(d).is_empty() {
+                ""
+            } else {
+                &d.record_separation
+            },
         ])?;
     }
     w.flush()?;

@@ -319,11 +319,9 @@ fn convert(
 ) -> Result<(), DiagnoseError> {
     for (id, mix) in &opts.convert_units {
         let d = diags.iter().find(|d| &d.record.segment_id == id);
-        let named = d.and_then(|d| {
-            (d.diagnosis.named == Some(Effect::MeasurementUnits))
-                .then_some(d.diagnosis.units.as_ref().map(|u| u.0))
-                .flatten()
-        });
+        let named = d
+            .filter(|d| d.diagnosis.named == Some(Effect::MeasurementUnits))
+            .and_then(|d| d.diagnosis.units.as_ref().map(|u| u.0));
         let what = match (d, named) {
             (None, _) => "not converted: the segment was not diagnosed".to_string(),
             (Some(_), Some(u)) if u == *mix => {

@@ -9,7 +9,7 @@ use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 use crate::synth::{band_hz, measure, segment_data, sizes, PipeSize, SOILS};
 
-use super::inventory::{DI_K_CLASSES, MM_PER_INCH, SDR_SERIES};
+use super::inventory::MM_PER_INCH;
 
 /// A kind of inventory error (model §8 E8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -107,32 +107,26 @@ pub fn record_error_trial<R: Rng + ?Sized>(rng: &mut R, kind: RecordError) -> Op
             trial(rng, m, (s.od_mm, s.wall_mm), None, (rm, r.od_mm, r.wall_mm))
         }
         RecordError::WallClass => {
+            // Another wall class of the catalogue at the same OD: an SDR of ISO 4427 / EN 1452
+            // for plastics (three trials in four), a K class of ISO 2531 for ductile iron.
             let plastics = [Material::Pvc, Material::Mdpe, Material::Hdpe];
-            if rng.gen_bool(0.75) {
-                let m = plastics[rng.gen_range(0..3)];
-                let s = sizes(m)[rng.gen_range(0..sizes(m).len())];
-                let i = SDR_SERIES
-                    .iter()
-                    .position(|&x| (x - s.od_mm / s.wall_mm).abs() < 1.0)?;
-                let j = if rng.gen_bool(0.5) {
-                    i.checked_sub(1)?
-                } else {
-                    i + 1
-                };
-                let wall = (s.od_mm / *SDR_SERIES.get(j)? * 10.0).round() / 10.0;
-                trial(rng, m, (s.od_mm, wall), None, (m, s.od_mm, s.wall_mm))
+            let m = if rng.gen_bool(0.75) {
+                plastics[rng.gen_range(0..3)]
             } else {
-                let m = Material::DuctileIron;
-                let s = sizes(m)[rng.gen_range(0..sizes(m).len())];
-                let unit = 0.5 + 0.001 * s.dn as f64;
-                let k = if rng.gen_bool(0.5) {
-                    DI_K_CLASSES[1]
-                } else {
-                    DI_K_CLASSES[3]
-                };
-                let wall = (k * unit * 10.0).round() / 10.0;
-                trial(rng, m, (s.od_mm, wall), None, (m, s.od_mm, s.wall_mm))
+                Material::DuctileIron
+            };
+            let s = sizes(m)[rng.gen_range(0..sizes(m).len())];
+            let walls: Vec<f64> = super::catalogue::sizes_of(m)
+                .filter(|(_, z)| {
+                    (z.od_mm - s.od_mm).abs() < 0.5 && (z.wall_mm - s.wall_mm).abs() > 0.05
+                })
+                .map(|(_, z)| z.wall_mm)
+                .collect();
+            if walls.is_empty() {
+                return None;
             }
+            let wall = walls[rng.gen_range(0..walls.len())];
+            trial(rng, m, (s.od_mm, wall), None, (m, s.od_mm, s.wall_mm))
         }
         RecordError::Inches => {
             // Sizes large enough that the number of inches is still a valid pipe in mm.

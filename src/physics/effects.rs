@@ -136,6 +136,45 @@ mod tests {
         );
         assert!(AirContent::with_fraction(0.05).is_err());
     }
+
+    #[test]
+    fn effects_state_the_materials_they_apply_to() {
+        use crate::physics::Material;
+        for m in Material::ALL {
+            // A polymer wall neither thins nor is stiff like iron; iron, steel and cement thin.
+            assert_eq!(Effect::WallThinning.applies_to(m), !m.is_plastic(), "{m:?}");
+            assert_eq!(
+                Effect::ViscoelasticWall.applies_to(m),
+                m.is_plastic(),
+                "{m:?}"
+            );
+            for e in [
+                Effect::SoilDamping,
+                Effect::AirInWater,
+                Effect::PipeLoss,
+                Effect::FullModel,
+                Effect::InventoryError,
+                Effect::MeasurementUnits,
+            ] {
+                assert!(
+                    e.applies_to(m) && e.not_applicable_note(m).is_none(),
+                    "{e} {m:?}"
+                );
+            }
+        }
+        let note = Effect::WallThinning
+            .not_applicable_note(Material::Pvc)
+            .unwrap();
+        assert!(
+            note.starts_with("wall_thinning skipped: PVC walls"),
+            "{note}"
+        );
+        assert!(Effect::MeasurementUnits.is_discrete() && !Effect::PipeLoss.is_discrete());
+        assert_eq!(
+            "measurement_units".parse::<Effect>().unwrap(),
+            Effect::MeasurementUnits
+        );
+    }
 }
 
 /// The effects that extend the model, by their canonical names (docs/interface.md, "Effects").
@@ -247,13 +286,13 @@ impl Effect {
         }
         Some(match self {
             Effect::WallThinning => format!(
-                "{} skipped: a {} wall neither corrodes nor graphitises, so it does not thin \
+                "{} skipped: {} walls neither corrode nor graphitise, so they do not thin \
                  (a thinner wall is a record to check: inventory_error)",
                 self.name(),
                 material.code()
             ),
             _ => format!(
-                "{} skipped: a {} wall has no power-law modulus at leak-noise frequencies",
+                "{} skipped: {} walls have no power-law modulus at leak-noise frequencies",
                 self.name(),
                 material.code()
             ),
