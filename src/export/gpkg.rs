@@ -19,7 +19,7 @@ use std::path::Path;
 use rusqlite::{params, params_from_iter, Connection};
 
 use super::crs::{self, ToCommonCrs};
-use super::record::{Records, Value, PROPERTIES};
+use super::record::{Records, Value};
 use super::style;
 use super::zones::ZonePoints;
 use super::{finish_temp, temp_path, ExportError, Tally};
@@ -377,7 +377,9 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
         .map_err(sql)?;
     }
 
-    let columns: Vec<String> = PROPERTIES
+    let layout = super::numbers::columns();
+    let columns: Vec<String> = layout
+        .properties
         .iter()
         .map(|p| {
             let extra = if p.name == "segment_id" {
@@ -406,11 +408,12 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
     let mut geometry_warnings = Vec::new();
     let mut zones = ZonePoints::default();
     {
-        let names: Vec<String> = PROPERTIES
+        let names: Vec<String> = layout
+            .properties
             .iter()
             .map(|p| format!("\"{}\"", p.name))
             .collect();
-        let marks: Vec<String> = (0..=PROPERTIES.len())
+        let marks: Vec<String> = (0..=layout.properties.len())
             .map(|i| format!("?{}", i + 1))
             .collect();
         let mut ins = tx
@@ -423,7 +426,8 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
         // The R-tree is created after the rows (so its triggers, which need the GIS SQL
         // functions, never fire here); its rows are collected meanwhile (40 bytes a segment).
         let mut index_rows: Vec<(i64, [f64; 4])> = Vec::new();
-        let mut values: Vec<rusqlite::types::Value> = Vec::with_capacity(PROPERTIES.len() + 1);
+        let mut values: Vec<rusqlite::types::Value> =
+            Vec::with_capacity(layout.properties.len() + 1);
         records.for_each(&mut load_warnings, |rec| {
             tally.add(&rec);
             let line = common.line(
@@ -435,7 +439,8 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
             let blob = line.as_ref().map(|l| linestring_blob(srs_id, l));
             values.clear();
             values.push(blob.map_or(rusqlite::types::Value::Null, rusqlite::types::Value::Blob));
-            for p in PROPERTIES {
+            // Full precision always: the GeoPackage is a database.
+            for p in &layout.properties {
                 values.push(match (p.get)(&rec) {
                     Value::Null => rusqlite::types::Value::Null,
                     Value::Text(s) => rusqlite::types::Value::Text(s.to_string()),
