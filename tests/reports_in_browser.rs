@@ -184,8 +184,9 @@ fn the_sample_audit_names_every_segment_to_distrust_and_dashes_wm10052() {
     );
 }
 
-/// The DOM of `page` as headless Chromium builds it (`--dump-dom`).
-fn chromium_dom(page: &Path, profile: &Path) -> String {
+/// Headless Chromium on `page` with the profile `profile` and `extra` arguments; its stdout.
+/// Fails (never skips) when chromium is missing.
+fn chromium(page: &Path, profile: &Path, extra: &[&str]) -> Vec<u8> {
     let url = format!("file://{}", page.canonicalize().unwrap().display());
     let out = Command::new("chromium")
         .args([
@@ -195,9 +196,9 @@ fn chromium_dom(page: &Path, profile: &Path) -> String {
             "--disable-background-networking",
             "--no-first-run",
             &format!("--user-data-dir={}", profile.display()),
-            "--dump-dom",
-            &url,
         ])
+        .args(extra)
+        .arg(&url)
         .output()
         .expect("chromium is needed for this test (Debian: apt-get install chromium)");
     assert!(
@@ -205,7 +206,12 @@ fn chromium_dom(page: &Path, profile: &Path) -> String {
         "chromium failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    String::from_utf8(out.stdout).unwrap()
+    out.stdout
+}
+
+/// The DOM of `page` as headless Chromium builds it (`--dump-dom`).
+fn chromium_dom(page: &Path, profile: &Path) -> String {
+    String::from_utf8(chromium(page, profile, &["--dump-dom"])).unwrap()
 }
 
 /// The values of attribute `name` in a serialized DOM.
@@ -280,32 +286,14 @@ fn every_report_reads_in_a_real_browser() {
     }
     // A screenshot of the audit, as in docs/audit.png.
     let shot = dir.join("audit.png");
-    let url = format!(
-        "file://{}",
-        dir.join("out/report.html")
-            .canonicalize()
-            .unwrap()
-            .display()
-    );
-    let out = Command::new("chromium")
-        .args([
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--no-first-run",
+    chromium(
+        &dir.join("out/report.html"),
+        profile.path(),
+        &[
             "--hide-scrollbars",
-            &format!("--user-data-dir={}", profile.path().display()),
             "--window-size=1200,2600",
             &format!("--screenshot={}", shot.display()),
-            &url,
-        ])
-        .output()
-        .expect("chromium");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
     );
     let png = std::fs::read(&shot).unwrap();
     assert!(
