@@ -510,19 +510,11 @@ impl Distribution {
     }
 }
 
-/// CPU time of the calling thread, ms (`CLOCK_THREAD_CPUTIME_ID`): unlike wall time, not
-/// inflated when other processes share the cores.
+/// CPU time of the calling thread, ms: unlike wall time, not inflated when other processes
+/// share the cores. Portable through the `cpu-time` crate (`CLOCK_THREAD_CPUTIME_ID` on Unix,
+/// `GetThreadTimes` on Windows); NaN where the platform cannot tell.
 pub fn thread_cpu_ms() -> f64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant libc knows.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
-    if rc != 0 {
-        return f64::NAN;
-    }
-    ts.tv_sec as f64 * 1e3 + ts.tv_nsec as f64 * 1e-6
+    cpu_time::ThreadTime::try_now().map_or(f64::NAN, |t| t.as_duration().as_secs_f64() * 1e3)
 }
 
 /// The inversion as pipewave 0.1 ran it, kept selectable so `bench` can time it beside the
@@ -789,6 +781,24 @@ pub fn print_verify(rows: &[VerifyRow]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thread_cpu_time_counts_this_threads_work_not_its_sleep() {
+        let t0 = thread_cpu_ms();
+        assert!(t0.is_finite() && t0 >= 0.0, "{t0}");
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        let slept = thread_cpu_ms() - t0;
+        // Busy work: about 50 ms of arithmetic on any machine of the last decade.
+        let t1 = thread_cpu_ms();
+        let mut x = 1.0f64;
+        for i in 0..20_000_000u64 {
+            x = (x * 1.000_000_1 + (i & 7) as f64).sqrt();
+        }
+        black_box(x);
+        let worked = thread_cpu_ms() - t1;
+        assert!(slept < 50.0, "sleeping 200 ms cost {slept} ms of CPU");
+        assert!(worked > slept, "work {worked} ms, sleep {slept} ms");
+    }
 
     #[test]
     fn quantiles_are_type_7() {

@@ -53,8 +53,12 @@ fn report_has_every_section_and_well_formed_svg() {
             &html[i..i + 60]
         );
     }
-    for attr in ["src=", "href=", "@import", "url("] {
+    for attr in ["src=", "@import", "url("] {
         assert!(!html.contains(attr), "{attr} in the page");
+    }
+    // Links only within the page.
+    for (i, _) in html.match_indices("href=") {
+        assert!(html[i..].starts_with("href=\"#"), "{}", &html[i..i + 40]);
     }
     // Escaped user text.
     assert!(html.contains("A&amp;B&lt;1&gt;"));
@@ -71,7 +75,8 @@ fn report_has_every_section_and_well_formed_svg() {
         parse_xml(s);
     }
     // The maps (speed, relative error): one path per segment with a geometry, each with its
-    // id as tooltip.
+    // id as tooltip (and the casings of distrusted segments, the legend's line samples and
+    // the scale bar, without one).
     let maps: Vec<&&str> = svgs
         .iter()
         .filter(|s| s.contains("class=\"map\""))
@@ -80,8 +85,12 @@ fn report_has_every_section_and_well_formed_svg() {
     let with_geometry = (0..N).filter(|&i| fx::has_geometry(i)).count() + 1;
     for map in &maps {
         let names = parse_xml(map);
-        assert_eq!(names.get("path"), Some(&with_geometry));
+        assert!(
+            names.get("path").is_some_and(|&n| n > with_geometry),
+            "{names:?}"
+        );
         assert_eq!(names.get("title"), Some(&with_geometry));
+        assert_eq!(map.matches("\"><title>").count(), with_geometry);
     }
     // S00000 is fitted ok with a stored speed error.
     assert!(maps[0].contains("<title>S00000: ") && maps[0].contains(" m/s (ok)</title>"));

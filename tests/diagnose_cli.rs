@@ -243,5 +243,5 @@ fn diagnose_needs_a_database_and_names_missing_segments() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("does not exist"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no pipewave database at"));
 }

@@ -11,7 +11,8 @@ use std::process::Command;
 use export_fixture as fx;
 use pipewave::db::wkt::LineString;
 use pipewave::db::{self, curves_for, latest_fits, Database, FitRow, ImportOptions, ImportSource};
-use pipewave::export::{self, ExportError, ExportFormat, PROPERTIES};
+use pipewave::export::numbers::columns;
+use pipewave::export::{self, ExportError, ExportFormat, Precision, PROPERTIES};
 use rusqlite::types::Value as Sql;
 use rusqlite::Connection;
 use tempfile::TempDir;
@@ -279,7 +280,7 @@ fn geopackage_meets_the_standard_and_holds_the_database_values() {
         .collect::<Result<_, _>>()
         .unwrap();
     let mut want_cols = vec!["fid".to_string(), "geom".to_string()];
-    want_cols.extend(PROPERTIES.iter().map(|p| p.name.to_string()));
+    want_cols.extend(columns().properties.iter().map(|p| p.name.to_string()));
     assert_eq!(cols, want_cols);
     let rows: Vec<Vec<Sql>> = g
         .prepare("SELECT * FROM pipe_segments ORDER BY fid")
@@ -356,12 +357,17 @@ fn geopackage_meets_the_standard_and_holds_the_database_values() {
     // The fixture covers unfitted, failed, flagged and geometry-less segments.
     let statuses: BTreeSet<String> = rows
         .iter()
-        .map(
-            |r| match &r[2 + PROPERTIES.iter().position(|p| p.name == "status").unwrap()] {
+        .map(|r| {
+            match &r[2 + columns()
+                .properties
+                .iter()
+                .position(|p| p.name == "status")
+                .unwrap()]
+            {
                 Sql::Text(s) => s.clone(),
                 v => panic!("{v:?}"),
-            },
-        )
+            }
+        })
         .collect();
     assert_eq!(
         statuses,
@@ -462,13 +468,15 @@ fn geopackage_opens_in_gdal_without_warnings() {
     );
 }
 
-/// The QML of a style, checked: well-formed XML whose graduated renderer colours by
-/// `leak_band_speed_m_per_s`. Returns each class as (lower, upper, label).
+/// The QML of a style, checked: well-formed XML whose rule-based renderer colours by
+/// `leak_band_speed_m_per_s` within each kind of segment (trusted, predicted, distrusted).
+/// Returns each class of the trusted kind as (lower, upper, label).
 fn qml_classes(qml: &str) -> Vec<(f64, f64, String)> {
     use quick_xml::events::Event;
     let mut r = quick_xml::Reader::from_str(qml);
     let mut renderer = None;
     let mut classes = Vec::new();
+    let mut kinds = Vec::new();
     let mut depth = 0i64;
     loop {
         let (e, is_start) = match r.read_event() {
@@ -487,23 +495,47 @@ fn qml_classes(qml: &str) -> Vec<(f64, f64, String)> {
             e.attributes()
                 .map(|a| a.expect("attribute"))
                 .find(|a| a.key.as_ref() == name.as_bytes())
-                .map(|a| String::from_utf8(a.value.into_owned()).unwrap())
+                .map(|a| {
+                    String::from_utf8(a.value.into_owned())
+                        .unwrap()
+                        .replace("&quot;", "\"")
+                        .replace("&lt;", "<")
+                        .replace("&gt;", ">")
+                        .replace("&amp;", "&")
+                })
         };
         match e.name().as_ref() {
-            b"renderer-v2" => renderer = Some((attr("type").unwrap(), attr("attr").unwrap())),
-            b"range" => classes.push((
-                attr("lower").unwrap().parse().unwrap(),
-                attr("upper").unwrap().parse().unwrap(),
-                attr("label").unwrap(),
-            )),
+            b"renderer-v2" => renderer = attr("type"),
+            b"rule" => {
+                let key = attr("key").unwrap();
+                let filter = attr("filter").unwrap();
+                if is_start {
+                    kinds.push(key.clone());
+                } else if key.starts_with("trusted-") && !key.ends_with("-none") {
+                    // "leak_band_speed_m_per_s" >= LO AND "leak_band_speed_m_per_s" < HI
+                    let num = |after: &str| -> f64 {
+                        filter[filter.find(after).unwrap() + after.len()..]
+                            .split_whitespace()
+                            .next()
+                            .unwrap()
+                            .parse()
+                            .unwrap()
+                    };
+                    assert!(filter.contains("\"leak_band_speed_m_per_s\""), "{filter}");
+                    let hi = if filter.contains("<=") {
+                        num("<= ")
+                    } else {
+                        num("< ")
+                    };
+                    classes.push((num(">= "), hi, attr("label").unwrap()));
+                }
+            }
             _ => {}
         }
     }
     assert_eq!(depth, 0, "unbalanced elements");
-    assert_eq!(
-        renderer,
-        Some(("graduatedSymbol".into(), "leak_band_speed_m_per_s".into()))
-    );
+    assert_eq!(renderer.as_deref(), Some("RuleRenderer"));
+    assert_eq!(kinds, ["trusted", "predicted", "distrusted"]);
     classes
 }
 
@@ -513,6 +545,8 @@ fn check_classes(classes: &[(f64, f64, String)], database: &Database) {
     for w in classes.windows(2) {
         assert_eq!(w[0].1, w[1].0, "contiguous classes: {classes:?}");
     }
+    // Rules select by the exported status: every flagged segment falls under the distrusted
+    // kind (dashed over a casing), checked on the style's own filter text.
     for (lo, hi, label) in classes {
         assert!(lo < hi);
         assert_eq!(*label, format!("{lo:.0} – {hi:.0} m/s"));
@@ -653,7 +687,9 @@ const SOUTHAMPTON_WGS84: (f64, f64) = (-1.40689879, 50.90506588);
 fn geojson_is_rfc7946_wgs84_lon_lat() {
     let (dir, database) = network(N);
     let out = dir.path().join("net.geojson");
-    let summary = export::write(&database, ExportFormat::GeoJson, &out).unwrap();
+    let summary =
+        export::write_with_precision(&database, ExportFormat::GeoJson, &out, Precision::Full)
+            .unwrap();
     assert!(summary.warnings.is_empty(), "{:?}", summary.warnings);
     let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
     assert_eq!(doc["type"], "FeatureCollection");
@@ -780,16 +816,14 @@ fn geometries_in_other_systems_are_reprojected_into_the_geopackage_system() {
 fn csv_is_a_join_table_keyed_by_segment_id() {
     let (dir, database) = network(N);
     let out = dir.path().join("net.csv");
-    export::write(&database, ExportFormat::Csv, &out).unwrap();
+    export::write_with_precision(&database, ExportFormat::Csv, &out, Precision::Full).unwrap();
     let mut rdr = csv::Reader::from_path(&out).unwrap();
     let headers: Vec<String> = rdr.headers().unwrap().iter().map(String::from).collect();
     assert_eq!(headers[0], "segment_id");
+    let order = &columns().properties;
     assert_eq!(
         headers,
-        PROPERTIES
-            .iter()
-            .map(|p| p.name.to_string())
-            .collect::<Vec<_>>()
+        order.iter().map(|p| p.name.to_string()).collect::<Vec<_>>()
     );
     let exp = expected(&database);
     let mut ids = BTreeSet::new();
@@ -798,7 +832,7 @@ fn csv_is_a_join_table_keyed_by_segment_id() {
         let id = rec[0].to_string();
         assert!(ids.insert(id.clone()), "join key {id} repeated");
         let e = &exp[&id];
-        for (p, cell) in PROPERTIES.iter().zip(rec.iter()) {
+        for (p, cell) in order.iter().zip(rec.iter()) {
             let v = if cell.is_empty() {
                 Sql::Null
             } else {
@@ -1079,7 +1113,10 @@ fn exports_and_audit_read_in_small_pages_equal_one_page() {
     let mut held_warnings = Vec::new();
     let records = export::load_records(&database, &mut held_warnings).unwrap();
     assert_eq!(records.len(), 23);
-    assert_eq!(export::csv::to_bytes(&records).unwrap(), files[0]["p.csv"]);
-    let doc = export::geojson::to_json(&records, &mut Vec::new());
+    assert_eq!(
+        export::csv::to_bytes(&records, Precision::People).unwrap(),
+        files[0]["p.csv"]
+    );
+    let doc = export::geojson::to_json(&records, Precision::People, &mut Vec::new());
     assert_eq!(serde_json::to_vec(&doc).unwrap(), files[0]["p.geojson"]);
 }

@@ -19,6 +19,7 @@
 //! The library prints nothing: progress goes to a [`RunObserver`] the caller supplies, and the
 //! outcome is returned as a [`CalibrateSummary`].
 
+pub mod progress;
 pub mod rows;
 pub mod throughput;
 
@@ -492,6 +493,9 @@ fn locked_run(
         },
     )?;
     summary.run_id = Some(run_id);
+    if opts.force && plan.to_fit > 0 {
+        selection.mark_forced(conn, run_id)?;
+    }
     observer.started(&RunPlan {
         run_id,
         to_fit: plan.to_fit,
@@ -701,6 +705,26 @@ impl<'a> Selection<'a> {
 
     fn page_size(&self) -> usize {
         self.opts.chunk_size.max(1)
+    }
+
+    /// For a forced run: record every segment it is to fit as pending (table `forced_refits`,
+    /// a page at a time), so that if the run stops, the next run fits the rest.
+    fn mark_forced(&self, conn: &mut Connection, run_id: i64) -> Result<(), BatchError> {
+        let mut after: Option<String> = None;
+        loop {
+            let page = db::fit_states_page(conn, after.as_deref(), self.page_size())?;
+            let mut ids = Vec::with_capacity(page.len());
+            for (st, own_effects) in &page {
+                if let Verdict::Fit { .. } = self.judge(st, own_effects)? {
+                    ids.push(st.segment_id.as_str());
+                }
+            }
+            db::mark_forced_refits(conn, run_id, ids)?;
+            if page.len() < self.page_size() {
+                return Ok(());
+            }
+            after = page.last().map(|(st, _)| st.segment_id.clone());
+        }
     }
 }
 

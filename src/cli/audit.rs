@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args;
 use pipewave::report;
 
-use super::export::{open_existing, report as print_summary};
+use super::export::report as print_summary;
 use super::Outcome;
 
 /// Arguments of `audit`.
@@ -21,7 +21,7 @@ pub struct AuditArgs {
 
 /// Write the report.
 pub fn run(args: &AuditArgs) -> anyhow::Result<Outcome> {
-    let database = open_existing(&args.db)?;
+    let database = super::open_database(&args.db)?;
     let summary = report::audit::write(&database, &args.out)?;
     print_summary("the audit report", &args.out, &summary);
     Ok(Outcome::Done)

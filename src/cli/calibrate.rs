@@ -5,11 +5,13 @@
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 use anyhow::Context;
 use clap::builder::PossibleValuesParser;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use pipewave::batch::progress::ProgressLines;
 use pipewave::batch::{
     self, BatchError, CalibrateOptions, CalibrateSummary, RunObserver, RunPlan, SegmentDone,
 };
@@ -21,7 +23,7 @@ use super::Outcome;
 /// Arguments of `calibrate`.
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
-    /// The database (created if it does not exist).
+    /// The pipewave database (it must exist: `pipewave import` creates it).
     #[arg(long, value_name = "DB")]
     db: PathBuf,
     #[command(flatten)]
@@ -182,11 +184,12 @@ fn report(s: &CalibrateSummary) {
     }
 }
 
-/// Progress on stderr: a bar on a terminal, nothing otherwise (the summary line comes at the
-/// end either way).
+/// Progress on stderr: a bar on a terminal; otherwise (a log) a plain line every 10 s or 5 %
+/// of the segments ([`ProgressLines`]). The summary line comes at the end either way.
 struct CliObserver {
     terminal: bool,
     bar: Option<ProgressBar>,
+    lines: Option<(ProgressLines, Instant)>,
     counts: [usize; 3],
 }
 
@@ -195,6 +198,7 @@ impl CliObserver {
         Self {
             terminal,
             bar: None,
+            lines: None,
             counts: [0; 3],
         }
     }
@@ -221,7 +225,15 @@ impl RunObserver for CliObserver {
     }
 
     fn started(&mut self, plan: &RunPlan) {
-        if !self.terminal || plan.to_fit == 0 {
+        if plan.to_fit == 0 {
+            return;
+        }
+        if !self.terminal {
+            eprintln!(
+                "calibrate: fitting {} segments ({} up to date) with {} jobs",
+                plan.to_fit, plan.up_to_date, plan.jobs
+            );
+            self.lines = Some((ProgressLines::new(plan.to_fit), Instant::now()));
             return;
         }
         let bar = ProgressBar::new(plan.to_fit as u64);
@@ -242,6 +254,13 @@ impl RunObserver for CliObserver {
             FitStatus::Failed => 2,
         };
         self.counts[i] += 1;
+        if let Some((lines, start)) = &mut self.lines {
+            let [ok, flagged, failed] = self.counts;
+            let detail = format!("ok {ok} flagged {flagged} failed {failed}");
+            if let Some(line) = lines.line(ok + flagged + failed, start.elapsed(), &detail) {
+                eprintln!("{line}");
+            }
+        }
         if let Some(bar) = &self.bar {
             bar.set_message(format!(
                 "ok {} flagged {} failed {}",

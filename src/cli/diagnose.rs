@@ -48,14 +48,11 @@ pub struct DiagnoseArgs {
     jobs: Option<u32>,
 }
 
+/// Skipped segments listed one line each; the rest are counted.
+const SKIPPED_LISTED: usize = 20;
+
 /// Run the diagnosis and print its summary.
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
-    if !args.db.is_file() {
-        anyhow::bail!(
-            "{} does not exist: diagnose needs a calibrated database (pipewave run DIR, or import and calibrate)",
-            args.db.display()
-        );
-    }
     let candidates = match &args.candidates {
         Some(t) => parse_effects(t).context("--candidates")?,
         None => Effect::ALL.to_vec(),
@@ -93,8 +90,15 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
         convert_units,
     };
     let s = diagnose_database(database.conn_mut(), &opts)?;
-    for (id, why) in &s.skipped {
+    for (id, why) in s.skipped.iter().take(SKIPPED_LISTED) {
         eprintln!("{}: segment {id}: skipped: {why}", args.db.display());
+    }
+    if s.skipped.len() > SKIPPED_LISTED {
+        eprintln!(
+            "{}: {} more segments skipped (the first {SKIPPED_LISTED} are listed above)",
+            args.db.display(),
+            s.skipped.len() - SKIPPED_LISTED
+        );
     }
     println!("{}", s.line());
     for (id, what) in &s.conversions {

@@ -2,17 +2,15 @@
 
 use std::path::PathBuf;
 
-use anyhow::bail;
 use clap::{Args, ValueEnum};
-use pipewave::db::Database;
-use pipewave::export::{self, ExportFormat, ExportSummary};
+use pipewave::export::{self, ExportFormat, ExportSummary, Precision};
 
 use super::Outcome;
 
 /// The formats, as clap values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum FormatArg {
-    /// OGC GeoPackage 1.4, in the segments' own coordinate system.
+    /// OGC GeoPackage 1.2, in the segments' own coordinate system.
     Gpkg,
     /// RFC 7946 GeoJSON, WGS 84 longitude/latitude.
     Geojson,
@@ -42,18 +40,20 @@ pub struct ExportArgs {
     /// The file to write (replaced if it exists; never a pipewave database).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// Numbers of the CSV and GeoJSON: `people` prints each error to 2 significant digits and
+    /// its value to the same decimal place, other values to 6 significant digits; `full` keeps
+    /// every digit. The GeoPackage (and the database) always keep every digit.
+    #[arg(long, value_enum, default_value = "people")]
+    precision: PrecisionArg,
 }
 
-/// Open an existing database (never create one: an export of nothing helps nobody).
-pub fn open_existing(path: &std::path::Path) -> anyhow::Result<Database> {
-    if !path.exists() {
-        bail!(
-            "no database at {}; run `pipewave import --db {}` first, or check the path",
-            path.display(),
-            path.display()
-        );
-    }
-    Ok(Database::open(path)?)
+/// `--precision`, as clap values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    /// Rounded to the errors (1323.2 ± 1.4).
+    People,
+    /// Every digit (1323.156273100555 ± 1.3588752771777628).
+    Full,
 }
 
 /// Print the warnings on stderr and one summary line on stdout.
@@ -72,9 +72,13 @@ pub fn report(what: &str, out: &std::path::Path, s: &ExportSummary) {
 
 /// Run the export.
 pub fn run(args: &ExportArgs) -> anyhow::Result<Outcome> {
-    let database = open_existing(&args.db)?;
+    let database = super::open_database(&args.db)?;
     let format = ExportFormat::from(args.format);
-    let summary = export::write(&database, format, &args.out)?;
+    let precision = match args.precision {
+        PrecisionArg::People => Precision::People,
+        PrecisionArg::Full => Precision::Full,
+    };
+    let summary = export::write_with_precision(&database, format, &args.out, precision)?;
     report(&format!("the {format} export"), &args.out, &summary);
     Ok(Outcome::Done)
 }

@@ -67,7 +67,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
             .unwrap_or(0)
     ));
     let result = (|| -> anyhow::Result<Outcome> {
-        let mut database = super::open_database(&scratch)?;
+        let mut database = super::create_database(&scratch)?;
         let report = db::import(
             database.conn_mut(),
             Some(&segments),

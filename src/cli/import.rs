@@ -10,11 +10,67 @@ use pipewave::units::escape_controls;
 
 use super::Outcome;
 
+/// The input formats, shown by `pipewave import --help` (and in docs/your-own-data.md, which
+/// says the same at more length). The example files import as they stand.
+const FORMATS: &str = "\
+YOUR OWN DATA
+Two CSV files (comma-separated, UTF-8, one header row). Columns may come in any order; column
+names are matched case-insensitively; columns pipewave does not know are ignored with one note
+(--strict rejects them); --map COLUMN=FIELD names your field for one of pipewave's columns.
+Units are SI unless the column name says otherwise (_mm, _hz).
+
+segments.csv: one row per pipe segment
+  segment_id            required  text, unique: your asset id (GIS FACILITYID)
+  material              required  CI grey cast iron, DI ductile iron, ST steel, PVC (uPVC),
+                                  MDPE, HDPE, AC asbestos cement; also understood, any case:
+                                  Cast Iron, Grey Iron, Ductile Iron, DICL, Steel, MSCL, uPVC,
+                                  PVC-U, PE80 (= MDPE), PE100 (= HDPE), Asbestos Cement, ...
+  outer_diameter_mm     required  outside diameter, mm, > 0
+  wall_thickness_mm     required  wall thickness, mm, > 0 and < outer_diameter_mm / 2
+  soil_density_kg_m3    required  soil bulk density, kg/m3, 1000-2600 (from a soil test; not
+                                  fitted; most soils lie between 1600 and 2200)
+  pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, pipe_loss_factor
+                        optional  override the material's typical values (Pa, -, kg/m3, -)
+  fluid_density_kg_m3, fluid_bulk_modulus_pa
+                        optional  default water: 1000 kg/m3, 2.25e9 Pa
+  length_m, soil_type, install_year
+                        optional  informational (m, text, year)
+  soil_zone             optional  text: the soil unit the segment lies in
+  geometry_wkt, srid    optional  LINESTRING (x y, x y, ...) in EPSG:srid (for the maps)
+
+measurements.csv: one row per segment and frequency (field wavenumbers)
+  segment_id            required  must be in the inventory (this file's segments or earlier)
+  frequency_hz          one of    frequency, Hz, > 0
+  omega_rad_s             these   angular frequency, rad/s, > 0 (not both)
+  k_re_rad_per_m        required  real part of the measured wavenumber, rad/m, > 0
+                                  (phase speed = 2 pi f / k_re)
+  attenuation_np_per_m  required  decay rate, Np/m, >= 0 (positive, as in field reports;
+                                  1 Np/m = 8.686 dB/m)
+  k_re_std, attenuation_std
+                        optional  one standard deviation of each, same units (without them
+                                  the fit assumes the noise and chi2/dof is not defined)
+  measured_on, campaign optional  ISO date, text
+
+Example segments.csv:
+  segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,geometry_wkt,srid
+  MAIN-0001,Ductile Iron,118,6,1900,\"LINESTRING (441800 111900, 441920 111900)\",27700
+
+Example measurements.csv:
+  segment_id,frequency_hz,k_re_rad_per_m,attenuation_np_per_m,k_re_std,attenuation_std
+  MAIN-0001,224,1.0519,0.00203,0.0105,0.00011
+  MAIN-0001,360,1.6682,0.00346,0.0168,0.00015
+
+A file with any invalid row imports nothing and lists the bad rows (file, line, column, what
+was expected); --skip-invalid imports the valid rows. Re-importing the same file changes
+nothing. Then: pipewave calibrate --db DB.";
+
 /// Arguments of `import`.
 #[derive(Debug, Args)]
+#[command(after_long_help = FORMATS)]
 #[command(group = clap::ArgGroup::new("files").required(true).multiple(true).args(["segments", "measurements"]))]
 pub struct ImportArgs {
-    /// The database (created if it does not exist).
+    /// The database (created if it does not exist). The columns, units and material codes of
+    /// the files: `pipewave import --help`.
     #[arg(long, value_name = "DB")]
     db: PathBuf,
     /// Inventory of pipe segments: segments.csv, or a GIS layer (GeoPackage .gpkg, GeoJSON
@@ -57,7 +113,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         .as_deref()
         .map(ImportSource::from_path)
         .transpose()?;
-    let mut database = Database::open(&args.db)?;
+    let mut database = super::create_database(&args.db)?;
     let report = db::import(
         database.conn_mut(),
         segments.as_ref(),
@@ -91,14 +147,10 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         );
     }
     if report.rejected {
-        let hint = if report.unusable_file {
-            "a file as a whole is unusable, see above; --skip-invalid does not help with that"
-        } else {
-            "fix the rows above, or use --skip-invalid to import the valid rows"
-        };
         bail!(
-            "import rejected: {n_bad} problem{} found, nothing was written ({hint})",
-            plural(n_bad)
+            "import rejected: {n_bad} problem{} found, nothing was written ({})",
+            plural(n_bad),
+            rejected_hint(&report, "use --skip-invalid to import the valid rows")
         );
     }
     println!("{}", summary(&report));
@@ -109,6 +161,17 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         );
     }
     Ok(Outcome::Done)
+}
+
+/// What to do about a rejected import: a file unusable as a whole (a required column missing,
+/// not a CSV) cannot be helped by skipping rows; bad rows can, as `skip` says.
+pub(super) fn rejected_hint(report: &ImportReport, skip: &str) -> String {
+    if report.unusable_file {
+        "a file as a whole is unusable, see above; --skip-invalid does not help with that"
+            .to_string()
+    } else {
+        format!("fix the rows above, or {skip}")
+    }
 }
 
 /// `COLUMN=FIELD`, COLUMN one of pipewave's columns.

@@ -114,9 +114,21 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
     }
 }
 
-/// Open a database for a command, naming the file in messages that do not already.
+/// Open an existing pipewave database for a command that reads or fits one (every command but
+/// `import` and `run`): a missing file or an empty database is an error (exit 2) and nothing is
+/// created.
 pub(crate) fn open_database(path: &Path) -> anyhow::Result<Database> {
-    match Database::open(path) {
+    named(path, Database::open_existing(path))
+}
+
+/// Open the database at `path` for `import` and `run`, creating and migrating it if needed.
+pub(crate) fn create_database(path: &Path) -> anyhow::Result<Database> {
+    named(path, Database::open(path))
+}
+
+/// Name the file in messages that do not already.
+fn named(path: &Path, opened: Result<Database, DbError>) -> anyhow::Result<Database> {
+    match opened {
         Ok(db) => Ok(db),
         Err(e @ (DbError::Corrupt(_) | DbError::Busy(_) | DbError::Sqlite(_))) => {
             Err(anyhow::Error::new(e))

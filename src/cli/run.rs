@@ -153,7 +153,7 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
         }
         sources.push(ImportSource::from_path(&p)?);
     }
-    let mut database = super::open_database(db_path)?;
+    let mut database = super::create_database(db_path)?;
     let report = db::import(
         database.conn_mut(),
         Some(&sources[0]),
@@ -171,10 +171,13 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
     }
     if report.rejected {
         bail!(
-            "import rejected: {} problem(s) found in {}, nothing was written (fix the rows \
-             above, or import with `pipewave import --skip-invalid`)",
+            "import rejected: {} problem(s) found in {}, nothing was written ({})",
             report.problems,
-            dir.display()
+            dir.display(),
+            super::import::rejected_hint(
+                &report,
+                "import the valid rows with `pipewave import --skip-invalid`"
+            )
         );
     }
     println!("{}", super::import::summary(&report));

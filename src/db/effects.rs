@@ -70,15 +70,20 @@ pub struct FitState {
     pub fit_algorithm_version: Option<i64>,
     /// It has at least one measurement.
     pub has_measurements: bool,
+    /// A `calibrate --force` run was asked to refit it and stopped before it did (table
+    /// `forced_refits`).
+    pub forced: bool,
 }
 
 impl FitState {
     /// Whether the segment needs a (re)fit under settings whose hash is `settings_hash`: it has
     /// measurements and no fit yet, or its latest fit was made from other inputs or settings,
-    /// or by another version of the fitting algorithm.
+    /// or by another version of the fitting algorithm, or a forced run that stopped did not
+    /// reach it.
     pub fn is_stale(&self, settings_hash: &str) -> bool {
         self.has_measurements
-            && (self.fit_inputs_hash.as_deref() != Some(self.inputs_hash.as_str())
+            && (self.forced
+                || self.fit_inputs_hash.as_deref() != Some(self.inputs_hash.as_str())
                 || self.fit_settings_hash.as_deref() != Some(settings_hash)
                 || self.made_by_other_algorithm())
     }
@@ -94,13 +99,14 @@ impl FitState {
 /// The columns of a [`FitState`] (read by [`FitState::from_row`]), over [`FIT_STATE_FROM`].
 pub(crate) const FIT_STATE_COLUMNS: &str = "s.segment_id, s.inputs_hash, f.inputs_hash, \
     f.settings_hash, f.algorithm_version, \
-    EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id)";
+    EXISTS (SELECT 1 FROM measurements m WHERE m.segment_id = s.segment_id), \
+    EXISTS (SELECT 1 FROM forced_refits p WHERE p.segment_id = s.segment_id)";
 /// The tables [`FIT_STATE_COLUMNS`] come from: every segment with its latest fit, if any.
 pub(crate) const FIT_STATE_FROM: &str =
     "segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id";
 
 impl FitState {
-    /// A fit state from the first six columns of `r`, selected as [`FIT_STATE_COLUMNS`].
+    /// A fit state from the first seven columns of `r`, selected as [`FIT_STATE_COLUMNS`].
     pub(crate) fn from_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<Self> {
         Ok(FitState {
             segment_id: r.get(0)?,
@@ -109,8 +115,33 @@ impl FitState {
             fit_settings_hash: r.get(3)?,
             fit_algorithm_version: r.get(4)?,
             has_measurements: r.get(5)?,
+            forced: r.get(6)?,
         })
     }
+}
+
+/// The number of columns [`FitState::from_row`] reads.
+pub(crate) const FIT_STATE_WIDTH: usize = 7;
+
+/// Record that a forced run `run_id` is to refit `segment_ids` (table `forced_refits`): until a
+/// new fit of one is stored, the segment stays stale for every later run.
+pub fn mark_forced_refits<'a>(
+    conn: &mut Connection,
+    run_id: i64,
+    segment_ids: impl IntoIterator<Item = &'a str>,
+) -> Result<(), DbError> {
+    let tx = conn.transaction()?;
+    {
+        let mut ins = tx.prepare_cached(
+            "INSERT INTO forced_refits (segment_id, run_id) VALUES (?1, ?2) \
+             ON CONFLICT(segment_id) DO UPDATE SET run_id = excluded.run_id",
+        )?;
+        for id in segment_ids {
+            ins.execute(params![id, run_id])?;
+        }
+    }
+    tx.commit()?;
+    Ok(())
 }
 
 /// The fit state of every segment, by id.

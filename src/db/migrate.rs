@@ -67,6 +67,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0009_honest_errors.sql",
         sql: include_str!("../../migrations/0009_honest_errors.sql"),
     },
+    Migration {
+        version: 10,
+        name: "0010_forced_refits.sql",
+        sql: include_str!("../../migrations/0010_forced_refits.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.
@@ -77,6 +82,17 @@ pub fn latest_version() -> i64 {
 /// `PRAGMA user_version`.
 pub fn user_version(conn: &Connection) -> rusqlite::Result<i64> {
     conn.query_row("PRAGMA user_version", [], |r| r.get(0))
+}
+
+/// Whether the database has no schema at all: no pipewave version and no table (a new or empty
+/// file, never imported into).
+pub fn is_uninitialised(conn: &Connection) -> rusqlite::Result<bool> {
+    let tables: i64 = conn.query_row(
+        "SELECT count(*) FROM sqlite_master WHERE type = 'table'",
+        [],
+        |r| r.get(0),
+    )?;
+    Ok(user_version(conn)? == 0 && tables == 0)
 }
 
 /// Bring the schema up to date. `path` is only for messages.

@@ -29,7 +29,9 @@ use std::time::Duration;
 
 pub use rusqlite::Connection;
 
-pub use effects::{effects_of, fit_states, segment_effects, set_segment_effects, FitState};
+pub use effects::{
+    effects_of, fit_states, mark_forced_refits, segment_effects, set_segment_effects, FitState,
+};
 pub use import::{
     import, known_columns, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError,
     SourceKind,
@@ -78,6 +80,29 @@ pub enum DbError {
         path.display()
     )]
     NotADatabase {
+        /// The database path.
+        path: PathBuf,
+    },
+    /// A command that reads or fits an existing database was given a path with no file.
+    #[error(
+        "no pipewave database at {}; nothing was created (only `pipewave import` and \
+         `pipewave run` create one): check the --db path, or import first with `pipewave \
+         import --db {} --segments segments.csv --measurements measurements.csv`",
+        path.display(),
+        path.display()
+    )]
+    Missing {
+        /// The database path.
+        path: PathBuf,
+    },
+    /// The file is an SQLite database with no schema at all (an empty file, for instance).
+    #[error(
+        "{} is not a pipewave database (it is empty: nothing was ever imported into it); \
+         import into it first with `pipewave import --db {} ...`, or check the --db path",
+        path.display(),
+        path.display()
+    )]
+    NotInitialised {
         /// The database path.
         path: PathBuf,
     },
@@ -198,13 +223,42 @@ impl Database {
     /// [`DbError::ForeignDatabase`] for another program's database, [`DbError::TooNew`] for a
     /// database of a newer pipewave.
     pub fn open(path: impl AsRef<Path>) -> Result<Database, DbError> {
-        let path = path.as_ref().to_path_buf();
+        Self::open_with(path.as_ref(), true)
+    }
+
+    /// Open an existing pipewave database, as every command but `import` and `run` does: it
+    /// never creates a file. Errors as [`Database::open`], and [`DbError::Missing`] when no
+    /// file is at `path`, [`DbError::NotInitialised`] for a database with no schema at all (an
+    /// empty file). An older pipewave database is migrated as by [`Database::open`].
+    pub fn open_existing(path: impl AsRef<Path>) -> Result<Database, DbError> {
+        Self::open_with(path.as_ref(), false)
+    }
+
+    fn open_with(path: &Path, create: bool) -> Result<Database, DbError> {
+        use rusqlite::OpenFlags;
+        let path = path.to_path_buf();
         if path.is_dir() {
             return Err(DbError::IsDirectory { path });
         }
-        let conn = Connection::open(&path).map_err(|source| DbError::Open {
-            path: path.clone(),
-            source,
+        if !create && !path.exists() {
+            return Err(DbError::Missing { path });
+        }
+        let mut flags = OpenFlags::SQLITE_OPEN_READ_WRITE
+            | OpenFlags::SQLITE_OPEN_URI
+            | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+        if create {
+            flags |= OpenFlags::SQLITE_OPEN_CREATE;
+        }
+        let conn = Connection::open_with_flags(&path, flags).map_err(|source| {
+            match source.sqlite_error_code() {
+                Some(rusqlite::ErrorCode::CannotOpen) if !create && !path.exists() => {
+                    DbError::Missing { path: path.clone() }
+                }
+                _ => DbError::Open {
+                    path: path.clone(),
+                    source,
+                },
+            }
         })?;
         let not_a_db = |e: rusqlite::Error| match e.sqlite_error_code() {
             Some(rusqlite::ErrorCode::NotADatabase) => DbError::NotADatabase { path: path.clone() },
@@ -213,6 +267,9 @@ impl Database {
         conn.busy_timeout(BUSY_TIMEOUT).map_err(not_a_db)?;
         conn.pragma_update(None, "foreign_keys", true)
             .map_err(not_a_db)?;
+        if !create && migrate::is_uninitialised(&conn).map_err(not_a_db)? {
+            return Err(DbError::NotInitialised { path });
+        }
         // journal_mode returns the mode now in force; a file that is not SQLite fails here.
         let _mode: String = conn
             .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))

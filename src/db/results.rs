@@ -453,6 +453,9 @@ pub fn insert_fit_with_curves(
     ))?
     .execute(rusqlite::params_from_iter(values.iter().map(|(_, v)| v)))?;
     let fit_id = tx.last_insert_rowid();
+    // A new fit answers any forced refit still pending for the segment.
+    tx.prepare_cached("DELETE FROM forced_refits WHERE segment_id = ?1")?
+        .execute([&fit.segment_id])?;
     {
         let mut ins = tx.prepare_cached(
             "INSERT INTO curves (segment_id, run_id, frequency_hz, phase_speed_m_per_s, \
@@ -752,7 +755,12 @@ pub fn fit_states_page(
          LEFT JOIN segment_effects e ON e.segment_id = s.segment_id"
     );
     let limit = i64::try_from(limit.max(1)).unwrap_or(i64::MAX);
-    let row = |r: &Row<'_>| Ok((super::FitState::from_row(r)?, r.get(6)?));
+    let row = |r: &Row<'_>| {
+        Ok((
+            super::FitState::from_row(r)?,
+            r.get(super::effects::FIT_STATE_WIDTH)?,
+        ))
+    };
     let rows = match after {
         None => conn
             .prepare_cached(&format!("{select} ORDER BY s.segment_id LIMIT ?1"))?

@@ -182,20 +182,34 @@ pub fn residual_runs(r: &Residuals) -> String {
     }
 }
 
+/// A χ²/dof for the page: 3 significant digits, or "–" where it is not defined (no
+/// measurement standard deviations, or no fit), never `NaN`.
+pub fn chi(v: f64) -> String {
+    if v.is_finite() {
+        sig(v, 3)
+    } else {
+        "–".to_string()
+    }
+}
+
 /// χ²/dof before and after each refitted candidate: `base 38.4; pipe_loss 38.1; …`.
 pub fn candidates_chi2(d: &Diagnosis) -> String {
-    let mut v = vec![format!("base {}", sig(d.chi2_per_dof_before(), 3))];
+    let mut v = vec![format!("base {}", chi(d.chi2_per_dof_before()))];
     for c in &d.candidates {
         if let Some(r) = &c.refit {
             v.push(format!(
                 "{} {}",
                 c.effect.name(),
-                sig(r.fit.chi2_per_dof.unwrap_or(f64::NAN), 3)
+                chi(r.fit.chi2_per_dof.unwrap_or(f64::NAN))
             ));
         }
     }
     v.join("; ")
 }
+
+/// The level below which a χ² p-value is no longer "within the noise" in words: the usual 5 %
+/// (the diagnosis itself acts only below [`super::STRUCTURE_P`]).
+pub const NOISE_P: f64 = 0.05;
 
 /// The ambiguity column: for each indistinguishable effect, why and what would separate it.
 pub fn ambiguity_text(d: &Diagnosis) -> String {
@@ -291,10 +305,20 @@ pub fn evidence(d: &Diagnosis) -> String {
             sig(r.holdout_base, 3),
             sig(r.holdout_ext, 3)
         ),
-        None if !d.structure.structured => format!(
-            "chi2 p = {} (within the noise)",
-            sig(d.structure.p_value, 2)
-        ),
+        None if !d.structure.structured => {
+            let p = d.structure.p_value;
+            if !p.is_finite() {
+                "chi2 p not defined (no misfit statistic)".to_string()
+            } else if p >= NOISE_P {
+                format!("chi2 p = {} (within the noise)", sig(p, 2))
+            } else {
+                format!(
+                    "chi2 p = {} (some misfit, but not below the {} this diagnosis acts on)",
+                    sig(p, 2),
+                    sig(super::STRUCTURE_P, 1)
+                )
+            }
+        }
         None => {
             let best = d
                 .candidates
@@ -306,8 +330,8 @@ pub fn evidence(d: &Diagnosis) -> String {
                     "no candidate passed: best {e} LR {} (p {}), chi2/dof {} -> {}, held-out chi2 {} -> {}",
                     sig(r.lr, 4),
                     sig(r.p_value, 2),
-                    sig(d.chi2_per_dof_before(), 3),
-                    sig(r.fit.chi2_per_dof.unwrap_or(f64::NAN), 3),
+                    chi(d.chi2_per_dof_before()),
+                    chi(r.fit.chi2_per_dof.unwrap_or(f64::NAN)),
                     sig(r.holdout_base, 3),
                     sig(r.holdout_ext, 3)
                 ),
@@ -381,10 +405,43 @@ fn num(v: f64) -> String {
 /// At most this many segments get a detailed section (plot and candidate table).
 pub const MAX_DETAILED: usize = 200;
 
+/// Round tick positions over `[lo, hi]`: steps of 1, 2 or 5 × 10^k, about `n` of them.
+pub fn ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if hi <= lo || !lo.is_finite() || !hi.is_finite() {
+        return vec![lo];
+    }
+    let raw = (hi - lo) / n.max(1) as f64;
+    let k = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * k)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * k);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|i| i as f64 * step).collect()
+}
+
+/// The label of tick `v` of `ticks`: as many decimals as their step needs, `-0` as `0`.
+fn tick_text(v: f64, ticks: &[f64]) -> String {
+    let step = match ticks {
+        [a, b, ..] => b - a,
+        _ => 1.0,
+    };
+    let dec = (-step.log10().floor()).max(0.0) as usize;
+    let t = format!("{v:.dec$}");
+    if t.starts_with('-') && t[1..].bytes().all(|b| b == b'0' || b == b'.') {
+        t[1..].to_string()
+    } else {
+        t
+    }
+}
+
 /// An inline SVG of normalised residuals against frequency: Re k (circles) and attenuation
-/// (squares), before (hollow) and after (filled), with the ±2σ band.
+/// (squares), before (hollow) and after (filled), with the ±2σ band, both axes with ticks and
+/// labels, and a legend.
 pub fn residual_svg(before: &Residuals, after: Option<&Residuals>) -> String {
-    let (w, h, ml, mr, mt, mb) = (520.0, 220.0, 52.0, 12.0, 12.0, 34.0);
+    let (w, h, ml, mr, mt, mb) = (560.0, 250.0, 56.0, 14.0, 30.0, 44.0);
     let all = before
         .re
         .iter()
@@ -410,38 +467,89 @@ pub fn residual_svg(before: &Residuals, after: Option<&Residuals>) -> String {
     };
     let x = |f: f64| ml + (f - f0) / (f1 - f0) * (w - ml - mr);
     let y = |v: f64| mt + (lim - v.clamp(-lim, lim)) / (2.0 * lim) * (h - mt - mb);
+    let (bottom, right) = (h - mb, w - mr);
     let mut s = String::new();
     let _ = write!(
         s,
-        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" role="img"><rect x="{ml}" y="{}" width="{}" height="{}" fill="#eef3f8"/>"##,
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" viewBox="0 0 {w} {h}" role="img" font-family="sans-serif"><rect x="{ml}" y="{:.1}" width="{}" height="{:.1}" fill="#eef3f8"/>"##,
         y(2.0),
         w - ml - mr,
         y(-2.0) - y(2.0)
     );
+    // Axes: the zero line, the frame's left and bottom edges, ticks and their labels.
     let _ = write!(
         s,
-        r##"<line x1="{ml}" x2="{}" y1="{}" y2="{}" stroke="#888"/>"##,
-        w - mr,
-        y(0.0),
+        r##"<line x1="{ml}" x2="{right}" y1="{0:.1}" y2="{0:.1}" stroke="#888"/><path d="M{ml} {mt}V{bottom}H{right}" fill="none" stroke="#333"/>"##,
         y(0.0)
     );
-    for v in [-2.0, 0.0, 2.0] {
+    let y_ticks = ticks(-lim, lim, 6);
+    for &v in &y_ticks {
         let _ = write!(
             s,
-            r##"<text x="{}" y="{}" font-size="10" text-anchor="end">{v}</text>"##,
-            ml - 4.0,
-            y(v) + 3.0
+            r##"<line x1="{x0}" x2="{ml}" y1="{yv:.1}" y2="{yv:.1}" stroke="#333"/><text x="{xt}" y="{yt:.1}" font-size="10" text-anchor="end">{label}</text>"##,
+            x0 = ml - 4.0,
+            yv = y(v),
+            xt = ml - 6.0,
+            yt = y(v) + 3.5,
+            label = tick_text(v, &y_ticks)
+        );
+    }
+    let x_ticks = ticks(f0, f1, 6);
+    for &f in &x_ticks {
+        let _ = write!(
+            s,
+            r##"<line x1="{0:.1}" x2="{0:.1}" y1="{bottom}" y2="{1}" stroke="#333"/><text x="{0:.1}" y="{2}" font-size="10" text-anchor="middle">{3}</text>"##,
+            x(f),
+            bottom + 4.0,
+            bottom + 15.0,
+            tick_text(f, &x_ticks)
         );
     }
     let _ = write!(
         s,
-        r##"<text x="{}" y="{}" font-size="11" text-anchor="middle">frequency (Hz): {} - {}</text><text x="12" y="{}" font-size="11" transform="rotate(-90 12 {})" text-anchor="middle">residual / sigma</text>"##,
-        (ml + w - mr) / 2.0,
-        h - 8.0,
-        sig(fmin, 4),
-        sig(fmax, 4),
-        (mt + h - mb) / 2.0,
-        (mt + h - mb) / 2.0
+        r##"<text x="{}" y="{}" font-size="11" text-anchor="middle">frequency (Hz)</text><text x="13" y="{2}" font-size="11" transform="rotate(-90 13 {2})" text-anchor="middle">residual / σ</text>"##,
+        (ml + right) / 2.0,
+        h - 6.0,
+        (mt + bottom) / 2.0,
+    );
+    // Legend, above the plot: (circle or square, filled, label).
+    let mut items = vec![
+        (true, false, "Re k, before"),
+        (false, false, "attenuation, before"),
+    ];
+    if after.is_some() {
+        items.extend([
+            (true, true, "Re k, after"),
+            (false, true, "attenuation, after"),
+        ]);
+    }
+    let mut lx = ml;
+    for (circle, filled, label) in items {
+        let cx = lx + 3.0;
+        let shape = if circle {
+            format!(
+                r##"<circle cx="{cx:.1}" cy="12" r="4" fill="{}" stroke="#1f77b4"/>"##,
+                if filled { "#1f77b4" } else { "none" }
+            )
+        } else {
+            format!(
+                r##"<rect x="{:.1}" y="8.5" width="7" height="7" fill="{}" stroke="#d62728"/>"##,
+                cx - 3.5,
+                if filled { "#d62728" } else { "none" }
+            )
+        };
+        let _ = write!(
+            s,
+            r##"{shape}<text x="{:.1}" y="16" font-size="10">{label}</text>"##,
+            lx + 10.0
+        );
+        lx += 14.0 + 5.6 * label.chars().count() as f64;
+    }
+    let _ = write!(
+        s,
+        r##"<rect x="{:.1}" y="8" width="12" height="8" fill="#eef3f8" stroke="#ccd"/><text x="{:.1}" y="16" font-size="10">±2σ</text>"##,
+        lx,
+        lx + 15.0
     );
     let mut dots = |r: &Residuals, filled: bool| {
         for ((f, a), b) in r.frequency_hz.iter().zip(&r.re).zip(&r.att) {
@@ -465,6 +573,21 @@ pub fn residual_svg(before: &Residuals, after: Option<&Residuals>) -> String {
     s
 }
 
+/// The fragment id of a segment's details: `s-` and the id with every character outside
+/// `[A-Za-z0-9.-]` written as its code point in hex between two `_`, so any segment id gives a
+/// valid, unique id that needs no escaping in a link.
+pub fn anchor(id: &str) -> String {
+    let mut a = String::from("s-");
+    for c in id.chars() {
+        if c.is_ascii_alphanumeric() || matches!(c, '.' | '-') {
+            a.push(c);
+        } else {
+            let _ = write!(a, "_{:x}_", u32::from(c));
+        }
+    }
+    a
+}
+
 /// Write `diagnosis.html`.
 pub fn write_html(
     path: &Path,
@@ -475,19 +598,33 @@ pub fn write_html(
 ) -> std::io::Result<()> {
     let mut h = String::new();
     h.push_str("<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>pipewave diagnosis</title><style>body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;font-size:13px}th{background:#f0f0f0}.seg{border-top:2px solid #ddd;margin-top:1.5em;padding-top:.5em}.ok{color:#2a7}.none{color:#888}</style></head><body>");
-    h.push_str("<h1>Discrepancy diagnosis</h1><p>For each segment: the residuals of its fit in standard deviations (hollow: before; filled: after adding the named effect; circles: Re k, squares: attenuation; shaded: ±2σ), the misfit before and after (χ² per degree of freedom), the named effect with its value and uncertainty, and the evidence: a likelihood-ratio test that allows for the parameter on its bound, ΔAICc, and the χ² of predicting each frequency held out of the fit. \"none\" means no effect of the library explains the misfit well enough, or there is no misfit to explain.</p>");
+    let detailed: Vec<(&String, &Diagnosis)> = ids
+        .iter()
+        .zip(diags)
+        .filter(|(_, d)| d.structure.structured || d.named.is_some() || diags.len() <= 50)
+        .take(MAX_DETAILED)
+        .collect();
+    let has_detail = |id: &str| detailed.iter().any(|(i, _)| i.as_str() == id);
     let named = diags.iter().filter(|d| d.named.is_some()).count();
     let structured = diags.iter().filter(|d| d.structure.structured).count();
+    h.push_str("<h1>Discrepancy diagnosis</h1>");
     let _ = write!(
         h,
-        "<p>{} segments diagnosed; {structured} with misfit far above the noise; an effect named for {named}.</p>",
-        diags.len()
+        "<p><b>{} segments diagnosed; {structured} with a misfit far above the noise (χ² p \
+         below {}); an effect named for {named}.</b></p>",
+        diags.len(),
+        sig(super::STRUCTURE_P, 1)
     );
     for n in notes {
         let _ = write!(h, "<p>{}</p>", esc(n));
     }
-    h.push_str("<h2>Summary</h2><table><tr><th>segment</th><th>pattern</th><th>named effect</th><th>value ± 1σ</th><th>χ²/dof before</th><th>after</th><th>evidence</th></tr>");
-    for (id, d) in ids.iter().zip(diags) {
+    // Findings first: the segments with something to act on, each linked to its details.
+    let findings: Vec<(&String, &Diagnosis)> = ids
+        .iter()
+        .zip(diags)
+        .filter(|(_, d)| d.structure.structured || d.named.is_some())
+        .collect();
+    let row = |h: &mut String, id: &String, d: &Diagnosis| {
         let val = match value_and_std(d) {
             (v, s) if s.is_empty() => v.parse::<f64>().map(|x| sig(x, 3)).unwrap_or(v),
             (v, s) => format!(
@@ -496,20 +633,35 @@ pub fn write_html(
                 sig(s.parse().unwrap_or(f64::NAN), 2)
             ),
         };
+        let name = if has_detail(id) {
+            format!("<a href=\"#{}\">{}</a>", anchor(id), esc(id))
+        } else {
+            esc(id)
+        };
         let _ = write!(
             h,
-            "<tr><td><a href=\"#s-{0}\">{0}</a></td><td>{1}</td><td class=\"{2}\">{3}</td><td>{4}</td><td>{5}</td><td>{6}</td><td>{7}</td></tr>",
-            esc(id),
+            "<tr><td>{name}</td><td>{}</td><td class=\"{}\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             esc(&d.structure.pattern),
             if d.named.is_some() { "ok" } else { "none" },
             d.named.map(|e| e.name()).unwrap_or("none"),
             val,
-            sig(d.chi2_per_dof_before(), 3),
-            sig(d.chi2_per_dof_after(), 3),
+            chi(d.chi2_per_dof_before()),
+            chi(d.chi2_per_dof_after()),
             esc(&evidence(d))
         );
+    };
+    const HEAD: &str = "<table><tr><th>segment</th><th>pattern</th><th>named effect</th><th>value ± 1σ</th><th>χ²/dof before</th><th>after</th><th>evidence</th></tr>";
+    h.push_str("<h2 id=\"findings\">Findings</h2>");
+    if findings.is_empty() {
+        h.push_str("<p>No segment has a misfit far above the noise: nothing to explain.</p>");
+    } else {
+        h.push_str(HEAD);
+        for (id, d) in &findings {
+            row(&mut h, id, d);
+        }
+        h.push_str("</table>");
     }
-    h.push_str("</table>");
+    h.push_str("<p class=\"how\">How to read this page: for each segment, the residuals of its fit in standard deviations (hollow: before; filled: after adding the named effect; circles: Re k, squares: attenuation; shaded: ±2σ), the misfit before and after as χ² per degree of freedom (χ² divided by the measured numbers minus the fitted parameters: about 1 when the model explains the data within their noise; \"–\" where the measurements state no standard deviations), the named effect with its value and uncertainty, and the evidence: a likelihood-ratio test that allows for the parameter on its bound, ΔAICc, and the χ² of predicting each frequency held out of the fit. \"none\" means no effect of the library explains the misfit well enough, or there is no misfit to explain.</p>");
     if !groups.is_empty() {
         let _ = write!(
             h,
@@ -537,14 +689,25 @@ pub fn write_html(
         }
         h.push_str("</table>");
     }
-    // Detail for the segments that have something to show, at most MAX_DETAILED of them, so
-    // that the page stays readable for a whole network.
-    let detailed: Vec<(&String, &Diagnosis)> = ids
+    // Every segment, findings first, folded away: the page leads with what to act on.
+    let _ = write!(
+        h,
+        "<details><summary>All {} segments diagnosed</summary>{HEAD}",
+        diags.len()
+    );
+    for (id, d) in &findings {
+        row(&mut h, id, d);
+    }
+    for (id, d) in ids
         .iter()
         .zip(diags)
-        .filter(|(_, d)| d.structure.structured || d.named.is_some() || diags.len() <= 50)
-        .take(MAX_DETAILED)
-        .collect();
+        .filter(|(_, d)| !(d.structure.structured || d.named.is_some()))
+    {
+        row(&mut h, id, d);
+    }
+    h.push_str("</table></details>");
+    // Detail for the segments that have something to show, at most MAX_DETAILED of them, so
+    // that the page stays readable for a whole network.
     let _ = write!(
         h,
         "<h2>Segments</h2><p>Residuals and candidates for {} segments{}.</p>",
@@ -555,8 +718,13 @@ pub fn write_html(
             ""
         }
     );
-    for (id, d) in detailed {
-        let _ = write!(h, "<div class=\"seg\" id=\"s-{0}\"><h3>{0}</h3>", esc(id));
+    for &(id, d) in &detailed {
+        let _ = write!(
+            h,
+            "<div class=\"seg\" id=\"{}\"><h3>{}</h3>",
+            anchor(id),
+            esc(id)
+        );
         if d.assumed_noise {
             h.push_str("<p><em>No measurement standard deviations were stated: 1 % on Re k and 10 % on the attenuation were assumed.</em></p>");
         }
@@ -585,8 +753,7 @@ pub fn write_html(
             let after = c
                 .refit
                 .as_ref()
-                .and_then(|r| r.fit.chi2_per_dof)
-                .map(|v| sig(v, 3))
+                .map(|r| chi(r.fit.chi2_per_dof.unwrap_or(f64::NAN)))
                 .unwrap_or_default();
             let (lr, p, da, ho, acc) = match &c.refit {
                 Some(r) => (
@@ -621,6 +788,47 @@ pub fn write_html(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn anchors_are_plain_and_unique() {
+        assert_eq!(anchor("WM10052"), "s-WM10052");
+        assert_eq!(anchor("A&B <1>"), "s-A_26_B_20__3c_1_3e_");
+        assert_ne!(anchor("a_b"), anchor("a b"));
+        assert!(anchor("é#x")
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"_.-".contains(&b)));
+    }
+
+    #[test]
+    fn ticks_are_round_and_inside() {
+        assert_eq!(
+            ticks(95.0, 1050.0, 6),
+            vec![200.0, 400.0, 600.0, 800.0, 1000.0]
+        );
+        assert_eq!(ticks(-4.4, 4.4, 6), vec![-4.0, -2.0, 0.0, 2.0, 4.0]);
+        assert_eq!(chi(f64::NAN), "–");
+    }
+
+    #[test]
+    fn residual_plots_have_ticks_axis_titles_and_a_legend() {
+        let r = Residuals {
+            frequency_hz: vec![100.0, 300.0, 500.0],
+            re: vec![0.5, -3.0, 1.0],
+            att: vec![2.5, 0.1, -0.4],
+        };
+        let svg = residual_svg(&r, Some(&r));
+        for text in [
+            "frequency (Hz)",
+            "residual / σ",
+            "Re k, before",
+            "attenuation, after",
+            "±2σ",
+            ">300<",
+            ">-2<",
+        ] {
+            assert!(svg.contains(text), "{text} missing: {svg}");
+        }
+    }
 
     #[test]
     fn residual_runs_name_where_and_by_how_much() {

@@ -56,6 +56,19 @@ pub enum DiagnoseError {
     /// The worker threads could not be started.
     #[error("cannot start {0} worker threads")]
     Threads(usize),
+    /// No segment asked for has a fit to diagnose.
+    #[error(
+        "nothing to diagnose: none of the {segments} segment(s) has a usable fit ({unfitted} \
+         never fitted, {failed} whose fit failed); run `pipewave calibrate` on this database first"
+    )]
+    NothingFitted {
+        /// Segments asked for (all of the inventory without `--segment`).
+        segments: usize,
+        /// Of them, never fitted.
+        unfitted: usize,
+        /// Of them, whose latest fit failed.
+        failed: usize,
+    },
     /// The group column is not in the database's inventory.
     #[error("--group-by soil_zone: the inventory in this database has no soil_zone column (import a segments.csv with soil_zone)")]
     NoZones,
@@ -207,6 +220,18 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
                 todo.push((rec, settings, method));
             }
         }
+    }
+    if todo.is_empty() {
+        let unfitted = summary
+            .skipped
+            .iter()
+            .filter(|(id, _)| !fits.contains_key(id))
+            .count();
+        return Err(DiagnoseError::NothingFitted {
+            segments: summary.skipped.len(),
+            unfitted,
+            failed: summary.skipped.len() - unfitted,
+        });
     }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))

@@ -1,6 +1,7 @@
 //! RFC 7946 GeoJSON writer: a FeatureCollection in WGS 84 longitude/latitude (reprojected from
 //! each segment's system), no `crs` member, coordinates rounded to [`COORD_DECIMALS`] decimals,
-//! `"geometry": null` for segments without geometry. Properties as [`PROPERTIES`].
+//! `"geometry": null` for segments without geometry. Properties as [`columns`], numbers as
+//! [`Precision`] says (a rounded number is written as the JSON number of its printed text).
 
 use std::collections::HashMap;
 use std::io::Write as _;
@@ -9,7 +10,8 @@ use std::path::Path;
 use serde_json::{json, Map, Number, Value as Json};
 
 use super::crs::{CrsError, Reprojector, WGS84};
-use super::record::{Records, Value, PROPERTIES};
+use super::numbers::{columns, Cell, Precision};
+use super::record::Records;
 use super::{write_streamed, ExportError, SegmentExport, Tally};
 
 /// Decimals of the written longitudes and latitudes: 1e-7 degree is about 1 cm, as RFC 7946
@@ -21,13 +23,19 @@ fn round_coord(v: f64) -> f64 {
     (v * k).round() / k
 }
 
-/// The JSON value of a property.
-pub(crate) fn json_value(v: Value<'_>) -> Json {
-    match v {
-        Value::Null => Json::Null,
-        Value::Text(s) => Json::String(s.to_string()),
-        Value::Real(x) => Number::from_f64(x).map_or(Json::Null, Json::Number),
-        Value::Integer(i) => Json::Number(i.into()),
+/// The JSON value of a printed cell.
+fn json_cell(c: Cell<'_>) -> Json {
+    match c {
+        Cell::Null => Json::Null,
+        Cell::Text(s) => Json::String(s.to_string()),
+        Cell::Number(n) => match n.parse::<i64>() {
+            Ok(i) if !n.contains(['.', 'e']) => Json::Number(i.into()),
+            _ => n
+                .parse::<f64>()
+                .ok()
+                .and_then(Number::from_f64)
+                .map_or(Json::Null, Json::Number),
+        },
     }
 }
 
@@ -35,7 +43,12 @@ pub(crate) fn json_value(v: Value<'_>) -> Json {
 type Projectors = HashMap<i64, Result<Reprojector, CrsError>>;
 
 /// One record's Feature (its geometry `null`, with a warning, when it cannot be put in WGS 84).
-fn feature(rec: &SegmentExport, projectors: &mut Projectors, warnings: &mut Vec<String>) -> Json {
+fn feature(
+    rec: &SegmentExport,
+    precision: Precision,
+    projectors: &mut Projectors,
+    warnings: &mut Vec<String>,
+) -> Json {
     let geometry = match (&rec.geometry, rec.segment.srid) {
         (Some(line), Some(srid)) => {
             let r = projectors
@@ -76,9 +89,10 @@ fn feature(rec: &SegmentExport, projectors: &mut Projectors, warnings: &mut Vec<
         }
         _ => Json::Null,
     };
-    let mut props = Map::with_capacity(PROPERTIES.len());
-    for p in PROPERTIES {
-        props.insert(p.name.to_string(), json_value((p.get)(rec)));
+    let layout = columns();
+    let mut props = Map::with_capacity(layout.properties.len());
+    for (p, c) in layout.properties.iter().zip(layout.cells(rec, precision)) {
+        props.insert(p.name.to_string(), json_cell(c));
     }
     json!({
         "type": "Feature",
@@ -88,12 +102,16 @@ fn feature(rec: &SegmentExport, projectors: &mut Projectors, warnings: &mut Vec<
     })
 }
 
-/// The whole document.
-pub fn to_json(records: &[SegmentExport], warnings: &mut Vec<String>) -> Json {
+/// The whole document, numbers printed at `precision`.
+pub fn to_json(
+    records: &[SegmentExport],
+    precision: Precision,
+    warnings: &mut Vec<String>,
+) -> Json {
     let mut projectors = Projectors::new();
     let features: Vec<Json> = records
         .iter()
-        .map(|rec| feature(rec, &mut projectors, warnings))
+        .map(|rec| feature(rec, precision, &mut projectors, warnings))
         .collect();
     json!({"type": "FeatureCollection", "features": features})
 }
@@ -108,7 +126,11 @@ fn envelope() -> (String, String) {
 }
 
 /// Write the GeoJSON of the records to `out`, each feature as it is read.
-pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportError> {
+pub(crate) fn write(
+    records: &Records<'_>,
+    out: &Path,
+    precision: Precision,
+) -> Result<Tally, ExportError> {
     let io = |source| ExportError::Write {
         path: out.to_path_buf(),
         source,
@@ -121,7 +143,7 @@ pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportEr
         let (head, tail) = envelope();
         w.write_all(head.as_bytes()).map_err(io)?;
         records.for_each(&mut warnings, |rec| {
-            let f = feature(&rec, &mut projectors, &mut own_warnings);
+            let f = feature(&rec, precision, &mut projectors, &mut own_warnings);
             if tally.summary.segments > 0 {
                 w.write_all(b",").map_err(io)?;
             }

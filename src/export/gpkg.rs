@@ -19,7 +19,7 @@ use std::path::Path;
 use rusqlite::{params, params_from_iter, Connection};
 
 use super::crs::{self, ToCommonCrs};
-use super::record::{Records, Value, PROPERTIES};
+use super::record::{Records, Value};
 use super::style;
 use super::zones::ZonePoints;
 use super::{finish_temp, temp_path, ExportError, Tally};
@@ -387,7 +387,9 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
     let mut srs_warnings = Vec::new();
     ensure_srs(&tx, srid, &mut srs_warnings).map_err(sql)?;
 
-    let columns: Vec<String> = PROPERTIES
+    let layout = super::numbers::columns();
+    let columns: Vec<String> = layout
+        .properties
         .iter()
         .map(|p| {
             let extra = if p.name == "segment_id" {
@@ -419,11 +421,12 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
         crate::db::field::plan_picks(records.db().conn()).map_err(ExportError::db(records.db()))?;
     let mut field_layers = super::field::FieldLayers::new(plan);
     {
-        let names: Vec<String> = PROPERTIES
+        let names: Vec<String> = layout
+            .properties
             .iter()
             .map(|p| format!("\"{}\"", p.name))
             .collect();
-        let marks: Vec<String> = (0..=PROPERTIES.len())
+        let marks: Vec<String> = (0..=layout.properties.len())
             .map(|i| format!("?{}", i + 1))
             .collect();
         let mut ins = tx
@@ -436,7 +439,8 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
         // The R-tree is created after the rows (so its triggers, which need the GIS SQL
         // functions, never fire here); its rows are collected meanwhile (40 bytes a segment).
         let mut index_rows: Vec<(i64, [f64; 4])> = Vec::new();
-        let mut values: Vec<rusqlite::types::Value> = Vec::with_capacity(PROPERTIES.len() + 1);
+        let mut values: Vec<rusqlite::types::Value> =
+            Vec::with_capacity(layout.properties.len() + 1);
         records.for_each(&mut load_warnings, |rec| {
             tally.add(&rec);
             let line = common.line(
@@ -448,7 +452,8 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
             let blob = line.as_ref().map(|l| linestring_blob(srs_id, l));
             values.clear();
             values.push(blob.map_or(rusqlite::types::Value::Null, rusqlite::types::Value::Blob));
-            for p in PROPERTIES {
+            // Full precision always: the GeoPackage is a database.
+            for p in &layout.properties {
                 values.push(match (p.get)(&rec) {
                     Value::Null => rusqlite::types::Value::Null,
                     Value::Text(s) => rusqlite::types::Value::Text(s.to_string()),

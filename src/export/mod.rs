@@ -4,6 +4,8 @@
 //! - [`record`]: the per-segment record shared by the three formats and the audit report, read
 //!   from the database a page at a time ([`Records`]), and the list of exported properties
 //!   ([`record::PROPERTIES`]).
+//! - [`numbers`]: the order of the columns and how the CSV and GeoJSON print numbers (rounded
+//!   to their errors for people, or every digit).
 //! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
 //! - [`gpkg`], [`geojson`], [`csv`]: the writers.
 //! - [`spreadsheet`]: the rule every CSV writer follows so a cell never opens as a formula.
@@ -20,6 +22,7 @@ pub mod csv;
 pub mod field;
 pub mod geojson;
 pub mod gpkg;
+pub mod numbers;
 pub mod record;
 pub mod spreadsheet;
 pub mod style;
@@ -31,6 +34,7 @@ use std::str::FromStr;
 
 use crate::db::{Database, DbError};
 
+pub use numbers::Precision;
 pub use record::{load_records, Records, SegmentExport, PAGE_SIZE, PROPERTIES};
 
 /// The output formats of `pipewave export`.
@@ -162,13 +166,24 @@ impl ExportError {
 
 /// Write the export of every segment in `format` to `out_path` (replacing the file if it
 /// exists, unless it is a pipewave database), reading the database [`PAGE_SIZE`] segments at a
-/// time.
+/// time. The CSV and GeoJSON print numbers for people ([`Precision::People`]).
 pub fn write(
     db: &Database,
     format: ExportFormat,
     out_path: &Path,
 ) -> Result<ExportSummary, ExportError> {
     write_paged(db, format, out_path, PAGE_SIZE)
+}
+
+/// [`write`] with the CSV's and GeoJSON's numbers printed at `precision` (the GeoPackage
+/// always keeps every digit).
+pub fn write_with_precision(
+    db: &Database,
+    format: ExportFormat,
+    out_path: &Path,
+    precision: Precision,
+) -> Result<ExportSummary, ExportError> {
+    write_pages(db, format, out_path, PAGE_SIZE, precision)
 }
 
 /// [`write`], reading the database `page_size` segments at a time: the file is the same for
@@ -181,6 +196,16 @@ pub fn write_paged(
     out_path: &Path,
     page_size: usize,
 ) -> Result<ExportSummary, ExportError> {
+    write_pages(db, format, out_path, page_size, Precision::default())
+}
+
+fn write_pages(
+    db: &Database,
+    format: ExportFormat,
+    out_path: &Path,
+    page_size: usize,
+    precision: Precision,
+) -> Result<ExportSummary, ExportError> {
     let suggested = match format {
         ExportFormat::Gpkg => "pipewave.gpkg",
         ExportFormat::GeoJson => "pipewave.geojson",
@@ -191,8 +216,8 @@ pub fn write_paged(
     let _snapshot = records.snapshot()?;
     let tally = match format {
         ExportFormat::Gpkg => gpkg::write(&records, out_path)?,
-        ExportFormat::GeoJson => geojson::write(&records, out_path)?,
-        ExportFormat::Csv => csv::write(&records, out_path)?,
+        ExportFormat::GeoJson => geojson::write(&records, out_path, precision)?,
+        ExportFormat::Csv => csv::write(&records, out_path, precision)?,
     };
     if format != ExportFormat::Gpkg {
         // The default QGIS style beside the file (the GeoPackage holds its own).

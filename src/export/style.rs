@@ -1,11 +1,15 @@
-//! The default QGIS style of the exports: a graduated renderer colouring each segment by its
-//! leak-band speed ([`STYLE_FIELD`]), with a legend in m/s and class breaks taken from the data.
+//! The default QGIS style of the exports: each segment coloured by its leak-band speed
+//! ([`STYLE_FIELD`]), with a legend in m/s and class breaks taken from the data, and drawn as
+//! the audit's maps draw it by how far it can be trusted ([`Trust`]: a flagged or failed
+//! segment dashed over a dark casing, a prediction dotted).
 //!
 //! The same QML document goes into the GeoPackage's `layer_styles` table (QGIS's own layout, see
 //! [`LAYER_STYLES_SQL`]) and, for a GeoJSON or CSV export, into a `.qml` file beside it (QGIS
 //! loads `NAME.qml` as the default style of `NAME.geojson`).
 
 use std::path::{Path, PathBuf};
+
+use crate::report::svg::Trust;
 
 /// The field the style colours by (a property of [`super::PROPERTIES`]).
 pub const STYLE_FIELD: &str = "leak_band_speed_m_per_s";
@@ -114,23 +118,47 @@ fn opt(name: &str, value: &str) -> String {
     format!("<Option type=\"QString\" name=\"{name}\" value=\"{value}\"/>")
 }
 
-/// A line symbol of one colour (QGIS 3 symbol layer `SimpleLine`).
-fn line_symbol(name: &str, colour: (u8, u8, u8)) -> String {
+/// Width of a segment's line, mm.
+const LINE_WIDTH_MM: &str = "0.8";
+/// Width of the dark casing under a distrusted segment, mm (its dashes are drawn over it).
+const CASING_WIDTH_MM: &str = "1.6";
+/// The casing's colour.
+const CASING_COLOUR: (u8, u8, u8) = (17, 17, 17);
+/// Colour of segments without a leak-band speed.
+const NO_VALUE_COLOUR: (u8, u8, u8) = (176, 176, 176);
+
+/// One QGIS 3 `SimpleLine` symbol layer.
+fn simple_line(colour: (u8, u8, u8), style: &str, width_mm: &str) -> String {
     let options = [
         opt("capstyle", "round"),
         opt("joinstyle", "round"),
         opt("line_color", &rgba(colour)),
-        opt("line_style", "solid"),
-        opt("line_width", "0.8"),
+        opt("line_style", style),
+        opt("line_width", width_mm),
         opt("line_width_unit", "MM"),
         opt("offset", "0"),
         opt("offset_unit", "MM"),
     ]
     .concat();
     format!(
-        "<symbol type=\"line\" name=\"{name}\" alpha=\"1\" clip_to_extent=\"1\" force_rhr=\"0\">\
-<layer class=\"SimpleLine\" enabled=\"1\" locked=\"0\" pass=\"0\"><Option type=\"Map\">{options}</Option></layer>\
-</symbol>"
+        "<layer class=\"SimpleLine\" enabled=\"1\" locked=\"0\" pass=\"0\"><Option type=\"Map\">{options}</Option></layer>"
+    )
+}
+
+/// The line symbol of a class colour for one kind of segment ([`Trust`], as the audit's maps
+/// draw it): solid; dotted for a prediction; dashed over a dark casing when distrusted.
+fn line_symbol(name: &str, colour: (u8, u8, u8), trust: Trust) -> String {
+    let layers = match trust {
+        Trust::Trusted => simple_line(colour, "solid", LINE_WIDTH_MM),
+        Trust::Predicted => simple_line(colour, "dot", LINE_WIDTH_MM),
+        Trust::Distrusted => [
+            simple_line(CASING_COLOUR, "solid", CASING_WIDTH_MM),
+            simple_line(colour, "dash", LINE_WIDTH_MM),
+        ]
+        .concat(),
+    };
+    format!(
+        "<symbol type=\"line\" name=\"{name}\" alpha=\"1\" clip_to_extent=\"1\" force_rhr=\"0\">{layers}</symbol>"
     )
 }
 
@@ -139,10 +167,32 @@ fn speed(v: f64) -> String {
     format!("{v:.0}")
 }
 
-/// The QML document (QGIS 3.28 LTR and later): a `graduatedSymbol` renderer on [`STYLE_FIELD`]
-/// with the ranges of [`class_breaks`], labelled `LOW – HIGH m/s`, coloured by
-/// [`CLASS_COLOURS`] (interpolated down to fewer colours when there are fewer classes).
-/// `speeds`: the segments' leak-band speeds, m/s (those they have).
+/// The kinds of segment the style tells apart, with the filter on the exported `status` that
+/// selects each and its legend label.
+const KINDS: [(Trust, &str, &str); 3] = [
+    (
+        Trust::Trusted,
+        "&quot;status&quot; NOT IN ('flagged', 'failed', 'predicted')",
+        "trusted",
+    ),
+    (
+        Trust::Predicted,
+        "&quot;status&quot; = 'predicted'",
+        "predicted, not measured (dotted)",
+    ),
+    (
+        Trust::Distrusted,
+        "&quot;status&quot; IN ('flagged', 'failed')",
+        "flagged or failed: distrust (dashed, outlined)",
+    ),
+];
+
+/// The QML document (QGIS 3.28 LTR and later): a rule-based renderer with one rule per kind of
+/// segment ([`KINDS`]: trusted, predicted, distrusted), each holding one rule per class of
+/// [`STYLE_FIELD`] ([`class_breaks`], labelled `LOW – HIGH m/s`, coloured by [`CLASS_COLOURS`],
+/// interpolated down to fewer colours when there are fewer classes) and one for segments
+/// without a speed (grey). A flagged segment keeps its class colour, dashed over a dark casing,
+/// so it reads as distrusted at any speed. `speeds`: the segments' leak-band speeds, m/s.
 pub fn qml(speeds: impl IntoIterator<Item = f64>) -> String {
     let breaks = class_breaks(speeds);
     let n = breaks.len().saturating_sub(1);
@@ -155,54 +205,57 @@ pub fn qml(speeds: impl IntoIterator<Item = f64>) -> String {
         };
         CLASS_COLOURS[j.min(N_CLASSES - 1)]
     };
-    let mut ranges = String::new();
+    let field = format!("&quot;{STYLE_FIELD}&quot;");
+    let mut rules = String::new();
     let mut symbols = String::new();
-    for i in 0..n {
-        let (lo, hi) = (breaks[i], breaks[i + 1]);
-        ranges.push_str(&format!(
-            "<range lower=\"{lo}\" upper=\"{hi}\" symbol=\"{i}\" label=\"{} – {} m/s\" render=\"true\"/>",
-            speed(lo),
-            speed(hi)
+    let mut k = 0;
+    for (trust, filter, label) in KINDS {
+        rules.push_str(&format!(
+            "<rule key=\"{}\" filter=\"{filter}\" label=\"{label}\">",
+            trust_key(trust)
         ));
-        symbols.push_str(&line_symbol(&i.to_string(), colour(i)));
+        for i in 0..n {
+            let (lo, hi) = (breaks[i], breaks[i + 1]);
+            // The last class is closed above, so the fastest segment is in it.
+            let upper = if i + 1 == n { "&lt;=" } else { "&lt;" };
+            rules.push_str(&format!(
+                "<rule key=\"{}-{i}\" symbol=\"{k}\" filter=\"{field} &gt;= {lo} AND {field} {upper} {hi}\" \
+                 label=\"{} – {} m/s\"/>",
+                trust_key(trust),
+                speed(lo),
+                speed(hi)
+            ));
+            symbols.push_str(&line_symbol(&k.to_string(), colour(i), trust));
+            k += 1;
+        }
+        rules.push_str(&format!(
+            "<rule key=\"{}-none\" symbol=\"{k}\" filter=\"{field} IS NULL\" label=\"no speed\"/></rule>",
+            trust_key(trust)
+        ));
+        symbols.push_str(&line_symbol(&k.to_string(), NO_VALUE_COLOUR, trust));
+        k += 1;
     }
-    let source = line_symbol("0", (128, 128, 128));
-    let (first, last) = (CLASS_COLOURS[0], CLASS_COLOURS[N_CLASSES - 1]);
-    let ramp = [
-        opt("color1", &rgba(first)),
-        opt("color2", &rgba(last)),
-        opt("discrete", "0"),
-        opt("rampType", "gradient"),
-        opt(
-            "stops",
-            &CLASS_COLOURS[1..N_CLASSES - 1]
-                .iter()
-                .enumerate()
-                .map(|(k, &c)| format!("{};{}", (k + 1) as f64 / 4.0, rgba(c)))
-                .collect::<Vec<_>>()
-                .join(":"),
-        ),
-    ]
-    .concat();
     format!(
         "<!DOCTYPE qgis PUBLIC 'http://mrcc.com/qgis.dtd' 'SYSTEM'>\n\
 <qgis version=\"3.28.0-Firenze\" styleCategories=\"Symbology\">\n\
-<renderer-v2 type=\"graduatedSymbol\" attr=\"{STYLE_FIELD}\" graduatedMethod=\"GraduatedColor\" \
-symbollevels=\"0\" enableorderby=\"0\" forceraster=\"0\" referencescale=\"-1\">\n\
-<ranges>{ranges}</ranges>\n\
+<renderer-v2 type=\"RuleRenderer\" symbollevels=\"0\" enableorderby=\"0\" forceraster=\"0\" \
+referencescale=\"-1\">\n\
+<rules key=\"{{pipewave-root}}\">{rules}</rules>\n\
 <symbols>{symbols}</symbols>\n\
-<source-symbol>{source}</source-symbol>\n\
-<colorramp type=\"gradient\" name=\"[source]\"><Option type=\"Map\">{ramp}</Option></colorramp>\n\
-<classificationMethod id=\"Quantile\">\
-<symmetricMode enabled=\"0\" symmetrypoint=\"0\" astride=\"0\"/>\
-<labelFormat format=\"%1 – %2 m/s\" labelprecision=\"0\" trimtrailingzeroes=\"1\"/>\
-<parameters><Option/></parameters><extraInformation/></classificationMethod>\n\
-<rotation/><sizescale/>\n\
 </renderer-v2>\n\
 <legend type=\"default-vector\" showLabelLegend=\"0\"/>\n\
 <layerGeometryType>1</layerGeometryType>\n\
 </qgis>\n"
     )
+}
+
+/// The key of a kind's rule.
+fn trust_key(t: Trust) -> &'static str {
+    match t {
+        Trust::Trusted => "trusted",
+        Trust::Predicted => "predicted",
+        Trust::Distrusted => "distrusted",
+    }
 }
 
 #[cfg(test)]
@@ -249,10 +302,43 @@ mod tests {
     #[test]
     fn qml_names_the_field_and_labels_in_m_per_s() {
         let q = qml(speeds());
-        assert!(q.contains("attr=\"leak_band_speed_m_per_s\""));
-        assert!(q.contains("label=\"400 – 600 m/s\""), "{q}");
-        assert!(q.contains("label=\"1200 – 1400 m/s\""));
-        assert_eq!(q.matches("<range ").count(), 5);
+        assert!(q.contains("type=\"RuleRenderer\""));
+        assert!(
+            q.contains(
+                "filter=\"&quot;leak_band_speed_m_per_s&quot; &gt;= 400 AND \
+             &quot;leak_band_speed_m_per_s&quot; &lt; 600\" label=\"400 – 600 m/s\""
+            ),
+            "{q}"
+        );
+        assert!(q.contains("&lt;= 1400\" label=\"1200 – 1400 m/s\""));
+        // Five classes and "no speed" for each of the three kinds.
+        assert_eq!(q.matches("<symbol ").count(), 18);
         assert!(q.contains("215,25,28,255") && q.contains("43,131,186,255"));
+    }
+
+    #[test]
+    fn flagged_segments_are_dashed_over_a_casing_in_their_class_colour() {
+        let q = qml(speeds());
+        let distrusted = &q[q.find("<rule key=\"distrusted\"").unwrap()..];
+        assert!(distrusted.starts_with(
+            "<rule key=\"distrusted\" filter=\"&quot;status&quot; IN ('flagged', 'failed')\""
+        ));
+        // Its first class rule's symbol: a dark solid casing, then the class colour dashed.
+        let k: usize = distrusted[distrusted.find("symbol=\"").unwrap() + 8..]
+            .split('"')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        let sym = &q[q
+            .find(&format!("<symbol type=\"line\" name=\"{k}\""))
+            .unwrap()..];
+        let sym = &sym[..sym.find("</symbol>").unwrap()];
+        let casing = sym.find("17,17,17,255").unwrap();
+        let dash = sym.find("\"line_style\" value=\"dash\"").unwrap();
+        assert!(casing < dash && sym.contains("215,25,28,255"), "{sym}");
+        // Trusted segments are solid and never match a flagged status.
+        let trusted = &q[q.find("<rule key=\"trusted\"").unwrap()..];
+        assert!(trusted.contains("NOT IN ('flagged', 'failed', 'predicted')"));
     }
 }

@@ -2,7 +2,9 @@
 //! SVG, no script, nothing fetched), leading with what a water utility needs.
 //!
 //! Sections (each a `<section id=...>`), in order: `trust` (how many predictions are
-//! trustworthy, status `ok`, and the flags that need action, each with its advice), `map`
+//! trustworthy, status `ok`, and the flags that need action, each with its advice), `actions`
+//! (every flagged or failed segment with its flags, what to do and its speed ± error, longest
+//! pipe first: what a wrong speed would cost), `map`
 //! (segments coloured by the leak-band wave speed, and a second map of its relative error),
 //! `least-certain` (the segments whose leak-band speed is least certain), `soil-speeds` (the
 //! soil's c_P and c_S by soil type, with errors), `notes` (what the data leave undetermined,
@@ -25,12 +27,13 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
-use super::svg::{self, escape, ColourScale, MapCanvas, MapLine, MapStyle};
+use super::svg::{self, escape, ColourScale, MapCanvas, MapLine, MapStyle, Trust};
 use super::{quantile, sorted_finite};
 use crate::db::wkt::LineString;
 use crate::db::zones::ZoneFitRow;
 use crate::db::{self, Database, FitStatus, RunRow};
 use crate::export::gpkg::CommonGeometry;
+use crate::export::numbers;
 use crate::export::record::UNFITTED;
 use crate::export::{
     check_out_path, crs, write_file_atomically, ExportError, ExportSummary, Records, SegmentExport,
@@ -53,6 +56,9 @@ pub const LEAST_CERTAIN_LISTED: usize = 20;
 const MAP_WIDTH_PX: f64 = 1000.0;
 /// Width of the relative-error map, px (a second, smaller map).
 const ERROR_MAP_WIDTH_PX: f64 = 640.0;
+/// Metres in a degree of latitude (WGS 84 mean, 111.32 km), for the scale bar of a map in
+/// longitude and latitude (the map scales longitude by cos(latitude)).
+const METRES_PER_DEGREE: f64 = 111_320.0;
 
 const CSS: &str = "body{font-family:sans-serif;margin:24px auto;max-width:1100px;color:#222;\
 line-height:1.4}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:4px;\
@@ -183,6 +189,46 @@ struct LeastCertain {
 struct Drawn {
     speed: Option<(f64, Option<f64>)>,
     status: &'static str,
+    trust: Trust,
+}
+
+/// A segment of the action list: flagged or failed, or carrying a flag.
+struct Action {
+    id: String,
+    /// Its length, m (the inventory's, else its geometry's in a projected system).
+    length_m: Option<f64>,
+    material: &'static str,
+    status: &'static str,
+    flags: String,
+    speed: Option<(f64, Option<f64>)>,
+    todo: String,
+}
+
+/// What to do about a segment: the action part of each flag's advice (after its first colon),
+/// once each, or why its fit failed.
+fn todo_of(flags: &str, failed: Option<&str>) -> String {
+    let mut out: Vec<String> = Vec::new();
+    if let Some(msg) = failed {
+        out.push(format!(
+            "no fit ({msg}): check the inventory record and the measurements"
+        ));
+    }
+    for code in codes(flags) {
+        let a = advice(code);
+        let action = a.split_once(": ").map_or(a, |(_, act)| act).to_string();
+        if !out.contains(&action) {
+            out.push(action);
+        }
+    }
+    out.join("; ")
+}
+
+/// The length of a line in a projected system, in its units.
+fn line_length(line: &LineString) -> f64 {
+    line.points
+        .windows(2)
+        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+        .sum()
 }
 
 /// A soil zone of the zone section: its newest estimate and its members' single fits.
@@ -227,6 +273,7 @@ struct Tally {
     common: CommonGeometry,
     bbox: [f64; 4],
     drawn: Vec<Drawn>,
+    actions: Vec<Action>,
 }
 
 impl Tally {
@@ -265,6 +312,7 @@ impl Tally {
                 f64::NEG_INFINITY,
             ],
             drawn: Vec::new(),
+            actions: Vec::new(),
         }
     }
 
@@ -293,6 +341,31 @@ impl Tally {
             self.drawn.push(Drawn {
                 speed: speed_with_std(r),
                 status: r.status(),
+                trust: Trust::of_status(r.status()),
+            });
+        }
+        let flags = r.flags.clone().unwrap_or_default();
+        if matches!(r.status(), "flagged" | "failed") || codes(&flags).next().is_some() {
+            let failed = r
+                .fit
+                .as_ref()
+                .filter(|f| f.status == FitStatus::Failed)
+                .map(|f| f.message.as_deref().unwrap_or("no reason stored"));
+            let length_m = r.segment.length_m.filter(|l| l.is_finite()).or_else(|| {
+                let srid = r.segment.srid?;
+                (!crs::is_geographic(srid))
+                    .then(|| r.geometry.as_ref().map(line_length))
+                    .flatten()
+                    .map(|l| l * metres_per_unit(srid).unwrap_or(1.0))
+            });
+            self.actions.push(Action {
+                id: r.id().to_string(),
+                length_m,
+                material: r.segment.material.code(),
+                status: r.status(),
+                todo: todo_of(&flags, failed),
+                flags,
+                speed: speed_with_std(r),
             });
         }
         if let Some((z, _)) = &r.zone {
@@ -388,6 +461,13 @@ impl Tally {
             v.sort_by(f64::total_cmp);
         }
         self.least_certain.finish();
+        // Longest first: a wrong speed on a long main costs the most excavation; then by id.
+        self.actions.sort_by(|a, b| {
+            b.length_m
+                .unwrap_or(-1.0)
+                .total_cmp(&a.length_m.unwrap_or(-1.0))
+                .then(a.id.cmp(&b.id))
+        });
         self.worst_chi2.finish();
         self.worst_misfit.finish();
     }
@@ -418,13 +498,63 @@ impl Tally {
     }
 }
 
-/// "v ± σ" (or "v" without σ, "–" without a value), m/s-like precision.
+/// "v ± σ" rounded to σ (or "v" in whole units without σ, "–" without a value), with a word
+/// when the error is so large that the value says little ([`error_comment`]).
 fn pm_opt(v: Option<(f64, Option<f64>)>) -> String {
     match v {
-        Some((v, Some(e))) if v.is_finite() && e.is_finite() => format!("{v:.0} ± {}", sig(e, 2)),
+        Some((v, Some(e))) if v.is_finite() && e.is_finite() && e > 0.0 => {
+            // As the exports print it: the error to 2 significant digits, the value to the
+            // same decimal place.
+            let place = numbers::error_place(e);
+            format!(
+                "{} ± {}{}",
+                numbers::fixed(v, place),
+                numbers::fixed(e, place),
+                error_comment(v, e)
+            )
+        }
         Some((v, _)) if v.is_finite() => format!("{v:.0}"),
         _ => "–".to_string(),
     }
+}
+
+/// A relative error above which a value is not determined at all (the error is larger than the
+/// value itself: zero is within one sigma).
+const UNDETERMINED_RSTD: f64 = 1.0;
+/// A relative error above which a value is only a rough indication.
+const ROUGH_RSTD: f64 = 0.3;
+
+/// The reader's comment on a value ± error, in words (empty when the error is moderate).
+pub fn error_comment(v: f64, e: f64) -> &'static str {
+    let rel = e / v.abs();
+    if !rel.is_finite() || rel > UNDETERMINED_RSTD {
+        " (not determined: the error exceeds the value; do not use it)"
+    } else if rel > ROUGH_RSTD {
+        " (rough: the error is over 30 % of the value)"
+    } else {
+        ""
+    }
+}
+
+/// Metres per unit of a projected system's coordinates, from its PROJ definition (`+units=`
+/// or `+to_meter=`; PROJ's default is the metre). `None` for an unknown system.
+fn metres_per_unit(srid: i64) -> Option<f64> {
+    let def = crs::lookup(srid)?;
+    let p = def.proj4;
+    if let Some(k) = p
+        .split_whitespace()
+        .find_map(|t| t.strip_prefix("+to_meter="))
+    {
+        return k.parse().ok();
+    }
+    Some(
+        match p.split_whitespace().find_map(|t| t.strip_prefix("+units=")) {
+            Some("us-ft") => 1200.0 / 3937.0,
+            Some("ft") => 0.3048,
+            Some("km") => 1000.0,
+            _ => 1.0,
+        },
+    )
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -455,6 +585,7 @@ fn render(
         hi = crate::physics::curves::LEAK_BAND_HZ.1,
     );
     trust(&mut h, t);
+    actions(&mut h, t);
     h.push_str(map);
     least_certain(&mut h, t);
     soil_speeds(&mut h, t)?;
@@ -644,6 +775,56 @@ fn trust(h: &mut String, t: &Tally) {
     );
 }
 
+/// The action list: every segment to distrust, longest first, with its flags, what to do and
+/// its speed ± error.
+fn actions(h: &mut String, t: &Tally) {
+    let n = t.actions.len();
+    let _ = write!(
+        h,
+        "<section id=\"actions\"><h2>Action list: the pipes to distrust</h2><p><b>{n} \
+         segment{} to act on</b> (flagged or failed), longest first: a wrong speed on a long pipe \
+         costs the most digging. Until the action is done, do not give their speed to a leak \
+         correlator as if it were known. The flags are explained <a href=\"#flags\">above</a>; \
+         each fit's own reasons are in the exports' <code>flag_reasons</code> column.</p>",
+        if n == 1 { "" } else { "s" }
+    );
+    if n == 0 {
+        h.push_str("<p class=\"note\">No segment is flagged or failed.</p></section>");
+        return;
+    }
+    h.push_str(
+        "<table class=\"actions\"><tr><th>segment</th><th>length (m)</th><th>material</th>\
+         <th>leak-band speed (m/s)</th><th>status</th><th>flags</th><th>what to do</th></tr>",
+    );
+    for a in &t.actions {
+        let _ = write!(
+            h,
+            "<tr><td class=\"segment\">{}</td><td class=\"n\">{}</td><td>{}</td>\
+             <td class=\"n\">{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            escape(&a.id),
+            a.length_m
+                .map_or_else(|| "–".to_string(), |l| format!("{l:.0}")),
+            a.material,
+            escape(&pm_opt(a.speed)),
+            a.status,
+            escape(if a.flags.is_empty() { "–" } else { &a.flags }),
+            escape(&a.todo),
+        );
+    }
+    h.push_str("</table></section>");
+}
+
+/// What the misfit and χ²/dof of a fit are, for the reader.
+const MISFIT_DEFINITION: &str = "<p class=\"note\" id=\"misfit-definition\"><b>misfit</b>: \
+the number each fit makes as small as it can: over the measured frequencies, the differences \
+between measured and modelled wavenumber (its real part and the attenuation), squared and \
+summed; each difference is divided by the measurement's standard deviation when the \
+measurements state one (then the misfit is χ²), or taken relative to the measured value \
+otherwise. <b>χ²/dof</b>: χ² divided by the degrees of freedom (the measured numbers minus the \
+fitted parameters). About 1 when the model explains the data within their stated noise; well \
+above 1 (flag <code>high_misfit</code>) when it does not; not defined when the measurements \
+carry no standard deviations.</p>";
+
 /// Classes of the relative-error map, % (the last class starts at [`SPEED_RSTD_MAX`]).
 fn error_scale() -> ColourScale {
     ColourScale {
@@ -671,9 +852,11 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
         h,
         "<p class=\"note\">{} segments drawn in EPSG:{srid} ({}). First map: the speed to type \
          into a leak correlator, colour classes spanning the 2nd–98th percentiles. Second map: its \
-         one-sigma error as a percentage of the speed; darker is less certain, the darkest class \
-         is above the {:.0} % a trustworthy prediction allows. Grey: no value (not fitted, \
-         failed, a curve that does not cover the band, or no error stored).{}</p>",
+         one-sigma error as a percentage of the speed, blue where small and red where large; the \
+         darkest red is above the {:.0} % a trustworthy prediction allows. On both maps a \
+         flagged or failed segment is dashed over a black casing: distrust its speed (see the \
+         <a href=\"#actions\">action list</a>). Grey: no value (not fitted, failed, a curve \
+         that does not cover the band, or no error stored).{}</p>",
         n,
         escape(name),
         100.0 * SPEED_RSTD_MAX,
@@ -686,19 +869,27 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
     let geographic = crs::is_geographic(srid);
     let speed_values = sorted_finite(t.drawn.iter().filter_map(|d| d.speed.map(|s| s.0)));
     let error_values = sorted_finite(t.drawn.iter().filter_map(relative_error));
+    // Metres of a coordinate unit, for the scale bar (a degree of latitude: 111.32 km).
+    let scale_units = if geographic {
+        Some(METRES_PER_DEGREE)
+    } else {
+        metres_per_unit(srid)
+    };
     let speed_style = MapStyle {
         unit: "m/s",
         decimals: 0,
         scale: None,
-        reversed: false,
+        palette: &svg::VIRIDIS_9,
         width: MAP_WIDTH_PX,
+        metres_per_unit: scale_units,
     };
     let error_style = MapStyle {
         unit: "%",
         decimals: 2,
         scale: Some(error_scale()),
-        reversed: true,
+        palette: &svg::BAD_IS_RED_8,
         width: ERROR_MAP_WIDTH_PX,
+        metres_per_unit: scale_units,
     };
     let mut speed_map = MapCanvas::new(t.bbox, n, &speed_values, geographic, &speed_style);
     let mut error_map = MapCanvas::new(t.bbox, n, &error_values, geographic, &error_style);
@@ -725,6 +916,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
         speed_map.add(&MapLine {
             id: &g.segment_id,
             line: &line,
+            trust: d.trust,
             value: d.speed.map(|s| s.0),
             label: d.speed.filter(|_| tooltips).map(|(v, e)| match e {
                 Some(e) => format!("{v:.0} ± {} m/s ({})", sig(e, 2), d.status),
@@ -734,6 +926,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
         error_map.add(&MapLine {
             id: &g.segment_id,
             line: &line,
+            trust: d.trust,
             value: rel,
             label: rel
                 .filter(|_| tooltips)
@@ -948,7 +1141,17 @@ fn soil_speeds(h: &mut String, t: &Tally) -> Result<(), ChartError> {
                     ""
                 }
             );
-            h.push_str(&charts::soil_speeds(&groups)?);
+            let chart = charts::soil_speeds(&groups)?;
+            if chart.off_axis > 0 {
+                let _ = write!(
+                    h,
+                    "<p class=\"note\">{} segment speed(s) or error bar(s) lie beyond the \
+                     axis (it spans the 1st–99th percentiles of the values): drawn at its edge \
+                     with a black triangle.</p>",
+                    chart.off_axis
+                );
+            }
+            h.push_str(&chart.svg);
         }
     }
     h.push_str("</section>");
@@ -980,6 +1183,7 @@ fn notes(h: &mut String, t: &Tally) {
 
 fn misfit(h: &mut String, t: &Tally) -> Result<(), ChartError> {
     h.push_str("<section id=\"misfit\"><h2>Misfit distribution</h2>");
+    h.push_str(MISFIT_DEFINITION);
     let (name, v) = t.quality();
     if v.iter().any(|x| *x > 0.0) {
         let _ = write!(
@@ -994,12 +1198,18 @@ fn misfit(h: &mut String, t: &Tally) -> Result<(), ChartError> {
         .into_iter()
         .filter_map(|(l, q)| q.map(|q| (l, q)))
         .collect();
-        h.push_str(&charts::log_histogram(
-            "misfit distribution",
-            v,
-            name,
-            &markers,
-        )?);
+        let chart = charts::log_histogram("misfit distribution", v, name, &markers)?;
+        if chart.off_axis > 0 {
+            let _ = write!(
+                h,
+                "<p class=\"note\">{} fit(s) with a {name} below {} of the median (fits \
+                 exact to rounding) are counted in the first bar, so the axis does not \
+                 stretch over empty decades.</p>",
+                chart.off_axis,
+                charts::LOG_HISTOGRAM_FLOOR_OF_MEDIAN
+            );
+        }
+        h.push_str(&chart.svg);
     } else {
         h.push_str("<p class=\"note\">No fitted segment.</p>");
     }
@@ -1045,7 +1255,8 @@ fn worst_fits(
     let _ = write!(
         h,
         "<section id=\"worst-fits\"><h2>The worst fits</h2><p class=\"note\">The {} fitted \
-         segments with the highest {name}: measured points (red) over the fitted curves \
+         segments with the highest {name} (<a href=\"#misfit-definition\">defined above</a>): \
+         measured points (red) with their ± one-sigma error bars over the fitted curves \
          (blue).</p><div class=\"worst\">",
         cands.len()
     );
@@ -1073,13 +1284,27 @@ fn worst_fits(
             })
             .collect();
         let ms = &r.segment.measurements;
-        let m_speed: Vec<(f64, f64)> = ms
+        // Phase speed c = ω / k_re, so σ_c = c σ_k / k_re (first order).
+        let m_speed: Vec<charts::Measured> = ms
             .iter()
-            .map(|m| (m.frequency_hz, m.omega_rad_s / m.k_re_rad_per_m))
+            .map(|m| {
+                let c = m.omega_rad_s / m.k_re_rad_per_m;
+                (
+                    m.frequency_hz,
+                    c,
+                    m.k_re_std.map(|s| c * s / m.k_re_rad_per_m),
+                )
+            })
             .collect();
-        let m_att: Vec<(f64, f64)> = ms
+        let m_att: Vec<charts::Measured> = ms
             .iter()
-            .map(|m| (m.frequency_hz, np_to_db(m.attenuation_np_per_m)))
+            .map(|m| {
+                (
+                    m.frequency_hz,
+                    np_to_db(m.attenuation_np_per_m),
+                    m.attenuation_std.map(np_to_db),
+                )
+            })
             .collect();
         let _ =
             write!(
@@ -1103,20 +1328,27 @@ fn worst_fits(
             pm_opt(fit.soil_s_wave_speed_m_per_s.map(|v| (v, fit.soil_s_wave_speed_std_m_per_s))),
             escape(if fit.notes.is_empty() { "none" } else { &fit.notes }),
         );
-        h.push_str(&charts::curve_with_points(
-            "worst fit: speed",
-            "phase speed",
-            &speed,
-            &m_speed,
-            "m/s",
-        )?);
-        h.push_str(&charts::curve_with_points(
-            "worst fit: attenuation",
-            "attenuation",
-            &att,
-            &m_att,
-            "dB/m",
-        )?);
+        let drawn = [
+            charts::curve_with_points("worst fit: speed", "phase speed", &speed, &m_speed, "m/s")?,
+            charts::curve_with_points(
+                "worst fit: attenuation",
+                "attenuation",
+                &att,
+                &m_att,
+                "dB/m",
+            )?,
+        ];
+        for c in &drawn {
+            h.push_str(&c.svg);
+        }
+        let off: usize = drawn.iter().map(|c| c.off_axis).sum();
+        if off > 0 {
+            let _ = write!(
+                h,
+                "<p class=\"note\">{off} error bar(s) run beyond the axis (ending in a black \
+                 triangle).</p>"
+            );
+        }
         h.push_str("</figure>");
     }
     h.push_str("</div></section>");

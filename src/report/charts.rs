@@ -20,6 +20,16 @@ pub struct ChartError {
     pub message: String,
 }
 
+/// A drawn chart, and how many of its values or error bars lie beyond its axes (drawn at the
+/// edge with a mark, and said in the caption, never dropped silently).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Chart {
+    /// The SVG.
+    pub svg: String,
+    /// Values (or error-bar ends) beyond the axes.
+    pub off_axis: usize,
+}
+
 /// Above this many points a scatter plot becomes a 2-D histogram: 20,000 overlapping dots say
 /// less than a density, and cost ~1.5 MB of SVG.
 pub const SCATTER_LIMIT: usize = 3000;
@@ -73,30 +83,44 @@ fn padded(lo: f64, hi: f64, frac: f64) -> (f64, f64) {
     }
 }
 
-/// Histogram of log10 of positive values, with vertical markers (label, value).
+/// The lowest value a log-axis histogram shows, as a fraction of the median: values far below
+/// it (a fit that is exact to rounding, misfit 1e-15) would otherwise stretch the axis over
+/// decades where nothing is. They are counted in the first bar, which the caption says.
+pub const LOG_HISTOGRAM_FLOOR_OF_MEDIAN: f64 = 1e-3;
+
+/// Histogram of log10 of positive values, with vertical markers (label, value). The axis
+/// starts at the smallest value, or at [`LOG_HISTOGRAM_FLOOR_OF_MEDIAN`] × the median when
+/// values lie below that; [`Chart::off_axis`] counts those, drawn in the first bar.
 pub fn log_histogram(
     chart: &'static str,
     values: &[f64],
     x_desc: &str,
     markers: &[(&str, f64)],
-) -> Result<String, ChartError> {
+) -> Result<Chart, ChartError> {
     const BINS: usize = 40;
-    let logs: Vec<f64> = values
-        .iter()
-        .filter(|v| v.is_finite() && **v > 0.0)
-        .map(|v| v.log10())
-        .collect();
-    let lo = logs.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let logs: Vec<f64> = super::sorted_finite(
+        values
+            .iter()
+            .filter(|v| v.is_finite() && **v > 0.0)
+            .map(|v| v.log10()),
+    );
+    let floor = quantile(&logs, 0.5).map(|m| m + LOG_HISTOGRAM_FLOOR_OF_MEDIAN.log10());
+    let lo = logs.first().copied().unwrap_or(f64::INFINITY);
+    let lo = floor.map_or(lo, |f| lo.max(f));
+    let hi = logs.last().copied().unwrap_or(f64::NEG_INFINITY);
     let (x0, x1) = padded(lo, hi, 0.02);
     let w = (x1 - x0) / BINS as f64;
     let mut counts = [0usize; BINS];
+    let mut below = 0;
     for v in &logs {
-        let i = (((v - x0) / w) as usize).min(BINS - 1);
+        if *v < x0 {
+            below += 1;
+        }
+        let i = ((((v - x0) / w).max(0.0)) as usize).min(BINS - 1);
         counts[i] += 1;
     }
     let ymax = counts.iter().copied().max().unwrap_or(0).max(1) as f64 * 1.1;
-    render(chart, (720, 300), |root| {
+    let svg = render(chart, (720, 300), |root| {
         let mut c = ChartBuilder::on(root)
             .margin(12)
             .x_label_area_size(40)
@@ -125,7 +149,7 @@ pub fn log_histogram(
         )
         .map_err(e2s)?;
         for (k, (label, v)) in markers.iter().enumerate() {
-            if !(v.is_finite() && *v > 0.0) {
+            if !(v.is_finite() && *v > 0.0) || v.log10() < x0 || v.log10() > x1 {
                 continue;
             }
             let colour = CATEGORY_COLOURS[(k + 1) % CATEGORY_COLOURS.len()];
@@ -150,6 +174,10 @@ pub fn log_histogram(
                 .map_err(e2s)?;
         }
         Ok(())
+    })?;
+    Ok(Chart {
+        svg,
+        off_axis: below,
     })
 }
 
@@ -365,8 +393,10 @@ type Pick = fn(&SoilSpeeds) -> &[WithStd];
 
 /// The soils' compressional (blue) and shear (red) speeds, one band per soil type: each
 /// segment's value ± σ as a dot with an error bar (up to [`SCATTER_LIMIT`] segments in all),
-/// and each type's weighted mean ± its error as a black bar.
-pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
+/// and each type's weighted mean ± its error as a black bar. The axis spans the values' 1st to
+/// 99th percentiles: a value beyond is drawn as a triangle at the edge, an error bar beyond
+/// ends in one, and [`Chart::off_axis`] counts both.
+pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<Chart, ChartError> {
     let all: Vec<f64> = groups
         .iter()
         .flat_map(|g| g.c_p.iter().chain(&g.c_s))
@@ -374,16 +404,19 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
         .filter(|v| v.is_finite())
         .collect();
     let sorted = super::sorted_finite(all.iter().copied());
-    // The axis spans the values (1st–99th percentiles), not the error bars, which are clipped.
+    // The axis spans the values (1st–99th percentiles), not the error bars; what lies beyond
+    // is drawn at the edge with a triangle and counted.
     let lo = quantile(&sorted, 0.01).unwrap_or(0.0);
     let hi = quantile(&sorted, 0.99).unwrap_or(1.0);
     let (x0, x1) = padded(lo.min(hi), hi, 0.08);
     let x0 = x0.max(0.0);
     let clip = |v: f64| v.clamp(x0, x1);
+    let beyond = |v: f64| v < x0 || v > x1;
     let n = groups.len().max(1);
     let dots = all.len() <= SCATTER_LIMIT;
+    let off_axis = std::cell::Cell::new(0usize);
     let height = (70 + 60 * n).clamp(180, 1400) as u32;
-    render("soil speeds by soil type", (720, height), |root| {
+    let svg = render("soil speeds by soil type", (720, height), |root| {
         let mut c = ChartBuilder::on(root)
             .margin(12)
             .x_label_area_size(40)
@@ -423,6 +456,7 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
         for (name, colour_i, get, base) in series {
             let colour = CATEGORY_COLOURS[colour_i];
             let mut bars = Vec::new();
+            let mut edges: Vec<(f64, f64)> = Vec::new();
             if dots {
                 for (i, g) in groups.iter().enumerate() {
                     let pts = get(g);
@@ -430,6 +464,19 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
                     for (j, p) in pts.iter().enumerate() {
                         // Spread the dots below the mean so their bars do not overlap.
                         let y = y_of(i) + base - 0.18 * (j as f64 + 0.5) / k;
+                        off_axis.set(
+                            off_axis.get()
+                                + usize::from(
+                                    beyond(p.value)
+                                        || beyond(p.value - p.std)
+                                        || beyond(p.value + p.std),
+                                ),
+                        );
+                        for end in [p.value - p.std, p.value, p.value + p.std] {
+                            if beyond(end) {
+                                edges.push((clip(end), y));
+                            }
+                        }
                         bars.push((
                             clip(p.value),
                             clip(p.value - p.std),
@@ -450,6 +497,12 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
             .map_err(e2s)?
             .label(format!("{name} of a segment ± σ"))
             .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
+            c.draw_series(
+                edges
+                    .iter()
+                    .map(|&p| TriangleMarker::new(p, 5, BLACK.filled())),
+            )
+            .map_err(e2s)?;
             let means: Vec<(f64, WithStd)> = groups
                 .iter()
                 .enumerate()
@@ -487,19 +540,35 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<String, ChartError> {
             .draw()
             .map_err(e2s)?;
         Ok(())
+    })?;
+    Ok(Chart {
+        svg,
+        off_axis: off_axis.get(),
     })
 }
 
-/// A fitted curve (line) with the measured points (dots) over it.
+/// One measured point: frequency, value and its one-sigma error when stated.
+pub type Measured = (f64, f64, Option<f64>);
+
+/// A fitted curve (line) with the measured points (dots) over it, each with its ± σ error bar.
+/// The axis spans the curve and the points, and the error bars up to one such span beyond
+/// them; a bar longer than that ends at the axis in a triangle, counted in
+/// [`Chart::off_axis`].
 pub fn curve_with_points(
     chart: &'static str,
     title: &str,
     fitted: &[(f64, f64)],
-    measured: &[(f64, f64)],
+    measured: &[Measured],
     y_desc: &str,
-) -> Result<String, ChartError> {
-    let xs = fitted.iter().chain(measured).map(|p| p.0);
-    let ys = fitted.iter().chain(measured).map(|p| p.1);
+) -> Result<Chart, ChartError> {
+    let xs = fitted
+        .iter()
+        .map(|p| p.0)
+        .chain(measured.iter().map(|p| p.0));
+    let ys = fitted
+        .iter()
+        .map(|p| p.1)
+        .chain(measured.iter().map(|p| p.1));
     let x1 = xs.fold(f64::NEG_INFINITY, f64::max);
     let (ylo, yhi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
         (a.min(v), b.max(v))
@@ -509,8 +578,34 @@ pub fn curve_with_points(
     } else {
         1.0
     };
-    let (y0, y1) = padded(ylo, yhi, 0.08);
-    render(chart, (360, 240), |root| {
+    let span = (yhi - ylo).max(0.05 * yhi.abs());
+    let (blo, bhi) = measured
+        .iter()
+        .filter_map(|&(_, y, s)| s.filter(|s| s.is_finite()).map(|s| (y - s, y + s)))
+        .fold((ylo, yhi), |(a, b), (l, h)| {
+            (a.min(l.max(ylo - span)), b.max(h.min(yhi + span)))
+        });
+    let (y0, y1) = padded(blo, bhi, 0.08);
+    let mut off_axis = 0;
+    let mut bars = Vec::new();
+    let mut edges = Vec::new();
+    for &(x, y, s) in measured {
+        let Some(s) = s.filter(|s| s.is_finite() && *s > 0.0) else {
+            continue;
+        };
+        let (l, h) = (y - s, y + s);
+        if l < y0 || h > y1 {
+            off_axis += 1;
+        }
+        if l < y0 {
+            edges.push((x, y0));
+        }
+        if h > y1 {
+            edges.push((x, y1));
+        }
+        bars.push((x, l.max(y0), h.min(y1)));
+    }
+    let svg = render(chart, (360, 240), |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
             .caption(title, (FONT, 13))
@@ -534,14 +629,25 @@ pub fn curve_with_points(
             CATEGORY_COLOURS[0].stroke_width(2),
         ))
         .map_err(e2s)?;
+        c.draw_series(bars.iter().map(|&(x, l, h)| {
+            PathElement::new(vec![(x, l), (x, h)], CATEGORY_COLOURS[1].stroke_width(1))
+        }))
+        .map_err(e2s)?;
         c.draw_series(
             measured
                 .iter()
-                .map(|&p| Circle::new(p, 3, CATEGORY_COLOURS[1].filled())),
+                .map(|&(x, y, _)| Circle::new((x, y), 3, CATEGORY_COLOURS[1].filled())),
+        )
+        .map_err(e2s)?;
+        c.draw_series(
+            edges
+                .iter()
+                .map(|&p| TriangleMarker::new(p, 4, BLACK.filled())),
         )
         .map_err(e2s)?;
         Ok(())
-    })
+    })?;
+    Ok(Chart { svg, off_axis })
 }
 
 #[cfg(test)]
@@ -589,7 +695,7 @@ mod tests {
                 c_s_mean: None,
             },
         ];
-        let svg = soil_speeds(&groups).unwrap();
+        let svg = soil_speeds(&groups).unwrap().svg;
         assert!(
             svg.contains("clay &amp; &lt;silt&gt; (c_P: 2, c_S: 1)"),
             "{svg}"
@@ -597,6 +703,35 @@ mod tests {
         assert!(svg.contains("sand (c_P: 1, c_S: 0)"));
         // One dot per segment plus one per mean, plus the legend's two.
         assert_eq!(svg.matches("<circle").count(), 4 + 3 + 2);
+    }
+
+    #[test]
+    fn measurements_carry_error_bars_and_long_ones_are_counted_off_axis() {
+        let fitted: Vec<(f64, f64)> = (1..=8).map(|i| (100.0 * i as f64, 400.0)).collect();
+        let measured = [
+            (200.0, 410.0, Some(5.0)),
+            (400.0, 395.0, Some(4.0)),
+            (600.0, 400.0, Some(900.0)),
+        ];
+        let c = curve_with_points("c", "t", &fitted, &measured, "m/s").unwrap();
+        // Three dots and three vertical bars; the long bar ends at both axis edges.
+        assert_eq!(c.svg.matches("<circle").count(), 3);
+        assert_eq!(c.off_axis, 1);
+        assert_eq!(c.svg.matches("<polygon").count(), 2, "{}", c.svg);
+    }
+
+    #[test]
+    fn a_log_histogram_does_not_stretch_to_exact_fits() {
+        let mut v: Vec<f64> = (0..100).map(|i| 0.5 + 0.05 * f64::from(i)).collect();
+        v.extend([1e-15, 3e-12]);
+        let h = log_histogram("h", &v, "chi2/dof", &[("median", 2.9)]).unwrap();
+        assert_eq!(h.off_axis, 2);
+        // Tick labels stay within a few decades of the median, not 1e-15.
+        assert!(
+            !h.svg.contains("e-15") && !h.svg.contains("e-12"),
+            "{}",
+            h.svg
+        );
     }
 
     #[test]
@@ -608,6 +743,14 @@ mod tests {
         assert!(log_boxplots("b", &[("a".into(), vec![5e7])], "E", |v| v.to_string()).is_ok());
         assert!(log_boxplots("b", &[], "E", |v| v.to_string()).is_ok());
         assert!(curve_with_points("c", "t", &[], &[], "m/s").is_ok());
+        assert!(curve_with_points(
+            "c",
+            "t",
+            &[(1.0, 1.0)],
+            &[(1.0, 1.0, Some(f64::NAN))],
+            "m/s"
+        )
+        .is_ok());
         assert!(soil_speeds(&[]).is_ok());
         let one = WithStd {
             value: 300.0,
@@ -620,7 +763,8 @@ mod tests {
             c_p_mean: Some(one),
             c_s_mean: None,
         };
-        assert!(soil_speeds(&[g]).is_ok());
-        assert!(curve_with_points("c", "t", &[(100.0, 1.0)], &[(100.0, 1.0)], "m/s").is_ok());
+        assert!(soil_speeds(std::slice::from_ref(&g)).is_ok());
+        assert!(curve_with_points("c", "t", &[(100.0, 1.0)], &[(100.0, 1.0, None)], "m/s").is_ok());
+        assert_eq!(soil_speeds(&[g]).unwrap().off_axis, 1);
     }
 }

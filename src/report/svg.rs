@@ -23,17 +23,72 @@ pub fn escape(s: &str) -> String {
 }
 
 /// Viridis, 9 classes (matplotlib's colour map sampled evenly): perceptually uniform and
-/// readable by colour-blind readers, low speeds dark blue, high speeds yellow.
+/// readable by colour-blind readers, low speeds dark blue, high speeds yellow. For values that
+/// are neither good nor bad (a wave speed).
 pub const VIRIDIS_9: [&str; 9] = [
     "#440154", "#472d7b", "#3b528b", "#2c728e", "#21918c", "#28ae80", "#5ec962", "#addc30",
     "#fde725",
 ];
 
+/// Small to large error, for values where large is bad: ColorBrewer "RdBu" with 10 classes
+/// (Brewer, colorbrewer2.org; colour-blind safe), reversed, without its two darkest blues, so
+/// the good end is a calm mid blue, the middle pale, and the bad end a saturated dark red: the
+/// eye goes to the segments that need action.
+pub const BAD_IS_RED_8: [&str; 8] = [
+    "#4393c3", "#92c5de", "#d1e5f0", "#fddbc7", "#f4a582", "#d6604d", "#b2182b", "#67001f",
+];
+
 /// Colour of segments without a value.
 pub const NO_VALUE_COLOUR: &str = "#b0b0b0";
 
-/// A classed colour scale: [`VIRIDIS_9`] over equal-width classes between `lo` and `hi` (the
-/// first and last classes are open-ended).
+/// Line width of a segment, px: wide enough to tell colours apart on a network map.
+pub const LINE_WIDTH_PX: f64 = 2.5;
+/// Line width of a distrusted segment's dashes, px, drawn over a dark casing of
+/// [`CASING_WIDTH_PX`], so a flagged pipe reads as a dashed, outlined line at any colour.
+pub const DISTRUSTED_WIDTH_PX: f64 = 3.0;
+/// Width of the casing under a distrusted segment, px.
+pub const CASING_WIDTH_PX: f64 = 6.5;
+/// Colour of that casing.
+pub const CASING_COLOUR: &str = "#111111";
+
+/// How far a segment's value can be trusted, which sets how its line is drawn (the colour says
+/// the value): the audit's maps and the exports' QGIS style draw the same three kinds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Trust {
+    /// A fit the model explains, speed within its limit (status `ok`), or no value at all:
+    /// a plain solid line.
+    Trusted,
+    /// A prediction for a segment without measurements (status `predicted`, physics §7.12):
+    /// dotted.
+    Predicted,
+    /// Flagged or failed: dashed over a dark casing.
+    Distrusted,
+}
+
+impl Trust {
+    /// The kind of a segment from its exported status.
+    pub fn of_status(status: &str) -> Trust {
+        match status {
+            "flagged" | "failed" => Trust::Distrusted,
+            "predicted" => Trust::Predicted,
+            _ => Trust::Trusted,
+        }
+    }
+
+    /// SVG stroke attributes of its line (colour `c`).
+    fn stroke(self, c: &str) -> String {
+        match self {
+            Trust::Trusted => format!("stroke=\"{c}\""),
+            Trust::Predicted => format!("stroke=\"{c}\" stroke-dasharray=\"1 5\""),
+            Trust::Distrusted => format!(
+                "stroke=\"{c}\" stroke-width=\"{DISTRUSTED_WIDTH_PX}\" stroke-dasharray=\"8 5\""
+            ),
+        }
+    }
+}
+
+/// A classed colour scale: the palette's colours over equal-width classes between `lo` and
+/// `hi` (the first and last classes are open-ended).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ColourScale {
     /// Upper edge of the first class.
@@ -56,9 +111,8 @@ impl ColourScale {
         Some(ColourScale { lo, hi })
     }
 
-    /// The class of a value, 0..9.
-    pub fn class(&self, v: f64) -> usize {
-        let n = VIRIDIS_9.len();
+    /// The class of a value, 0..n for `n` classes (n ≥ 3).
+    pub fn class(&self, v: f64, n: usize) -> usize {
         let inner = n - 2;
         if v < self.lo {
             0
@@ -70,9 +124,8 @@ impl ColourScale {
         }
     }
 
-    /// The bounds of a class, for the legend (None: open end).
-    pub fn bounds(&self, class: usize) -> (Option<f64>, Option<f64>) {
-        let n = VIRIDIS_9.len();
+    /// The bounds of a class of `n`, for the legend (None: open end).
+    pub fn bounds(&self, class: usize, n: usize) -> (Option<f64>, Option<f64>) {
         let inner = (n - 2) as f64;
         let edge = |k: usize| self.lo + (self.hi - self.lo) * (k as f64) / inner;
         match class {
@@ -83,8 +136,8 @@ impl ColourScale {
     }
 }
 
-/// Above this many segments the map draws one path per colour class (no per-segment tooltip),
-/// which keeps a 20,000-segment map to a few hundred kB and fast to render.
+/// Above this many segments the map draws one path per colour class and kind (no per-segment
+/// tooltip), which keeps a 20,000-segment map to a few hundred kB and fast to render.
 pub const MAP_TOOLTIP_LIMIT: usize = 2000;
 
 /// One segment on the map.
@@ -98,6 +151,8 @@ pub struct MapLine<'a> {
     pub value: Option<f64>,
     /// The tooltip's text after the id (None: the value with [`MapStyle::unit`]).
     pub label: Option<String>,
+    /// How its line is drawn.
+    pub trust: Trust,
 }
 
 /// How a map colours its values.
@@ -110,10 +165,13 @@ pub struct MapStyle<'a> {
     /// Fixed colour classes (None: the 2nd–98th percentiles of the values,
     /// [`ColourScale::from_sorted`]).
     pub scale: Option<ColourScale>,
-    /// Reverse the palette: high values dark (used where high values are the ones to see).
-    pub reversed: bool,
+    /// The class colours, first class first (at least 3).
+    pub palette: &'static [&'static str],
     /// Width of the SVG, px.
     pub width: f64,
+    /// Metres per unit of the map's coordinates, for the scale bar (None: no scale bar; for
+    /// geographic coordinates give the metres of a degree of latitude).
+    pub metres_per_unit: Option<f64>,
 }
 
 /// The network map: every segment as a polyline coloured by `value`, with a legend.
@@ -147,10 +205,11 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> Str
 /// whole map needs first (the bounding box `[min x, max x, min y, max y]` of every line, the
 /// number of lines, their sorted finite values), then given the lines in order
 /// ([`Self::add`]), then closed ([`Self::finish`]). The SVG is that of [`map`] on the same lines.
+/// Distrusted segments are drawn last, over the others, so none is hidden.
 pub struct MapCanvas<'s> {
     style: MapStyle<'s>,
     scale: Option<ColourScale>,
-    /// Tooltips: one path per segment; otherwise one path per colour class.
+    /// Tooltips: one path per segment; otherwise one path per colour class and kind.
     tooltips: bool,
     bbox: [f64; 4],
     kx: f64,
@@ -158,11 +217,40 @@ pub struct MapCanvas<'s> {
     ox: f64,
     height: f64,
     svg: String,
+    /// Per kind of line (in [`Trust`] order, drawn in that order): the casings and the paths
+    /// of the segments drawn one by one (tooltips), or the path data by colour.
+    layers: [Layer; 3],
+    kinds_drawn: [bool; 3],
+}
+
+/// The paths of one [`Trust`] kind.
+#[derive(Default)]
+struct Layer {
+    casing: String,
+    paths: String,
     by_colour: Vec<(&'static str, String)>,
 }
 
-const LEGEND_H: f64 = 40.0;
+const LEGEND_H: f64 = 78.0;
 const PAD: f64 = 10.0;
+
+fn kind_index(t: Trust) -> usize {
+    match t {
+        Trust::Trusted => 0,
+        Trust::Predicted => 1,
+        Trust::Distrusted => 2,
+    }
+}
+
+/// A round length for a scale bar at most `max_m` metres long: 1, 2 or 5 × 10^k.
+pub fn scale_bar_length(max_m: f64) -> f64 {
+    let k = 10f64.powf(max_m.log10().floor());
+    [5.0, 2.0, 1.0]
+        .into_iter()
+        .map(|m| m * k)
+        .find(|&l| l <= max_m)
+        .unwrap_or(k)
+}
 
 impl<'s> MapCanvas<'s> {
     /// A map of `n_lines` lines within `bbox`, coloured by the classes of `sorted_values` (or
@@ -200,7 +288,8 @@ impl<'s> MapCanvas<'s> {
         );
         let _ = write!(
             svg,
-            "<g fill=\"none\" stroke-width=\"1.5\" stroke-linecap=\"round\" stroke-linejoin=\"round\">"
+            "<g fill=\"none\" stroke-width=\"{LINE_WIDTH_PX}\" stroke-linecap=\"round\" \
+             stroke-linejoin=\"round\">"
         );
         let mut canvas = MapCanvas {
             style: *style,
@@ -212,29 +301,25 @@ impl<'s> MapCanvas<'s> {
             ox,
             height,
             svg,
-            by_colour: Vec::new(),
+            layers: Default::default(),
+            kinds_drawn: [false; 3],
         };
         if !canvas.tooltips {
             // Grey first, so coloured segments are drawn over it.
-            canvas.by_colour = std::iter::once(NO_VALUE_COLOUR)
-                .chain((0..VIRIDIS_9.len()).map(|c| canvas.palette(c)))
-                .map(|c| (c, String::new()))
+            let colours: Vec<&'static str> = std::iter::once(NO_VALUE_COLOUR)
+                .chain(style.palette.iter().copied())
                 .collect();
+            for layer in &mut canvas.layers {
+                layer.by_colour = colours.iter().map(|&c| (c, String::new())).collect();
+            }
         }
         canvas
     }
 
-    fn palette(&self, class: usize) -> &'static str {
-        if self.style.reversed {
-            VIRIDIS_9[VIRIDIS_9.len() - 1 - class]
-        } else {
-            VIRIDIS_9[class]
-        }
-    }
-
     fn colour(&self, v: Option<f64>) -> &'static str {
+        let p = self.style.palette;
         match (v, self.scale) {
-            (Some(v), Some(sc)) => self.palette(sc.class(v)),
+            (Some(v), Some(sc)) => p[sc.class(v, p.len())],
             _ => NO_VALUE_COLOUR,
         }
     }
@@ -257,9 +342,15 @@ impl<'s> MapCanvas<'s> {
     /// Draw the next segment.
     pub fn add(&mut self, l: &MapLine<'_>) {
         let c = self.colour(l.value);
+        let k = kind_index(l.trust);
+        self.kinds_drawn[k] = true;
+        let mut d = String::new();
+        self.path_d(l.line, &mut d);
+        if l.trust == Trust::Distrusted {
+            let layer = &mut self.layers[k];
+            layer.casing.push_str(&d);
+        }
         if self.tooltips {
-            let mut d = String::new();
-            self.path_d(l.line, &mut d);
             let dec = self.style.decimals;
             let v = match (&l.label, l.value) {
                 (Some(t), _) => t.clone(),
@@ -267,37 +358,48 @@ impl<'s> MapCanvas<'s> {
                 (None, None) => "no value".to_string(),
             };
             let _ = write!(
-                self.svg,
-                "<path stroke=\"{c}\" d=\"{d}\"><title>{}: {}</title></path>",
+                self.layers[k].paths,
+                "<path {} d=\"{d}\"><title>{}: {}</title></path>",
+                l.trust.stroke(c),
                 escape(l.id),
                 escape(&v)
             );
-        } else if let Some(k) = self.by_colour.iter().position(|(k, _)| *k == c) {
-            let mut d = std::mem::take(&mut self.by_colour[k].1);
-            self.path_d(l.line, &mut d);
-            self.by_colour[k].1 = d;
+        } else if let Some(j) = self.layers[k].by_colour.iter().position(|(x, _)| *x == c) {
+            self.layers[k].by_colour[j].1.push_str(&d);
         }
     }
 
-    /// The SVG, with its legend.
+    /// The SVG, with its legend and scale bar.
     pub fn finish(mut self) -> String {
-        for (c, d) in std::mem::take(&mut self.by_colour) {
-            if !d.is_empty() {
-                let _ = write!(self.svg, "<path stroke=\"{c}\" d=\"{d}\"/>");
+        let mut svg = std::mem::take(&mut self.svg);
+        for (k, layer) in self.layers.iter().enumerate() {
+            let trust = [Trust::Trusted, Trust::Predicted, Trust::Distrusted][k];
+            if !layer.casing.is_empty() {
+                let _ = write!(
+                    svg,
+                    "<path class=\"casing\" stroke=\"{CASING_COLOUR}\" \
+                     stroke-width=\"{CASING_WIDTH_PX}\" d=\"{}\"/>",
+                    layer.casing
+                );
+            }
+            svg.push_str(&layer.paths);
+            for (c, d) in &layer.by_colour {
+                if !d.is_empty() {
+                    let _ = write!(svg, "<path {} d=\"{d}\"/>", trust.stroke(c));
+                }
             }
         }
-        let mut svg = std::mem::take(&mut self.svg);
         svg.push_str("</g>");
         let (width, height, dec) = (self.style.width, self.height, self.style.decimals);
-        // Legend.
+        let palette = self.style.palette;
+        // Legend: the colour classes, then the kinds of line and the scale bar.
         let ly = height - LEGEND_H + 8.0;
         let _ = write!(svg, "<g font-family=\"sans-serif\" font-size=\"11\">");
+        let box_w = (width - 2.0 * PAD) / (palette.len() + 1) as f64;
         if let Some(sc) = self.scale {
-            let box_w = (width - 2.0 * PAD) / (VIRIDIS_9.len() + 1) as f64;
-            for i in 0..VIRIDIS_9.len() {
-                let c = self.palette(i);
+            for (i, c) in palette.iter().enumerate() {
                 let x = PAD + i as f64 * box_w;
-                let label = match sc.bounds(i) {
+                let label = match sc.bounds(i, palette.len()) {
                     (None, Some(h)) => format!("< {h:.dec$}"),
                     (Some(l), None) => format!("≥ {l:.dec$}"),
                     (Some(l), Some(h)) => format!("{l:.dec$}–{h:.dec$}"),
@@ -314,14 +416,74 @@ impl<'s> MapCanvas<'s> {
                 );
             }
         }
-        let x = PAD + VIRIDIS_9.len() as f64 * ((width - 2.0 * PAD) / (VIRIDIS_9.len() + 1) as f64);
+        let x = PAD + palette.len() as f64 * box_w;
         let _ = write!(
             svg,
             "<rect x=\"{x:.1}\" y=\"{ly:.1}\" width=\"20\" height=\"10\" fill=\"{NO_VALUE_COLOUR}\"/>\
-             <text x=\"{:.1}\" y=\"{:.1}\">no value</text></g></svg>",
+             <text x=\"{:.1}\" y=\"{:.1}\">no value</text>",
             x,
             ly + 24.0
         );
+        // The kinds of line drawn.
+        let y2 = ly + 46.0;
+        let mut lx = PAD;
+        let sample = "#3b528b";
+        for (k, (trust, label)) in [
+            (Trust::Trusted, "trusted (status ok)"),
+            (Trust::Predicted, "predicted, not measured"),
+            (Trust::Distrusted, "flagged or failed: distrust"),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if !self.kinds_drawn[k] && trust != Trust::Distrusted {
+                continue;
+            }
+            let d = format!("M{:.1} {y2:.1}L{:.1} {y2:.1}", lx, lx + 34.0);
+            if trust == Trust::Distrusted {
+                let _ = write!(
+                    svg,
+                    "<path fill=\"none\" stroke=\"{CASING_COLOUR}\" \
+                     stroke-width=\"{CASING_WIDTH_PX}\" d=\"{d}\"/>"
+                );
+            }
+            let _ = write!(
+                svg,
+                "<g fill=\"none\" stroke-width=\"{LINE_WIDTH_PX}\"><path {} d=\"{d}\"/></g>\
+                 <text x=\"{:.1}\" y=\"{:.1}\">{label}</text>",
+                trust.stroke(sample),
+                lx + 40.0,
+                y2 + 4.0
+            );
+            lx += 40.0 + 7.0 * label.len() as f64 + 24.0;
+        }
+        if let Some(m_per_unit) = self.style.metres_per_unit {
+            // px per metre: the map's scale s is px per coordinate unit.
+            let px_per_m = self.s / m_per_unit;
+            let max_px = (width - 2.0 * PAD - lx).min(0.3 * width);
+            if max_px > 40.0 && px_per_m.is_finite() && px_per_m > 0.0 {
+                let len_m = scale_bar_length(max_px / px_per_m);
+                let len_px = len_m * px_per_m;
+                let x1 = width - PAD - len_px;
+                let label = if len_m >= 1000.0 {
+                    format!("{} km", len_m / 1000.0)
+                } else {
+                    format!("{len_m} m")
+                };
+                let _ = write!(
+                    svg,
+                    "<g class=\"scale-bar\"><path fill=\"none\" stroke=\"#222\" stroke-width=\"2\" \
+                     d=\"M{x1:.1} {:.1}V{y2:.1}H{:.1}V{:.1}\"/><text x=\"{:.1}\" y=\"{:.1}\" \
+                     text-anchor=\"middle\">{label}</text></g>",
+                    y2 - 5.0,
+                    x1 + len_px,
+                    y2 - 5.0,
+                    x1 + len_px / 2.0,
+                    y2 + 16.0
+                );
+            }
+        }
+        svg.push_str("</g></svg>");
         svg
     }
 }
@@ -369,38 +531,102 @@ mod tests {
             unit: "m/s",
             decimals: 0,
             scale: None,
-            reversed: false,
+            palette: &VIRIDIS_9,
             width,
+            metres_per_unit: Some(1.0),
         }
     }
 
     #[test]
-    fn fixed_reversed_scales_put_high_values_dark() {
-        let ls = lines(2);
+    fn bad_values_are_red_and_distrusted_segments_dashed_over_a_casing() {
+        let ls = lines(3);
         let ml: Vec<MapLine<'_>> = ls
             .iter()
-            .zip([0.1, 3.0])
-            .map(|(l, v)| MapLine {
+            .zip([
+                (0.1, Trust::Trusted),
+                (3.0, Trust::Distrusted),
+                (1.0, Trust::Predicted),
+            ])
+            .map(|(l, (v, trust))| MapLine {
                 id: "x",
                 line: l,
                 value: Some(v),
                 label: Some(format!("{v} %")),
+                trust,
             })
             .collect();
         let st = MapStyle {
             unit: "%",
             decimals: 2,
             scale: Some(ColourScale { lo: 0.25, hi: 2.0 }),
-            reversed: true,
+            palette: &BAD_IS_RED_8,
             width: 400.0,
+            metres_per_unit: None,
         };
         let svg = map(&ml, false, &st);
-        assert!(svg.contains(&format!("<path stroke=\"{}\"", VIRIDIS_9[8])));
-        assert!(svg.contains(&format!("<path stroke=\"{}\"", VIRIDIS_9[0])));
-        let yellow = svg.find(&format!("stroke=\"{}\"", VIRIDIS_9[8])).unwrap();
-        assert!(svg[yellow..].starts_with(&format!("stroke=\"{}\" d=", VIRIDIS_9[8])));
-        assert!(svg[yellow..].contains("<title>x: 0.1 %</title>"));
+        // Small error: the calm blue, solid; large error: the dark red, dashed, drawn last over
+        // its casing.
+        let good = svg
+            .find(&format!("<path stroke=\"{}\" d=", BAD_IS_RED_8[0]))
+            .unwrap();
+        assert!(svg[good..].contains("<title>x: 0.1 %</title>"));
+        let bad = svg
+            .find(&format!(
+                "<path stroke=\"{}\" stroke-width=\"3\" stroke-dasharray",
+                BAD_IS_RED_8[7]
+            ))
+            .unwrap();
+        let casing = svg.find("class=\"casing\"").unwrap();
+        let dotted = svg.find("stroke-dasharray=\"1 5\"").unwrap();
+        assert!(good < casing && dotted < casing && casing < bad, "{svg}");
         assert!(svg.contains(">≥ 2.00<") && svg.contains(">&lt; 0.25<"));
+        assert!(
+            svg.contains("flagged or failed: distrust") && svg.contains("predicted, not measured")
+        );
+        assert!(!svg.contains("scale-bar"));
+    }
+
+    #[test]
+    fn the_scale_bar_is_a_round_length_at_the_map_scale() {
+        assert_eq!(scale_bar_length(730.0), 500.0);
+        assert_eq!(scale_bar_length(199.0), 100.0);
+        assert_eq!(scale_bar_length(2100.0), 2000.0);
+        // 50 lines 100 m apart over 150 columns: 15 km wide on a 1000 px map.
+        let ls = lines(50);
+        let ml: Vec<MapLine<'_>> = ls
+            .iter()
+            .map(|l| MapLine {
+                id: "x",
+                line: l,
+                value: Some(1.0),
+                label: None,
+                trust: Trust::Trusted,
+            })
+            .collect();
+        let svg = map(&ml, false, &style(1000.0));
+        let bar = &svg[svg.find("class=\"scale-bar\"").unwrap()..];
+        let label: String = bar[bar.find("middle\">").unwrap() + 8..]
+            .split('<')
+            .next()
+            .unwrap()
+            .into();
+        // The bar's path: M x1 y V y H x2: its length in px over px per metre is the label.
+        let d = &bar[bar.find("d=\"M").unwrap() + 4..];
+        let x1: f64 = d.split(' ').next().unwrap().parse().unwrap();
+        let x2: f64 = d[d.find('H').unwrap() + 1..]
+            .split('V')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        let px_per_m = (1000.0 - 20.0) / (49.0 * 100.0 + 90.0);
+        let metres = (x2 - x1) / px_per_m;
+        let want: f64 = if let Some(km) = label.strip_suffix(" km") {
+            km.parse::<f64>().unwrap() * 1000.0
+        } else {
+            label.strip_suffix(" m").unwrap().parse().unwrap()
+        };
+        assert!((metres - want).abs() < 0.01 * want, "{label}: {metres} m");
     }
 
     fn count(svg: &str, tag: &str) -> usize {
@@ -420,10 +646,13 @@ mod tests {
                 line: l,
                 value: (i % 7 != 0).then_some(300.0 + i as f64),
                 label: None,
+                trust: Trust::Trusted,
             })
             .collect();
         let svg = map(&ml, false, &style(800.0));
-        assert_eq!(count(&svg, "path"), 50);
+        // One path per segment, and the legend's two line samples (the distrusted one over its
+        // casing) and the scale bar.
+        assert_eq!(count(&svg, "path"), 50 + 3 + 1);
         assert_eq!(count(&svg, "title"), 50);
         assert!(svg.contains("<title>S&lt;7&gt;: no value</title>"));
         assert!(svg.contains(NO_VALUE_COLOUR) && svg.contains(VIRIDIS_9[8]));
@@ -440,14 +669,22 @@ mod tests {
                 line: l,
                 value: (i % 11 != 0).then_some((i % 1000) as f64),
                 label: None,
+                trust: if i % 13 == 0 {
+                    Trust::Distrusted
+                } else {
+                    Trust::Trusted
+                },
             })
             .collect();
         let svg = map(&ml, false, &style(1000.0));
-        // Nine colour classes and grey, no per-segment element.
-        assert_eq!(count(&svg, "path"), 10);
+        // Nine colour classes and grey for each of the two kinds drawn, one casing, the
+        // legend's samples and scale bar; no per-segment element.
+        assert_eq!(count(&svg, "path"), 20 + 1 + 3 + 1);
         assert_eq!(count(&svg, "title"), 0);
-        // Every segment is still drawn: one move-to per segment.
-        assert_eq!(svg.matches('M').count(), 20_000);
+        // Every segment is still drawn: one move-to per segment, and its casing for the
+        // distrusted ones (and the legend's samples and scale bar).
+        let distrusted = (0..20_000).filter(|i| i % 13 == 0).count();
+        assert_eq!(svg.matches('M').count(), 20_000 + distrusted + 3 + 1);
         assert!(svg.len() < 1_200_000, "{} bytes", svg.len());
     }
 
@@ -457,19 +694,30 @@ mod tests {
             lo: 100.0,
             hi: 800.0,
         };
-        assert_eq!(sc.class(50.0), 0);
-        assert_eq!(sc.class(100.0), 1);
-        assert_eq!(sc.class(799.9), 7);
-        assert_eq!(sc.class(800.0), 8);
-        assert_eq!(sc.class(f64::INFINITY), 8);
+        assert_eq!(sc.class(50.0, 9), 0);
+        assert_eq!(sc.class(100.0, 9), 1);
+        assert_eq!(sc.class(799.9, 9), 7);
+        assert_eq!(sc.class(800.0, 9), 8);
+        assert_eq!(sc.class(f64::INFINITY, 9), 8);
         let mut last = 0;
         for i in 0..=1000 {
-            let c = sc.class(i as f64);
+            let c = sc.class(i as f64, 9);
             assert!(c >= last && c < 9);
             last = c;
         }
-        assert_eq!(sc.bounds(0), (None, Some(100.0)));
-        assert_eq!(sc.bounds(1), (Some(100.0), Some(200.0)));
-        assert_eq!(sc.bounds(8), (Some(800.0), None));
+        assert_eq!(sc.bounds(0, 9), (None, Some(100.0)));
+        assert_eq!(sc.bounds(1, 9), (Some(100.0), Some(200.0)));
+        assert_eq!(sc.bounds(8, 9), (Some(800.0), None));
+        assert_eq!(sc.class(799.9, 8), 6);
+        assert_eq!(sc.bounds(1, 8), (Some(100.0), Some(100.0 + 700.0 / 6.0)));
+    }
+
+    #[test]
+    fn trust_follows_the_status() {
+        assert_eq!(Trust::of_status("ok"), Trust::Trusted);
+        assert_eq!(Trust::of_status("flagged"), Trust::Distrusted);
+        assert_eq!(Trust::of_status("failed"), Trust::Distrusted);
+        assert_eq!(Trust::of_status("predicted"), Trust::Predicted);
+        assert_eq!(Trust::of_status("unfitted"), Trust::Trusted);
     }
 }

@@ -8,8 +8,9 @@ use quick_xml::events::Event;
 use quick_xml::Reader;
 
 /// The ids of the audit report's sections, in order.
-pub const SECTIONS: [&str; 10] = [
+pub const SECTIONS: [&str; 11] = [
     "trust",
+    "actions",
     "map",
     "least-certain",
     "soil-speeds",
