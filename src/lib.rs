@@ -5,6 +5,7 @@ pub mod bench;
 pub mod db;
 pub mod diagnose;
 pub mod export;
+pub mod field;
 pub mod forward;
 pub mod invert;
 pub mod network;

@@ -247,6 +247,8 @@ pub struct CalibrateSummary {
     pub worker_ms: f64,
     /// The soil zones estimated after the fits (issue 12), if the run finished.
     pub zones: Option<crate::zones::ZoneUpdate>,
+    /// The soil field's update after the fits (physics §7.12), if the run finished.
+    pub field: Option<crate::field::FieldUpdate>,
 }
 
 impl CalibrateSummary {
@@ -410,6 +412,7 @@ pub fn calibrate(
         elapsed_s: 0.0,
         worker_ms: 0.0,
         zones: None,
+        field: None,
     };
     let Some(lock) = acquire_lock(conn, opts.wait_for_lock, observer, stop)? else {
         return Ok(CalibrateSummary {
@@ -523,6 +526,13 @@ fn locked_run(
     finished?;
     if status == RunStatus::Finished {
         summary.zones = Some(crate::zones::update_zones(conn, Some(run_id))?);
+        let settings = crate::field::FieldSettings {
+            model: opts.model,
+            contact_mode: opts.contact_mode,
+            jobs,
+            force: false,
+        };
+        summary.field = Some(crate::field::update_field(conn, Some(run_id), &settings)?);
     }
     Ok(summary)
 }
@@ -1014,6 +1024,7 @@ mod tests {
             elapsed_s: 2.0,
             worker_ms: 0.0,
             zones: None,
+            field: None,
         };
         assert_eq!(
             s.line(),

@@ -128,6 +128,13 @@ pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
         f.leak_band_speed_m_per_s = finite(b.value);
         f.leak_band_speed_std_m_per_s = finite(b.std);
     }
+    if let Some([pp, ps, ss]) = r.soil_information {
+        (
+            f.soil_information_pp,
+            f.soil_information_ps,
+            f.soil_information_ss,
+        ) = (finite(pp), finite(ps), finite(ss));
+    }
     f.misfit = not_nan(r.misfit);
     f.chi2_per_dof = r.chi2_per_dof.and_then(not_nan);
     f.n_measurements = i64::try_from(r.n_measurements).ok();

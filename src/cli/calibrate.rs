@@ -163,6 +163,9 @@ fn report(s: &CalibrateSummary) {
     {
         println!("{}", z.line());
     }
+    if let Some(f) = &s.field {
+        println!("{}", f.line());
+    }
 }
 
 /// Progress on stderr: a bar on a terminal, nothing otherwise (the summary line comes at the

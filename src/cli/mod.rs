@@ -10,6 +10,7 @@ mod export;
 mod fit;
 mod forward;
 mod import;
+mod plan;
 mod run;
 mod synth;
 mod wavenumbers;
@@ -65,6 +66,8 @@ enum Command {
     Fit(fit::FitArgs),
     /// Field wavenumbers from hydrant-test recordings (WAV files and a layout.csv).
     Wavenumbers(wavenumbers::WavenumbersArgs),
+    /// Choose the next segments to measure: the largest expected cut in speed uncertainty.
+    Plan(plan::PlanArgs),
 }
 
 /// How a command that ran ended.
@@ -103,6 +106,7 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Diagnose(args) => diagnose::run(&args),
         Command::Fit(args) => fit::run(&args),
         Command::Wavenumbers(args) => wavenumbers::run(&args),
+        Command::Plan(args) => plan::run(&args),
     }
 }
 

@@ -12,6 +12,7 @@
 //! in order in one exclusive transaction, tracked by `PRAGMA user_version` ([`migrate`]).
 
 pub mod effects;
+pub mod field;
 pub mod hash;
 pub mod import;
 pub mod inventory;

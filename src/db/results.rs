@@ -173,6 +173,13 @@ pub struct FitRow {
     pub leak_band_speed_m_per_s: Option<f64>,
     /// Its one-sigma error, m/s.
     pub leak_band_speed_std_m_per_s: Option<f64>,
+    /// The fit's information about ln c_P, with ξ and the effects profiled out and divided by
+    /// the misfit's variance factor (physics P79, P88): what the soil field learns from it.
+    pub soil_information_pp: Option<f64>,
+    /// Its cross term between ln c_P and ln c_S.
+    pub soil_information_ps: Option<f64>,
+    /// Its information about ln c_S.
+    pub soil_information_ss: Option<f64>,
     /// Objective value at the optimum.
     pub misfit: Option<f64>,
     /// χ² per degree of freedom, when measurement standard deviations are known.
@@ -256,6 +263,9 @@ impl FitRow {
             contact_hi: None,
             leak_band_speed_m_per_s: None,
             leak_band_speed_std_m_per_s: None,
+            soil_information_pp: None,
+            soil_information_ps: None,
+            soil_information_ss: None,
             misfit: None,
             chi2_per_dof: None,
             n_measurements: None,
@@ -523,6 +533,9 @@ fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
             "leak_band_speed_std_m_per_s",
             real(f.leak_band_speed_std_m_per_s),
         ),
+        ("soil_information_pp", real(f.soil_information_pp)),
+        ("soil_information_ps", real(f.soil_information_ps)),
+        ("soil_information_ss", real(f.soil_information_ss)),
         ("misfit", real(f.misfit)),
         ("chi2_per_dof", real(f.chi2_per_dof)),
         ("n_measurements", int(f.n_measurements)),
@@ -586,6 +599,9 @@ fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
     f.contact_hi = r.get("contact_hi")?;
     f.leak_band_speed_m_per_s = r.get("leak_band_speed_m_per_s")?;
     f.leak_band_speed_std_m_per_s = r.get("leak_band_speed_std_m_per_s")?;
+    f.soil_information_pp = r.get("soil_information_pp")?;
+    f.soil_information_ps = r.get("soil_information_ps")?;
+    f.soil_information_ss = r.get("soil_information_ss")?;
     f.misfit = r.get("misfit")?;
     f.chi2_per_dof = r.get("chi2_per_dof")?;
     f.n_measurements = r.get("n_measurements")?;

@@ -405,6 +405,9 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
     let mut load_warnings = Vec::new();
     let mut geometry_warnings = Vec::new();
     let mut zones = ZonePoints::default();
+    let plan =
+        crate::db::field::plan_picks(records.db().conn()).map_err(ExportError::db(records.db()))?;
+    let mut field_layers = super::field::FieldLayers::new(plan);
     {
         let names: Vec<String> = PROPERTIES
             .iter()
@@ -457,6 +460,9 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
                 tally.summary.with_geometry += 1;
             }
             zones.add(&rec, line.as_ref());
+            field_layers
+                .add(&tx, &rec, line.as_ref(), srs_id)
+                .map_err(sql)?;
             Ok(())
         })?;
         tx.execute_batch(&rtree_sql(TABLE, GEOMETRY_COLUMN))
@@ -491,6 +497,7 @@ fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, Expo
     .map_err(sql)?;
     write_style(&tx, &style::qml(tally.speeds.iter().copied())).map_err(sql)?;
     super::zones::write_zone_layer(&tx, zones, srs_id, table_srs).map_err(sql)?;
+    field_layers.finish(&tx, table_srs).map_err(sql)?;
     tx.commit().map_err(sql)?;
     conn.close().map_err(|(_, e)| sql(e))?;
     load_warnings.append(&mut geometry_warnings);

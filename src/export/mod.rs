@@ -17,6 +17,7 @@
 
 pub mod crs;
 pub mod csv;
+pub mod field;
 pub mod geojson;
 pub mod gpkg;
 pub mod record;

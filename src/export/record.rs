@@ -52,7 +52,23 @@ pub struct SegmentExport {
     pub flags: Option<String>,
     /// The reason lines of [`Self::flags`], one per flag.
     pub flag_reasons: Option<String>,
+    /// The soil field's prediction (physics P81), for a segment without a fitted speed.
+    pub prediction: Option<db::field::PredictionRow>,
+    /// The segment as the latest field update saw it: its class, its leave-one-out check.
+    pub field: Option<db::field::FieldSegmentRow>,
+    /// Where the exported speed comes from: [`SPEED_FITTED`], [`SPEED_PREDICTED`] or
+    /// [`SPEED_NONE`].
+    pub speed_source: &'static str,
+    /// Why, in words (what a prediction rests on, why there is no speed).
+    pub speed_source_reason: String,
 }
+
+/// `speed_source` of a segment whose speed is its own fit's.
+pub const SPEED_FITTED: &str = "fitted";
+/// `speed_source` of a segment whose speed the soil field predicts (physics P81).
+pub const SPEED_PREDICTED: &str = "predicted";
+/// `speed_source` of a segment without a speed.
+pub const SPEED_NONE: &str = "none";
 
 impl SegmentExport {
     /// Build the record from its parts (the derived values are computed here).
@@ -81,6 +97,102 @@ impl SegmentExport {
             flag_reasons: fit.as_ref().map(|f| f.flag_reasons.clone()),
             fit,
             zone: None,
+            prediction: None,
+            field: None,
+            speed_source: SPEED_NONE,
+            speed_source_reason: String::new(),
+        }
+        .settled()
+    }
+
+    /// Whether the latest fit gives the segment a speed.
+    fn has_fitted_speed(&self) -> bool {
+        self.fit
+            .as_ref()
+            .is_some_and(|f| f.status != db::FitStatus::Failed)
+            && self.leak_band_speed.is_some()
+    }
+
+    /// Set [`Self::speed_source`] and its reason from the fit, prediction and field row.
+    fn settled(mut self) -> Self {
+        let (source, reason) = if self.has_fitted_speed() {
+            let n = self
+                .fit
+                .as_ref()
+                .and_then(|f| f.n_measurements)
+                .unwrap_or(0);
+            (SPEED_FITTED, format!("fitted to {n} measurements"))
+        } else if let Some(p) = &self.prediction {
+            (SPEED_PREDICTED, p.note.clone())
+        } else if let Some(f) = self.field.as_ref().filter(|f| !f.note.is_empty()) {
+            (SPEED_NONE, f.note.clone())
+        } else if let Some(msg) = self.fit.as_ref().and_then(|f| f.message.clone()) {
+            (
+                SPEED_NONE,
+                format!("the fit failed ({msg}) and the soil field has not been updated since"),
+            )
+        } else {
+            (
+                SPEED_NONE,
+                "no fit and no soil-field prediction: run calibrate".to_string(),
+            )
+        };
+        self.speed_source = source;
+        self.speed_source_reason = reason;
+        self
+    }
+
+    /// Attach the soil field's view of the segment and, when it has no fitted speed, its
+    /// prediction (whose curve then stands for the fit's); a `field_outlier` is appended to
+    /// [`Self::flags`].
+    pub fn set_field(
+        mut self,
+        field: Option<db::field::FieldSegmentRow>,
+        prediction: Option<db::field::Prediction>,
+    ) -> Self {
+        if !self.has_fitted_speed() {
+            if let Some((p, curve)) = prediction {
+                let fit = self.fit.take();
+                let flags = (self.flags.take(), self.flag_reasons.take());
+                let zone = self.zone.take();
+                let mut rec = SegmentExport::new(self.segment, fit, curve);
+                rec.leak_band_speed = p.leak_band_speed.map(|v| v.0).or(rec.leak_band_speed);
+                (rec.flags, rec.flag_reasons) = flags;
+                rec.zone = zone;
+                rec.prediction = Some(p);
+                self = rec;
+            }
+        }
+        if let Some(f) = field.as_ref().filter(|f| f.field_outlier) {
+            let z = f.loo_z.unwrap_or(f64::NAN);
+            let reason = format!(
+                "field_outlier: its leak-band speed is {z:.1} sigma from what its neighbours \
+                 predict (leave-one-out, |z| > {:.2}): a wrong record, a changed soil or a leak",
+                crate::field::FIELD_OUTLIER_Z
+            );
+            let join = |list: Option<String>, item: &str, sep: &str| match list {
+                Some(l) if !l.is_empty() => Some(format!("{l}{sep}{item}")),
+                _ => Some(item.to_string()),
+            };
+            self.flags = join(self.flags.take(), "field_outlier", ",");
+            self.flag_reasons = join(self.flag_reasons.take(), &reason, "\n");
+        }
+        self.field = field;
+        self.settled()
+    }
+
+    /// One-sigma error of the exported leak-band speed: the fit's, or the prediction's.
+    pub fn leak_band_speed_std(&self) -> Option<f64> {
+        match self.speed_source {
+            SPEED_FITTED => self
+                .fit
+                .as_ref()
+                .and_then(|f| f.leak_band_speed_std_m_per_s),
+            SPEED_PREDICTED => self
+                .prediction
+                .as_ref()
+                .and_then(|p| p.leak_band_speed.map(|v| v.1)),
+            _ => None,
         }
     }
 
@@ -266,6 +378,10 @@ impl<'a> Records<'a> {
         };
         let mut rec = SegmentExport::new(seg, fit, curve);
         rec.set_zone(zone);
+        let id = rec.segment.segment_id.clone();
+        let field = db::field::field_segment(conn, &id).map_err(&err)?;
+        let prediction = db::field::prediction_for(conn, &id).map_err(&err)?;
+        let rec = rec.set_field(field, prediction);
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
             let why = LineString::parse_wkt(w).err().unwrap_or_default();
             warnings.push(format!(
@@ -658,11 +774,13 @@ pub const PROPERTIES: &[Property] = &[
               the figure to type into a leak correlator",
         get: |r| Value::real(r.leak_band_speed),
     },
-    fit_real!(
-        "leak_band_speed_std_m_per_s",
-        leak_band_speed_std_m_per_s,
-        "one-sigma error of the leak-band speed, m/s (physics P65)"
-    ),
+    Property {
+        name: "leak_band_speed_std_m_per_s",
+        kind: Kind::Real,
+        doc: "one-sigma error of the leak-band speed, m/s (the fit's, physics P65, or the \
+              prediction's, P81)",
+        get: |r| Value::real(r.leak_band_speed_std()),
+    },
     Property {
         name: "soil_zone",
         kind: Kind::Text,
@@ -735,6 +853,80 @@ pub const PROPERTIES: &[Property] = &[
         doc: "this segment's misfit at its zone with the scatter allowed for (chi-square, 2 \
               dof); above 13.82 (p < 0.001) it is a zone_outlier",
         get: |r| Value::real(r.zone.as_ref().and_then(|z| z.1.statistic)),
+    },
+    Property {
+        name: "speed_source",
+        kind: Kind::Text,
+        doc: "where the speed comes from: fitted (its own measurements), predicted (the soil \
+              field of the network, physics P81) or none",
+        get: |r| Value::Text(r.speed_source),
+    },
+    Property {
+        name: "speed_source_reason",
+        kind: Kind::Text,
+        doc: "what the speed rests on, or why there is none",
+        get: |r| Value::Text(&r.speed_source_reason),
+    },
+    Property {
+        name: "soil_class",
+        kind: Kind::Text,
+        doc: "the soil class the field used (soil_zone, else soil_type; the neighbourhood's \
+              majority where it rejects the label)",
+        get: |r| Value::text(r.field.as_ref().and_then(|f| f.soil_class.as_deref())),
+    },
+    Property {
+        name: "label_rejected",
+        kind: Kind::Integer,
+        doc: "1 if most of the segment's nearest neighbours carry another soil label",
+        get: |r| Value::int(r.field.as_ref().map(|f| i64::from(f.label_rejected))),
+    },
+    Property {
+        name: "field_leak_band_speed_m_per_s",
+        kind: Kind::Real,
+        doc: "the soil field's leak-band speed: for a measured segment predicted from the \
+              others (leave-one-out, P82), for comparison with its own fit, m/s",
+        get: |r| {
+            Value::real(
+                r.field
+                    .as_ref()
+                    .and_then(|f| f.field_leak_band_speed_m_per_s)
+                    .or_else(|| {
+                        r.prediction
+                            .as_ref()
+                            .and_then(|p| p.leak_band_speed.map(|v| v.0))
+                    }),
+            )
+        },
+    },
+    Property {
+        name: "field_leak_band_speed_std_m_per_s",
+        kind: Kind::Real,
+        doc: "its one-sigma error, m/s",
+        get: |r| {
+            Value::real(
+                r.field
+                    .as_ref()
+                    .and_then(|f| f.field_leak_band_speed_std_m_per_s)
+                    .or_else(|| {
+                        r.prediction
+                            .as_ref()
+                            .and_then(|p| p.leak_band_speed.map(|v| v.1))
+                    }),
+            )
+        },
+    },
+    Property {
+        name: "field_z",
+        kind: Kind::Real,
+        doc: "leave-one-out z of a measured segment (P82): its fit against its neighbours' \
+              prediction, in combined sigmas",
+        get: |r| Value::real(r.field.as_ref().and_then(|f| f.loo_z)),
+    },
+    Property {
+        name: "field_outlier",
+        kind: Kind::Integer,
+        doc: "1 if |field_z| exceeds 3.29 (p < 0.001): a wrong record, a changed soil or a leak",
+        get: |r| Value::int(r.field.as_ref().map(|f| i64::from(f.field_outlier))),
     },
 ];
 

@@ -160,7 +160,7 @@ pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 /// solve gives up after 12 Newton iterations and 10 of Muller's, not 30 and 20
 /// ([`crate::physics::solver::NEWTON_MAX_ITER`]); near grazing a solve that does not converge
 /// costs less than half as much, and a fit changes only where a root took more (issue 10).
-pub const FIT_ALGORITHM_VERSION: i64 = 19;
+pub const FIT_ALGORITHM_VERSION: i64 = 20;
 
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
@@ -294,6 +294,10 @@ pub struct FitResult {
     pub curve: Vec<PredictedPoint>,
     /// Mean phase speed over [`LEAK_BAND_HZ`], m/s, with its error.
     pub leak_band_speed: Option<WithError>,
+    /// The information about (ln c_P, ln c_S) with ξ and the effects profiled out, divided by
+    /// the misfit's variance factor (R_B², P88): (I_PP, I_PS, I_SS), eq. P79. What the soil
+    /// field of the network learns from this fit. None for a failed fit or unknown curvature.
+    pub soil_information: Option<[f64; 3]>,
     /// Wall-clock time of building the result after the search (uncertainty, curve with
     /// errors, findings), s: what reporting what the data determine costs (`pipewave bench`).
     pub result_seconds: f64,
@@ -355,6 +359,7 @@ impl FitResult {
             s_wave_speed: None,
             curve: Vec::new(),
             leak_band_speed: None,
+            soil_information: None,
             result_seconds: 0.0,
         }
     }
@@ -997,6 +1002,16 @@ fn assemble(
         leak_band_speed,
         separated,
     });
+    // The information the soil field learns from (P79), divided by the misfit's variance
+    // factor: R_B² (P88) when the measurement errors are known, so that a fit the model does
+    // not explain does not teach the field overconfident soil; σ̂² of the relative residuals
+    // otherwise. None when the curvature could not be evaluated.
+    let variance = match problem.weighting {
+        Weighting::ChiSquare => crate::stats::birge_ratio(ss, m, n).powi(2),
+        Weighting::Relative => scale,
+    };
+    let soil_information =
+        (!determined.curvature_unknown).then(|| determined.speed_information.map(|v| v / variance));
     let (flags, notes): (Vec<Flag>, Vec<Flag>) = findings
         .into_iter()
         .partition(|f| f.code.severity() == Severity::Flag);
@@ -1032,6 +1047,7 @@ fn assemble(
         s_wave_speed: Some(determined.s_wave_speed),
         curve,
         leak_band_speed,
+        soil_information,
         result_seconds: started.elapsed().as_secs_f64(),
     })
 }
@@ -1684,6 +1700,7 @@ mod tests {
             condition_number: 1.0,
             curvature_unknown: false,
             valley: Vec::new(),
+            speed_information: [0.0; 3],
         };
         let band_at = |x: &[f64]| leak_band_speed_of(&p.system_at(x).unwrap()).unwrap();
         let (band_best, band_inside) = (band_at(&best), band_at(&inside));

@@ -159,6 +159,11 @@ pub struct Determined {
     /// each at its profile minimum: the caller widens what it derives from the soil (the
     /// leak-band speed) to reach them.
     pub valley: Vec<Vec<f64>>,
+    /// The data's information about u = (ln c_P, ln c_S) with ξ and every effect profiled out
+    /// (the Schur complement of the Gauss–Newton information JᵀJ, eq. P79), as (I_PP, I_PS,
+    /// I_SS), in units of the weighted residuals (not yet divided by any variance factor). No
+    /// prior is included: a direction the data do not see has (nearly) zero information.
+    pub speed_information: [f64; 3],
 }
 
 /// The linear map T = ∂u/∂x from the search coordinates x to u = (ln c_P, ln c_S, rest) at x,
@@ -276,6 +281,13 @@ pub fn determine(
     let cov_x = spd_inverse(&info, n);
     // To speed coordinates.
     let (t, ie, inu) = speed_map(specs, x);
+    let speed_information = profiled_speed_information(
+        &crate::optimize::linalg::jtj(jac, m, n),
+        &invert_speed_map(&t, n, ie, inu),
+        n,
+        ie,
+        inu,
+    );
     let tt = transpose(&t, n);
     let cov_u = mat_mul(&mat_mul(&t, &cov_x, n), &tt, n);
     let mut u: Vec<f64> = x.to_vec();
@@ -393,7 +405,53 @@ pub fn determine(
         condition_number,
         curvature_unknown: false,
         valley: valley.into_iter().map(|(_, x)| x).collect(),
+        speed_information,
     }
+}
+
+/// The information about (ln c_P, ln c_S) of an information matrix `info_x` in the search
+/// coordinates, with the other coordinates profiled out (eq. P79): I_u = T⁻ᵀ I_x T⁻¹ carried to
+/// the speed coordinates by the inverse `ti` of [`speed_map`], then the Schur complement
+/// I_aa − I_ab I_bb⁺ I_ba of the speed block a = {E_m, ν_m} against the rest b (pseudo-inverse:
+/// a coordinate the data do not see, such as an effect without signal, profiles out as zero).
+/// Returns (I_PP, I_PS, I_SS).
+pub fn profiled_speed_information(
+    info_x: &[f64],
+    ti: &[f64],
+    n: usize,
+    ie: usize,
+    inu: usize,
+) -> [f64; 3] {
+    let iu = mat_mul(&mat_mul(&transpose(ti, n), info_x, n), ti, n);
+    let a = [ie, inu];
+    let b: Vec<usize> = (0..n).filter(|i| *i != ie && *i != inu).collect();
+    let mut out = [iu[ie * n + ie], iu[ie * n + inu], iu[inu * n + inu]];
+    if !b.is_empty() {
+        let nb = b.len();
+        let ibb: Vec<f64> = (0..nb * nb)
+            .map(|k| iu[b[k / nb] * n + b[k % nb]])
+            .collect();
+        let (pinv, _) = crate::optimize::linalg::pseudo_inverse_symmetric(&ibb, nb, 1e-12);
+        let mut schur = [[0.0; 2]; 2];
+        for (r, &ar) in a.iter().enumerate() {
+            for (c, &ac) in a.iter().enumerate() {
+                let mut s = 0.0;
+                for p in 0..nb {
+                    for q in 0..nb {
+                        s += iu[ar * n + b[p]] * pinv[p * nb + q] * iu[b[q] * n + ac];
+                    }
+                }
+                schur[r][c] = s;
+            }
+        }
+        out[0] -= schur[0][0];
+        out[1] -= 0.5 * (schur[0][1] + schur[1][0]);
+        out[2] -= schur[1][1];
+    }
+    // Round-off of the subtraction may leave a tiny negative eigenvalue: clip to PSD.
+    let (pp, ps, ss) = (out[0].max(0.0), out[1], out[2].max(0.0));
+    let lim = (pp * ss).sqrt();
+    [pp, ps.clamp(-lim, lim), ss]
 }
 
 /// Points scanned along each of the two valley lines beyond the quadratic model.
@@ -558,6 +616,40 @@ fn soil_intervals(
             reaches_upper_bound: nu_range.1 >= nu_spec.upper - reach_nu,
         },
     )
+}
+
+/// 95 % intervals of E_m and ν_m of a soil known through u = (ln c_P, ln c_S) with covariance
+/// `cov` (row-major 2 × 2), inside the default search box: the range of each over the
+/// Δχ² ≤ 3.84 ellipse, as for a fit ([`soil_intervals`]). `None` where u is no soil.
+pub fn soil_intervals_of_speeds(
+    u: [f64; 2],
+    cov: [f64; 4],
+    rho: f64,
+) -> Option<(Interval, Interval)> {
+    let specs = super::problem::parameter_space(super::problem::Method::Default, &[]);
+    let bounds = Bounds::new(
+        specs.iter().map(|s| s.lower).collect(),
+        specs.iter().map(|s| s.upper).collect(),
+    )
+    .ok()?;
+    let ie = specs.iter().position(|s| s.param == Param::SoilModulus)?;
+    let inu = specs.iter().position(|s| s.param == Param::SoilPoisson)?;
+    let n = specs.len();
+    let (e, nu) = soil_from_speeds(u[0].exp(), u[1].exp(), rho)?;
+    let mut x: Vec<f64> = specs.iter().map(|s| 0.5 * (s.lower + s.upper)).collect();
+    x[ie] = specs[ie].coordinate(e);
+    x[inu] = nu;
+    let mut uu = x.clone();
+    uu[ie] = u[0];
+    uu[inu] = u[1];
+    let mut cov_u = vec![0.0; n * n];
+    cov_u[ie * n + ie] = cov[0];
+    cov_u[ie * n + inu] = cov[1];
+    cov_u[inu * n + ie] = cov[2];
+    cov_u[inu * n + inu] = cov[3];
+    Some(soil_intervals(
+        &specs, &bounds, &uu, &cov_u, n, ie, inu, rho, &x,
+    ))
 }
 
 /// Inverse of a symmetric positive definite matrix (Cholesky); falls back to the symmetric

@@ -1,0 +1,63 @@
+//! `pipewave plan --db DB --count N --out next.csv`: the next measurement campaign (P83).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use pipewave::field::plan;
+
+use super::export::open_existing;
+use super::Outcome;
+
+/// Arguments of `plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// The pipewave database (calibrated: the plan reads its soil field).
+    #[arg(long, value_name = "DB")]
+    db: PathBuf,
+    /// How many segments to choose.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    count: u32,
+    /// The CSV file to write, best first (replaced if it exists).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// Worker threads (default: all cores; the plan does not depend on it).
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
+}
+
+/// Choose, store and write the plan.
+pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
+    let mut database = open_existing(&args.db)?;
+    let jobs = args.jobs.unwrap_or_else(pipewave::batch::default_jobs);
+    let picks = plan::plan(database.conn_mut(), args.count as usize, jobs)
+        .with_context(|| format!("plan of {} failed", args.db.display()))?;
+    let mut w = csv::Writer::from_path(&args.out)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    w.write_record([
+        "segment_id",
+        "rank",
+        "expected_gain",
+        "leak_band_speed_std_m_per_s",
+        "weight",
+    ])?;
+    for p in &picks {
+        w.write_record([
+            p.segment_id.clone(),
+            p.rank.to_string(),
+            format!("{:.6e}", p.expected_gain),
+            p.leak_band_speed_std_m_per_s
+                .map_or(String::new(), |v| format!("{v:.3}")),
+            format!("{:.2}", p.weight),
+        ])?;
+    }
+    w.flush()
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    println!(
+        "plan: {} segments -> {} (each valued as a measurement carrying the median information of \
+         the network's fitted pipes of its material; weight: length)",
+        picks.len(),
+        args.out.display()
+    );
+    Ok(Outcome::Done)
+}

@@ -1,0 +1,549 @@
+//! The soil field's tables (physics §7.12): `field_runs`, `field_classes`, `field_segments`,
+//! `predictions` with `prediction_curves`, and `plan_picks`. Each field update replaces the
+//! per-segment rows (only the latest are kept, naming the run that made them).
+
+use rusqlite::{params, Connection, OptionalExtension, Row, TransactionBehavior};
+
+use super::results::CurvePoint;
+use super::DbError;
+
+/// What the field needs of one segment: its inventory labels and geometry and its latest
+/// fit's soil speeds, information and leak-band speed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldInput {
+    /// The segment.
+    pub segment_id: String,
+    /// Geometry as stored (WKT) and its EPSG code.
+    pub geometry_wkt: Option<String>,
+    /// EPSG code.
+    pub srid: Option<i64>,
+    /// `soil_type`.
+    pub soil_type: Option<String>,
+    /// Material code.
+    pub material: String,
+    /// `soil_zone`.
+    pub soil_zone: Option<String>,
+    /// `length_m`.
+    pub length_m: Option<f64>,
+    /// The inventory row's hash (what a fit depends on).
+    pub inputs_hash: String,
+    /// Latest fit's row id (None: never fitted).
+    pub fit_id: Option<i64>,
+    /// Latest fit's status.
+    pub fit_status: Option<String>,
+    /// Latest fit's c_P and c_S, m/s.
+    pub speeds: Option<(f64, f64)>,
+    /// Latest fit's information (I_PP, I_PS, I_SS).
+    pub information: Option<[f64; 3]>,
+    /// Latest fit's leak-band speed and its error, m/s.
+    pub leak_band_speed: Option<(f64, f64)>,
+}
+
+/// Every segment's [`FieldInput`], in id order.
+pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
+    let mut stmt = conn.prepare(
+        "SELECT s.segment_id, s.geometry_wkt, s.srid, s.soil_type, s.soil_zone, s.length_m, \
+         s.inputs_hash, f.id, f.status, f.soil_p_wave_speed_m_per_s, \
+         f.soil_s_wave_speed_m_per_s, f.soil_information_pp, f.soil_information_ps, \
+         f.soil_information_ss, f.leak_band_speed_m_per_s, f.leak_band_speed_std_m_per_s, s.material \
+         FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
+         ORDER BY s.segment_id",
+    )?;
+    let rows = stmt.query_map([], |r| {
+        let pair = |a: Option<f64>, b: Option<f64>| a.zip(b);
+        let info = match (
+            r.get::<_, Option<f64>>(11)?,
+            r.get::<_, Option<f64>>(12)?,
+            r.get::<_, Option<f64>>(13)?,
+        ) {
+            (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+            _ => None,
+        };
+        Ok(FieldInput {
+            segment_id: r.get(0)?,
+            geometry_wkt: r.get(1)?,
+            srid: r.get(2)?,
+            soil_type: r.get(3)?,
+            soil_zone: r.get(4)?,
+            length_m: r.get(5)?,
+            inputs_hash: r.get(6)?,
+            fit_id: r.get(7)?,
+            fit_status: r.get(8)?,
+            speeds: pair(r.get(9)?, r.get(10)?),
+            information: info,
+            leak_band_speed: pair(r.get(14)?, r.get(15)?),
+            material: r.get(16)?,
+        })
+    })?;
+    Ok(rows.collect::<Result<_, _>>()?)
+}
+
+/// One row of `field_runs`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FieldRunRow {
+    /// Row id (None before insertion).
+    pub id: Option<i64>,
+    /// The calibrate run that updated the field.
+    pub run_id: Option<i64>,
+    /// Fingerprint of the inputs.
+    pub fingerprint: String,
+    /// Segments in the inventory.
+    pub n_segments: i64,
+    /// Measured segments the field learned from.
+    pub n_measured: i64,
+    /// Soil classes.
+    pub n_classes: i64,
+    /// Segments given a prediction.
+    pub n_predicted: i64,
+    /// Of those, predicted from their class mean alone (no geometry).
+    pub n_class_mean_only: i64,
+    /// Segments left without a speed.
+    pub n_without_speed: i64,
+    /// m of the conditioning.
+    pub neighbours: i64,
+    /// ℓ, m.
+    pub correlation_length_m: Option<f64>,
+    /// ℓ's search range, m.
+    pub correlation_length_lo_m: Option<f64>,
+    /// ℓ's search range, m.
+    pub correlation_length_hi_m: Option<f64>,
+    /// B (PP, PS, SS).
+    pub field_cov: [Option<f64>; 3],
+    /// T (PP, SS).
+    pub scatter_var: [Option<f64>; 2],
+    /// ln p(û | θ).
+    pub log_likelihood: Option<f64>,
+    /// `marginal_likelihood` or `defaults`.
+    pub hyper_source: String,
+    /// Standard deviation of the leave-one-out z.
+    pub loo_z_std: Option<f64>,
+    /// Segments flagged `field_outlier`.
+    pub n_field_outliers: i64,
+    /// Segments whose label the neighbourhood rejects.
+    pub n_labels_rejected: i64,
+    /// Time taken, s.
+    pub elapsed_s: Option<f64>,
+    /// Set by the database.
+    pub created_at: Option<String>,
+}
+
+/// One row of `field_classes`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldClassRow {
+    /// The class (a `soil_zone` or `soil_type`, or the one class of an unlabelled network).
+    pub soil_class: String,
+    /// Segments in it.
+    pub n_segments: i64,
+    /// Measured segments in it.
+    pub n_measured: i64,
+    /// Its mean (ln c_P, ln c_S) and their posterior standard deviations.
+    pub mean: [f64; 2],
+    /// Standard deviations of the mean.
+    pub std: [f64; 2],
+}
+
+/// One row of `field_segments`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FieldSegmentRow {
+    /// The segment.
+    pub segment_id: String,
+    /// Its label as given.
+    pub label: Option<String>,
+    /// The class it was given.
+    pub soil_class: Option<String>,
+    /// Its neighbourhood rejects its label.
+    pub label_rejected: bool,
+    /// It has a fit the field learned from.
+    pub measured: bool,
+    /// Its leave-one-out prediction (measured segments), m/s.
+    pub field_leak_band_speed_m_per_s: Option<f64>,
+    /// Its error, m/s.
+    pub field_leak_band_speed_std_m_per_s: Option<f64>,
+    /// z of P82.
+    pub loo_z: Option<f64>,
+    /// |z| beyond the outlier threshold.
+    pub field_outlier: bool,
+    /// Why, in words.
+    pub note: String,
+}
+
+/// One row of `predictions`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PredictionRow {
+    /// The segment.
+    pub segment_id: String,
+    /// The calibrate run that made it.
+    pub run_id: Option<i64>,
+    /// c_P and its error, m/s.
+    pub soil_p_wave_speed: Option<(f64, f64)>,
+    /// c_S and its error, m/s.
+    pub soil_s_wave_speed: Option<(f64, f64)>,
+    /// E_m, Pa, with its 95 % interval.
+    pub soil_youngs_modulus: Option<(f64, f64, f64)>,
+    /// ν_m with its 95 % interval.
+    pub soil_poisson: Option<(f64, f64, f64)>,
+    /// Leak-band speed and its error, m/s.
+    pub leak_band_speed: Option<(f64, f64)>,
+    /// ∂(leak-band speed)/∂(ln c_P, ln c_S), m/s.
+    pub leak_band_speed_gradient: Option<[f64; 2]>,
+    /// The class it was predicted in.
+    pub soil_class: Option<String>,
+    /// Measured segments it was conditioned on.
+    pub n_neighbours: i64,
+    /// What it rests on.
+    pub note: String,
+}
+
+/// A prediction with its curve.
+pub type Prediction = (PredictionRow, Vec<CurvePoint>);
+
+/// The newest field update, if any.
+pub fn latest_field_run(conn: &Connection) -> Result<Option<FieldRunRow>, DbError> {
+    Ok(conn
+        .query_row(
+            "SELECT * FROM field_runs ORDER BY id DESC LIMIT 1",
+            [],
+            field_run_from_row,
+        )
+        .optional()?)
+}
+
+fn field_run_from_row(r: &Row<'_>) -> rusqlite::Result<FieldRunRow> {
+    Ok(FieldRunRow {
+        id: r.get("id")?,
+        run_id: r.get("run_id")?,
+        fingerprint: r.get("fingerprint")?,
+        n_segments: r.get("n_segments")?,
+        n_measured: r.get("n_measured")?,
+        n_classes: r.get("n_classes")?,
+        n_predicted: r.get("n_predicted")?,
+        n_class_mean_only: r.get("n_class_mean_only")?,
+        n_without_speed: r.get("n_without_speed")?,
+        neighbours: r.get("neighbours")?,
+        correlation_length_m: r.get("correlation_length_m")?,
+        correlation_length_lo_m: r.get("correlation_length_lo_m")?,
+        correlation_length_hi_m: r.get("correlation_length_hi_m")?,
+        field_cov: [
+            r.get("field_var_ln_cp")?,
+            r.get("field_cov_ln_cp_ln_cs")?,
+            r.get("field_var_ln_cs")?,
+        ],
+        scatter_var: [r.get("scatter_var_ln_cp")?, r.get("scatter_var_ln_cs")?],
+        log_likelihood: r.get("log_likelihood")?,
+        hyper_source: r.get("hyper_source")?,
+        loo_z_std: r.get("loo_z_std")?,
+        n_field_outliers: r.get("n_field_outliers")?,
+        n_labels_rejected: r.get("n_labels_rejected")?,
+        elapsed_s: r.get("elapsed_s")?,
+        created_at: r.get("created_at")?,
+    })
+}
+
+/// Store a field update in one transaction: its run row and classes, and every segment's row
+/// and prediction in place of the previous update's. Returns the field run's id.
+pub fn replace_field(
+    conn: &mut Connection,
+    run: &FieldRunRow,
+    classes: &[FieldClassRow],
+    segments: &[FieldSegmentRow],
+    predictions: &[Prediction],
+) -> Result<i64, DbError> {
+    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+    tx.execute(
+        "INSERT INTO field_runs (run_id, fingerprint, n_segments, n_measured, n_classes, \
+         n_predicted, n_class_mean_only, n_without_speed, neighbours, correlation_length_m, \
+         correlation_length_lo_m, correlation_length_hi_m, field_var_ln_cp, \
+         field_cov_ln_cp_ln_cs, field_var_ln_cs, scatter_var_ln_cp, scatter_var_ln_cs, \
+         log_likelihood, hyper_source, loo_z_std, n_field_outliers, n_labels_rejected, \
+         elapsed_s) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, \
+         ?16, ?17, ?18, ?19, ?20, ?21, ?22, ?23)",
+        params![
+            run.run_id,
+            run.fingerprint,
+            run.n_segments,
+            run.n_measured,
+            run.n_classes,
+            run.n_predicted,
+            run.n_class_mean_only,
+            run.n_without_speed,
+            run.neighbours,
+            run.correlation_length_m,
+            run.correlation_length_lo_m,
+            run.correlation_length_hi_m,
+            run.field_cov[0],
+            run.field_cov[1],
+            run.field_cov[2],
+            run.scatter_var[0],
+            run.scatter_var[1],
+            run.log_likelihood,
+            run.hyper_source,
+            run.loo_z_std,
+            run.n_field_outliers,
+            run.n_labels_rejected,
+            run.elapsed_s,
+        ],
+    )?;
+    let field_run_id = tx.last_insert_rowid();
+    // Only the latest update's classes are kept, as its segments and predictions are.
+    tx.execute("DELETE FROM field_classes", [])?;
+    {
+        let mut ins = tx.prepare(
+            "INSERT INTO field_classes (field_run_id, soil_class, n_segments, n_measured, \
+             mean_ln_cp, mean_ln_cs, std_ln_cp, std_ln_cs) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
+        )?;
+        for c in classes {
+            ins.execute(params![
+                field_run_id,
+                c.soil_class,
+                c.n_segments,
+                c.n_measured,
+                c.mean[0],
+                c.mean[1],
+                c.std[0],
+                c.std[1],
+            ])?;
+        }
+    }
+    tx.execute("DELETE FROM field_segments", [])?;
+    tx.execute("DELETE FROM predictions", [])?;
+    {
+        let mut ins = tx.prepare(
+            "INSERT INTO field_segments (segment_id, field_run_id, label, soil_class, \
+             label_rejected, measured, field_leak_band_speed_m_per_s, \
+             field_leak_band_speed_std_m_per_s, loo_z, field_outlier, note) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+        )?;
+        for s in segments {
+            ins.execute(params![
+                s.segment_id,
+                field_run_id,
+                s.label,
+                s.soil_class,
+                s.label_rejected,
+                s.measured,
+                s.field_leak_band_speed_m_per_s,
+                s.field_leak_band_speed_std_m_per_s,
+                s.loo_z,
+                s.field_outlier,
+                s.note,
+            ])?;
+        }
+    }
+    {
+        let mut ins = tx.prepare(
+            "INSERT INTO predictions (segment_id, run_id, soil_p_wave_speed_m_per_s, \
+             soil_p_wave_speed_std_m_per_s, soil_s_wave_speed_m_per_s, \
+             soil_s_wave_speed_std_m_per_s, soil_youngs_modulus_pa, soil_youngs_modulus_lo_pa, \
+             soil_youngs_modulus_hi_pa, soil_poisson, soil_poisson_lo, soil_poisson_hi, \
+             leak_band_speed_m_per_s, leak_band_speed_std_m_per_s, soil_class, n_neighbours, \
+             note, leak_band_speed_gradient_ln_cp, leak_band_speed_gradient_ln_cs) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, \
+             ?17, ?18, ?19)",
+        )?;
+        let mut curve = tx.prepare(
+            "INSERT INTO prediction_curves (segment_id, frequency_hz, phase_speed_m_per_s, \
+             phase_speed_std_m_per_s, attenuation_db_per_m, attenuation_std_db_per_m) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+        )?;
+        for (p, pts) in predictions {
+            let (cp, cs) = (p.soil_p_wave_speed, p.soil_s_wave_speed);
+            let (e, nu) = (p.soil_youngs_modulus, p.soil_poisson);
+            ins.execute(params![
+                p.segment_id,
+                p.run_id,
+                cp.map(|v| v.0),
+                cp.map(|v| v.1),
+                cs.map(|v| v.0),
+                cs.map(|v| v.1),
+                e.map(|v| v.0),
+                e.map(|v| v.1),
+                e.map(|v| v.2),
+                nu.map(|v| v.0),
+                nu.map(|v| v.1),
+                nu.map(|v| v.2),
+                p.leak_band_speed.map(|v| v.0),
+                p.leak_band_speed.map(|v| v.1),
+                p.soil_class,
+                p.n_neighbours,
+                p.note,
+                p.leak_band_speed_gradient.map(|g| g[0]),
+                p.leak_band_speed_gradient.map(|g| g[1]),
+            ])?;
+            for c in pts {
+                curve.execute(params![
+                    p.segment_id,
+                    c.frequency_hz,
+                    c.phase_speed_m_per_s,
+                    c.phase_speed_std_m_per_s,
+                    c.attenuation_db_per_m,
+                    c.attenuation_std_db_per_m,
+                ])?;
+            }
+        }
+    }
+    tx.commit()?;
+    Ok(field_run_id)
+}
+
+/// A segment's prediction with its curve (by increasing frequency), if it has one.
+pub fn prediction_for(conn: &Connection, segment_id: &str) -> Result<Option<Prediction>, DbError> {
+    let row = conn
+        .prepare_cached("SELECT * FROM predictions WHERE segment_id = ?1")?
+        .query_row([segment_id], |r| {
+            let pair = |a: Option<f64>, b: Option<f64>| a.zip(b);
+            let triple = |a: Option<f64>, b: Option<f64>, c: Option<f64>| match (a, b, c) {
+                (Some(a), Some(b), Some(c)) => Some((a, b, c)),
+                _ => None,
+            };
+            Ok(PredictionRow {
+                segment_id: r.get("segment_id")?,
+                run_id: r.get("run_id")?,
+                soil_p_wave_speed: pair(
+                    r.get("soil_p_wave_speed_m_per_s")?,
+                    r.get("soil_p_wave_speed_std_m_per_s")?,
+                ),
+                soil_s_wave_speed: pair(
+                    r.get("soil_s_wave_speed_m_per_s")?,
+                    r.get("soil_s_wave_speed_std_m_per_s")?,
+                ),
+                soil_youngs_modulus: triple(
+                    r.get("soil_youngs_modulus_pa")?,
+                    r.get("soil_youngs_modulus_lo_pa")?,
+                    r.get("soil_youngs_modulus_hi_pa")?,
+                ),
+                soil_poisson: triple(
+                    r.get("soil_poisson")?,
+                    r.get("soil_poisson_lo")?,
+                    r.get("soil_poisson_hi")?,
+                ),
+                leak_band_speed: pair(
+                    r.get("leak_band_speed_m_per_s")?,
+                    r.get("leak_band_speed_std_m_per_s")?,
+                ),
+                leak_band_speed_gradient: pair(
+                    r.get("leak_band_speed_gradient_ln_cp")?,
+                    r.get("leak_band_speed_gradient_ln_cs")?,
+                )
+                .map(|(a, b)| [a, b]),
+                soil_class: r.get("soil_class")?,
+                n_neighbours: r.get::<_, Option<i64>>("n_neighbours")?.unwrap_or(0),
+                note: r.get("note")?,
+            })
+        })
+        .optional()?;
+    let Some(row) = row else {
+        return Ok(None);
+    };
+    let mut stmt = conn.prepare_cached(
+        "SELECT frequency_hz, phase_speed_m_per_s, phase_speed_std_m_per_s, \
+         attenuation_db_per_m, attenuation_std_db_per_m FROM prediction_curves \
+         WHERE segment_id = ?1 ORDER BY frequency_hz",
+    )?;
+    let pts = stmt
+        .query_map([segment_id], |r| {
+            Ok(CurvePoint {
+                frequency_hz: r.get(0)?,
+                phase_speed_m_per_s: r.get(1)?,
+                phase_speed_std_m_per_s: r.get(2)?,
+                attenuation_db_per_m: r.get(3)?,
+                attenuation_std_db_per_m: r.get(4)?,
+            })
+        })?
+        .collect::<Result<_, _>>()?;
+    Ok(Some((row, pts)))
+}
+
+/// A segment's row of the latest field update, if any.
+pub fn field_segment(
+    conn: &Connection,
+    segment_id: &str,
+) -> Result<Option<FieldSegmentRow>, DbError> {
+    Ok(conn
+        .prepare_cached("SELECT * FROM field_segments WHERE segment_id = ?1")?
+        .query_row([segment_id], field_segment_from_row)
+        .optional()?)
+}
+
+/// Every segment's row of the latest field update, in id order.
+pub fn field_segments(conn: &Connection) -> Result<Vec<FieldSegmentRow>, DbError> {
+    let mut stmt = conn.prepare("SELECT * FROM field_segments ORDER BY segment_id")?;
+    let rows = stmt.query_map([], field_segment_from_row)?;
+    Ok(rows.collect::<Result<_, _>>()?)
+}
+
+fn field_segment_from_row(r: &Row<'_>) -> rusqlite::Result<FieldSegmentRow> {
+    Ok(FieldSegmentRow {
+        segment_id: r.get("segment_id")?,
+        label: r.get("label")?,
+        soil_class: r.get("soil_class")?,
+        label_rejected: r.get("label_rejected")?,
+        measured: r.get("measured")?,
+        field_leak_band_speed_m_per_s: r.get("field_leak_band_speed_m_per_s")?,
+        field_leak_band_speed_std_m_per_s: r.get("field_leak_band_speed_std_m_per_s")?,
+        loo_z: r.get("loo_z")?,
+        field_outlier: r.get("field_outlier")?,
+        note: r.get("note")?,
+    })
+}
+
+/// One pick of a measurement plan (P83).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanPick {
+    /// 1 = best.
+    pub rank: i64,
+    /// The segment to measure.
+    pub segment_id: String,
+    /// Expected reduction of the network's weighted relative speed variance.
+    pub expected_gain: f64,
+    /// Its current leak-band speed error, m/s.
+    pub leak_band_speed_std_m_per_s: Option<f64>,
+    /// Its weight (length or risk weight).
+    pub weight: f64,
+}
+
+/// Replace the stored plan.
+pub fn replace_plan(
+    conn: &mut Connection,
+    field_run_id: Option<i64>,
+    picks: &[PlanPick],
+) -> Result<(), DbError> {
+    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
+    tx.execute("DELETE FROM plan_picks", [])?;
+    {
+        let mut ins = tx.prepare(
+            "INSERT INTO plan_picks (rank, segment_id, field_run_id, expected_gain, \
+             leak_band_speed_std_m_per_s, weight) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+        )?;
+        for p in picks {
+            ins.execute(params![
+                p.rank,
+                p.segment_id,
+                field_run_id,
+                p.expected_gain,
+                p.leak_band_speed_std_m_per_s,
+                p.weight,
+            ])?;
+        }
+    }
+    tx.commit()?;
+    Ok(())
+}
+
+/// The stored plan, best first.
+pub fn plan_picks(conn: &Connection) -> Result<Vec<PlanPick>, DbError> {
+    let mut stmt = conn.prepare(
+        "SELECT rank, segment_id, expected_gain, leak_band_speed_std_m_per_s, weight \
+         FROM plan_picks ORDER BY rank",
+    )?;
+    let rows = stmt.query_map([], |r| {
+        Ok(PlanPick {
+            rank: r.get(0)?,
+            segment_id: r.get(1)?,
+            expected_gain: r.get(2)?,
+            leak_band_speed_std_m_per_s: r.get(3)?,
+            weight: r.get(4)?,
+        })
+    })?;
+    Ok(rows.collect::<Result<_, _>>()?)
+}

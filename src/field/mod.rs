@@ -1,0 +1,642 @@
+//! The soil field over the network (physics §7.12): every segment gets a speed.
+//!
+//! The fitted segments observe the soil u = (ln c_P, ln c_S) through their information (P79);
+//! [`model`] pools them into a Gaussian field with class means and a spatially correlated part
+//! (P78, P80); [`labels`] decides each segment's class from its label and its neighbours';
+//! [`predict`] carries the field's posterior through the forward model to a speed (P81);
+//! [`update_field`] does it all after a calibrate run: predictions for every segment without a
+//! fitted speed, the leave-one-out check of every measured one (P82), stored in place of the
+//! previous update's. [`plan`] chooses where to measure next (P83).
+
+pub mod labels;
+pub mod model;
+pub mod plan;
+pub mod predict;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use rusqlite::Connection;
+
+use crate::db::field::{
+    self as store, FieldClassRow, FieldInput, FieldRunRow, FieldSegmentRow, Prediction,
+    PredictionRow,
+};
+use crate::db::hash::fnv1a64;
+use crate::db::wkt::LineString;
+use crate::db::{pages, DbError, SegmentRecord};
+use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
+use crate::physics::{ContactMode, Model};
+
+use model::{Field, Observation, Posterior, Sym2, NEIGHBOURS};
+use predict::{predict_speed, soil_of, SpeedPrediction};
+
+/// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
+pub const FIELD_ALGORITHM_VERSION: u32 = 1;
+
+/// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
+/// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
+/// measured segments that the field describes well gets about one false alarm.
+pub const FIELD_OUTLIER_Z: f64 = 3.29;
+
+/// The one class of a network whose inventory has neither `soil_zone` nor `soil_type`.
+pub const NETWORK_CLASS: &str = "network";
+
+/// The class of segments without a label whose neighbourhood has none either.
+pub const UNLABELLED_CLASS: &str = "unlabelled";
+
+/// Segments read from the inventory at a time for the predictions (flat memory).
+const PAGE: usize = 256;
+
+/// Mean Earth radius, m (IUGG), for distances between longitude/latitude midpoints.
+const EARTH_RADIUS_M: f64 = 6_371_008.8;
+
+/// A neighbour further than this many correlation lengths away hardly informs a prediction
+/// (weight e⁻² or less); the note counts only the nearer ones.
+const INFORMATIVE_LENGTHS: f64 = 2.0;
+
+/// How the field is updated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FieldSettings {
+    /// The model variant the speeds are computed with (the run's).
+    pub model: Model,
+    /// The contact reading (the run's).
+    pub contact_mode: ContactMode,
+    /// Worker threads (the result does not depend on it).
+    pub jobs: usize,
+    /// Rebuild even when the inputs are unchanged.
+    pub force: bool,
+}
+
+/// What a field update did.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FieldUpdate {
+    /// The stored field and predictions were current: nothing was done.
+    pub up_to_date: bool,
+    /// The field run's row (the stored one when up to date).
+    pub run: FieldRunRow,
+}
+
+impl FieldUpdate {
+    /// The summary line, e.g. `field: 81 segments predicted from 21 measured (3 classes,
+    /// correlation length 350 m); leave-one-out z spread 1.04, 0 field outliers; 2 labels
+    /// rejected; in 1.2 s`.
+    pub fn line(&self) -> String {
+        let r = &self.run;
+        if self.up_to_date {
+            return format!(
+                "field: up to date ({} segments predicted from {} measured)",
+                r.n_predicted, r.n_measured
+            );
+        }
+        let mut s = format!(
+            "field: {} segments predicted from {} measured ({} class{}",
+            r.n_predicted,
+            r.n_measured,
+            r.n_classes,
+            if r.n_classes == 1 { "" } else { "es" }
+        );
+        if let Some(l) = r.correlation_length_m {
+            let _ = write!(s, ", correlation length {l:.0} m");
+        }
+        if r.hyper_source == model::HyperSource::Defaults.as_str() && r.n_measured > 0 {
+            s.push_str(", default hyper-parameters: too few measured");
+        }
+        s.push(')');
+        if let Some(z) = r.loo_z_std {
+            let _ = write!(s, "; leave-one-out z spread {z:.2}");
+        }
+        let _ = write!(
+            s,
+            ", {} field outlier{}; {} label{} rejected",
+            r.n_field_outliers,
+            if r.n_field_outliers == 1 { "" } else { "s" },
+            r.n_labels_rejected,
+            if r.n_labels_rejected == 1 { "" } else { "s" }
+        );
+        if r.n_without_speed > 0 {
+            let _ = write!(s, "; {} without a speed", r.n_without_speed);
+        }
+        if let Some(t) = r.elapsed_s {
+            let _ = write!(s, "; in {t:.1} s");
+        }
+        s
+    }
+}
+
+/// One segment as the field sees it.
+#[derive(Debug, Clone)]
+pub struct Site {
+    /// The segment.
+    pub segment_id: String,
+    /// Its midpoint in metres (None: no readable geometry).
+    pub pos: Option<[f64; 2]>,
+    /// Its length, m (geometry, else the inventory's `length_m`).
+    pub length: Option<f64>,
+    /// Its material code.
+    pub material: String,
+    /// Its label as given (`soil_zone`, else `soil_type`).
+    pub label: Option<String>,
+    /// Its class index.
+    pub class: Option<usize>,
+    /// Its neighbourhood rejects its label.
+    pub label_rejected: bool,
+    /// Its index among the field's members, when it has a usable fit.
+    pub member: Option<usize>,
+    /// Its fitted leak-band speed and error, m/s.
+    pub fitted_speed: Option<(f64, f64)>,
+}
+
+/// Midpoint (along its length) and length of a polyline, in the units of its coordinates.
+fn midpoint_and_length(points: &[(f64, f64)]) -> Option<([f64; 2], f64)> {
+    let seg = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0).hypot(b.1 - a.1);
+    let total: f64 = points.windows(2).map(|w| seg(w[0], w[1])).sum();
+    if !total.is_finite() || points.is_empty() {
+        return None;
+    }
+    let mut left = 0.5 * total;
+    for w in points.windows(2) {
+        let d = seg(w[0], w[1]);
+        if d >= left && d > 0.0 {
+            let t = left / d;
+            return Some((
+                [
+                    w[0].0 + t * (w[1].0 - w[0].0),
+                    w[0].1 + t * (w[1].1 - w[0].1),
+                ],
+                total,
+            ));
+        }
+        left -= d;
+    }
+    Some(([points[0].0, points[0].1], total))
+}
+
+/// A segment's midpoint and length in metres: projected coordinates as they are, longitude and
+/// latitude by a local equirectangular projection (adequate over a network's extent).
+fn site_geometry(wkt: Option<&str>, srid: Option<i64>) -> Option<([f64; 2], f64)> {
+    let line = LineString::parse_wkt(wkt?).ok()?;
+    let geographic = srid.is_some_and(crate::export::crs::is_geographic);
+    if !geographic {
+        return midpoint_and_length(&line.points);
+    }
+    let lat0 = line.points.iter().map(|p| p.1).sum::<f64>() / line.points.len() as f64;
+    let k = EARTH_RADIUS_M * std::f64::consts::PI / 180.0;
+    let pts: Vec<(f64, f64)> = line
+        .points
+        .iter()
+        .map(|p| (p.0 * k * lat0.to_radians().cos(), p.1 * k))
+        .collect();
+    midpoint_and_length(&pts)
+}
+
+/// A label: the text, trimmed, when it holds more than spaces.
+fn label_of(v: Option<&str>) -> Option<String> {
+    v.map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(str::to_string)
+}
+
+/// Fingerprint of everything a field update depends on.
+fn fingerprint(inputs: &[FieldInput], settings: &FieldSettings) -> String {
+    let mut text = format!(
+        "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
+        settings.model.as_str(),
+        settings.contact_mode.as_str()
+    );
+    for i in inputs {
+        let _ = writeln!(
+            text,
+            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+            i.segment_id,
+            i.inputs_hash,
+            i.soil_type,
+            i.soil_zone,
+            i.geometry_wkt,
+            i.srid,
+            i.length_m,
+            i.fit_id
+        );
+    }
+    format!("{:016x}", fnv1a64(text.as_bytes()))
+}
+
+/// The sites and members of the field from the inputs, with the class names.
+pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
+    let mut sites: Vec<Site> = inputs
+        .iter()
+        .map(|i| {
+            let geo = site_geometry(i.geometry_wkt.as_deref(), i.srid);
+            let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
+            Site {
+                segment_id: i.segment_id.clone(),
+                pos: geo.map(|g| g.0),
+                length: geo.map(|g| g.1).or(i.length_m),
+                material: i.material.clone(),
+                label: label_of(i.soil_zone.as_deref())
+                    .or_else(|| label_of(i.soil_type.as_deref())),
+                class: None,
+                label_rejected: false,
+                member: None,
+                fitted_speed: i.leak_band_speed.filter(|_| usable),
+            }
+        })
+        .collect();
+    // Classes: the labels in sorted order (one "network" class when there are none).
+    let mut names: Vec<String> = sites.iter().filter_map(|s| s.label.clone()).collect();
+    names.sort();
+    names.dedup();
+    let index: BTreeMap<&str, usize> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i))
+        .collect();
+    let own: Vec<Option<usize>> = sites
+        .iter()
+        .map(|s| s.label.as_deref().map(|l| index[l]))
+        .collect();
+    let pos: Vec<Option<[f64; 2]>> = sites.iter().map(|s| s.pos).collect();
+    let smoothed = labels::smooth(&own, &pos);
+    let fallback = if names.is_empty() {
+        NETWORK_CLASS
+    } else {
+        UNLABELLED_CLASS
+    };
+    let mut fallback_index = None;
+    for (s, (class, rejected)) in sites.iter_mut().zip(smoothed) {
+        s.class = Some(class.unwrap_or_else(|| {
+            *fallback_index.get_or_insert_with(|| {
+                names.push(fallback.to_string());
+                names.len() - 1
+            })
+        }));
+        s.label_rejected = rejected;
+    }
+    let mut obs = Vec::new();
+    for (s, i) in sites.iter_mut().zip(inputs) {
+        let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
+        let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, usable) else {
+            continue;
+        };
+        if !(cp > 0.0 && cs > 0.0 && info.iter().all(|v| v.is_finite())) {
+            continue;
+        }
+        s.member = Some(obs.len());
+        obs.push(Observation {
+            pos: s.pos,
+            class: s.class.unwrap_or(0),
+            u: [cp.ln(), cs.ln()],
+            info: Sym2::new(info[0], info[1], info[2]),
+            key: fnv1a64(s.segment_id.as_bytes()),
+        });
+    }
+    (sites, obs, names)
+}
+
+/// The bounds of ℓ (physics §7.12): a typical segment length (the median) and the network's
+/// extent (the diagonal of the midpoints' bounding box), m.
+pub fn length_bounds(sites: &[Site]) -> (f64, f64) {
+    let mut lengths: Vec<f64> = sites
+        .iter()
+        .filter_map(|s| s.length)
+        .filter(|l| *l > 0.0 && l.is_finite())
+        .collect();
+    lengths.sort_by(f64::total_cmp);
+    let typical = lengths.get(lengths.len() / 2).copied().unwrap_or(100.0);
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in sites.iter().filter_map(|s| s.pos) {
+        for a in 0..2 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let extent = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+    let extent = if extent.is_finite() { extent } else { 0.0 };
+    (typical, extent.max(10.0 * typical))
+}
+
+/// The note of a prediction: what it rests on.
+fn note_of(site: &Site, post: &Posterior, field: &Field, class: &str) -> String {
+    let reach = INFORMATIVE_LENGTHS * field.hyper.ell;
+    let near: Vec<f64> = post
+        .neighbours
+        .iter()
+        .map(|n| n.1)
+        .filter(|d| *d <= reach)
+        .collect();
+    let mut note = if site.pos.is_none() {
+        format!("no geometry: the mean of soil class {class}")
+    } else if near.is_empty() {
+        format!(
+            "no measured segment within {:.0} m: the mean of soil class {class}",
+            reach
+        )
+    } else {
+        format!(
+            "from {} measured segment{} within {:.0} m; soil class {class}",
+            near.len(),
+            if near.len() == 1 { "" } else { "s" },
+            near.iter().copied().fold(0.0, f64::max)
+        )
+    };
+    if site.label_rejected {
+        let _ = write!(
+            note,
+            "; its label {} is rejected by its neighbourhood",
+            site.label.as_deref().unwrap_or("")
+        );
+    }
+    note
+}
+
+/// The stored prediction of a site from its posterior and the quadrature's speed.
+fn prediction_row(
+    site: &Site,
+    run_id: Option<i64>,
+    post: &Posterior,
+    speed: &SpeedPrediction,
+    rho: f64,
+    class: &str,
+    note: String,
+) -> PredictionRow {
+    let (cp, cs) = (post.mean[0].exp(), post.mean[1].exp());
+    let soil = soil_of(post.mean, rho);
+    let intervals = soil.and_then(|(e, nu)| {
+        let u = {
+            let (p, s) = soil_speeds(e, nu, rho);
+            [p.ln(), s.ln()]
+        };
+        soil_intervals_of_speeds(u, [post.cov.pp, post.cov.ps, post.cov.ps, post.cov.ss], rho)
+            .map(|(ie, inu)| ((e, ie.lo, ie.hi), (nu, inu.lo, inu.hi)))
+    });
+    PredictionRow {
+        segment_id: site.segment_id.clone(),
+        run_id,
+        soil_p_wave_speed: Some((cp, cp * post.cov.pp.max(0.0).sqrt())),
+        soil_s_wave_speed: Some((cs, cs * post.cov.ss.max(0.0).sqrt())),
+        soil_youngs_modulus: intervals.map(|i| i.0),
+        soil_poisson: intervals.map(|i| i.1),
+        leak_band_speed: speed.band.map(|b| (b.value, b.std)),
+        leak_band_speed_gradient: speed.band_gradient,
+        soil_class: Some(class.to_string()),
+        n_neighbours: post.neighbours.len() as i64,
+        note,
+    }
+}
+
+/// What the field computes for one site: its prediction (unmeasured) or its leave-one-out row
+/// (measured), and the speed's gradient in u (for `plan`).
+struct SiteResult {
+    row: FieldSegmentRow,
+    prediction: Option<Prediction>,
+}
+
+/// The field's work on one site.
+fn site_result(
+    site: &Site,
+    rec: Option<&SegmentRecord>,
+    field: Option<&Field>,
+    names: &[String],
+    settings: &FieldSettings,
+    run_id: Option<i64>,
+) -> SiteResult {
+    let class_name = site.class.map_or("", |k| names[k].as_str());
+    let mut row = FieldSegmentRow {
+        segment_id: site.segment_id.clone(),
+        label: site.label.clone(),
+        soil_class: site.class.map(|k| names[k].clone()),
+        label_rejected: site.label_rejected,
+        measured: site.member.is_some(),
+        ..FieldSegmentRow::default()
+    };
+    let none = |mut row: FieldSegmentRow, why: String| {
+        row.note = why;
+        SiteResult {
+            row,
+            prediction: None,
+        }
+    };
+    let Some(field) = field else {
+        return none(
+            row,
+            "no fitted segment in the network to learn the soil from".into(),
+        );
+    };
+    let Some(rec) = rec else {
+        return none(
+            row,
+            "not in the inventory when the field was updated".into(),
+        );
+    };
+    let data = match crate::batch::rows::segment_data(rec) {
+        Ok(d) => d,
+        Err(e) => return none(row, format!("no speed: the pipe's data are unusable ({e})")),
+    };
+    let class = site.class.unwrap_or(0);
+    let post = field.posterior(site.pos, class, site.member);
+    let speed = predict_speed(
+        &data,
+        settings.model,
+        settings.contact_mode,
+        post.mean,
+        post.cov,
+    );
+    let note = note_of(site, &post, field, class_name);
+    if site.fitted_speed.is_some() {
+        // A measured segment: the leave-one-out check (P82).
+        if let (Some(b), Some((c, s))) = (speed.band, site.fitted_speed) {
+            row.field_leak_band_speed_m_per_s = Some(b.value);
+            row.field_leak_band_speed_std_m_per_s = Some(b.std);
+            let z = (b.value - c) / (b.std * b.std + s * s).sqrt();
+            if z.is_finite() {
+                row.loo_z = Some(z);
+                row.field_outlier = z.abs() > FIELD_OUTLIER_Z;
+            }
+        }
+        row.note = note;
+        return SiteResult {
+            row,
+            prediction: None,
+        };
+    }
+    if speed.band.is_none() {
+        return none(
+            row,
+            format!("no speed: the forward model has no root for the soil predicted ({note})"),
+        );
+    }
+    row.note.clone_from(&note);
+    let pred = prediction_row(
+        site,
+        run_id,
+        &post,
+        &speed,
+        data.soil_density,
+        class_name,
+        note,
+    );
+    SiteResult {
+        row,
+        prediction: Some((pred, speed.curve)),
+    }
+}
+
+/// Run `f` in `pool` (the global pool when none could be built: only the speed differs).
+fn in_pool<R: Send>(pool: &Option<rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
+    match pool {
+        Some(p) => p.install(f),
+        None => f(),
+    }
+}
+
+/// Update the soil field after a calibrate run (`run_id`): rebuild it from the stored fits
+/// when its inputs changed (or `settings.force`), predict every segment without a fitted speed,
+/// check every measured one by leave-one-out, and store it all in place of the previous
+/// update's.
+pub fn update_field(
+    conn: &mut Connection,
+    run_id: Option<i64>,
+    settings: &FieldSettings,
+) -> Result<FieldUpdate, DbError> {
+    let started = Instant::now();
+    let inputs = store::field_inputs(conn)?;
+    let fp = fingerprint(&inputs, settings);
+    if !settings.force {
+        if let Some(last) = store::latest_field_run(conn)? {
+            if last.fingerprint == fp {
+                return Ok(FieldUpdate {
+                    up_to_date: true,
+                    run: last,
+                });
+            }
+        }
+    }
+    let (sites, obs, names) = sites_of(&inputs);
+    drop(inputs);
+    let ell_bounds = length_bounds(&sites);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(settings.jobs.max(1))
+        .build()
+        .ok();
+    let n_members = obs.len();
+    let field = in_pool(&pool, || {
+        (n_members > 0).then(|| Field::fit(obs, names.len(), ell_bounds))
+    });
+    // Every site's result, a page of the inventory at a time.
+    let by_id: BTreeMap<&str, usize> = sites
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.segment_id.as_str(), i))
+        .collect();
+    let mut rows: Vec<Option<FieldSegmentRow>> = vec![None; sites.len()];
+    let mut predictions: Vec<Prediction> = Vec::new();
+    let mut after: Option<String> = None;
+    loop {
+        let page = pages::segments_page(conn, after.as_deref(), PAGE)?;
+        let Some(last) = page.last() else {
+            break;
+        };
+        after = Some(last.segment_id.clone());
+        let full = page.len() >= PAGE;
+        let results: Vec<(usize, SiteResult)> = in_pool(&pool, || {
+            page.par_iter()
+                .filter_map(|rec| by_id.get(rec.segment_id.as_str()).map(|&i| (i, rec)))
+                .map(|(i, rec)| {
+                    (
+                        i,
+                        site_result(
+                            &sites[i],
+                            Some(rec),
+                            field.as_ref(),
+                            &names,
+                            settings,
+                            run_id,
+                        ),
+                    )
+                })
+                .collect()
+        });
+        for (i, r) in results {
+            rows[i] = Some(r.row);
+            predictions.extend(r.prediction);
+        }
+        if !full {
+            break;
+        }
+    }
+    let rows: Vec<FieldSegmentRow> = rows
+        .into_iter()
+        .zip(&sites)
+        .map(|(r, s)| {
+            r.unwrap_or_else(|| site_result(s, None, field.as_ref(), &names, settings, run_id).row)
+        })
+        .collect();
+    let z: Vec<f64> = rows.iter().filter_map(|r| r.loo_z).collect();
+    let z_std = (z.len() >= 2).then(|| {
+        let m = z.iter().sum::<f64>() / z.len() as f64;
+        (z.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (z.len() - 1) as f64).sqrt()
+    });
+    let n_predicted = predictions.len();
+    let n_class_mean_only = predictions
+        .iter()
+        .filter(|p| sites[by_id[p.0.segment_id.as_str()]].pos.is_none())
+        .count();
+    let n_with_fit = sites.iter().filter(|s| s.fitted_speed.is_some()).count();
+    let mut classes: Vec<FieldClassRow> = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let members: Vec<&Site> = sites.iter().filter(|s| s.class == Some(k)).collect();
+        let (mean, cov) = field.as_ref().map_or(
+            (
+                model::TYPICAL_LN_SPEEDS,
+                Sym2::diag(model::CLASS_PRIOR_SD.powi(2)),
+            ),
+            |f| f.class(k),
+        );
+        classes.push(FieldClassRow {
+            soil_class: name.clone(),
+            n_segments: members.len() as i64,
+            n_measured: members.iter().filter(|s| s.member.is_some()).count() as i64,
+            mean,
+            std: [cov.pp.max(0.0).sqrt(), cov.ss.max(0.0).sqrt()],
+        });
+    }
+    let h = field.as_ref().map(|f| f.hyper);
+    let run = FieldRunRow {
+        id: None,
+        run_id,
+        fingerprint: fp,
+        n_segments: sites.len() as i64,
+        n_measured: n_members as i64,
+        n_classes: names.len() as i64,
+        n_predicted: n_predicted as i64,
+        n_class_mean_only: n_class_mean_only as i64,
+        n_without_speed: (sites.len() - n_predicted - n_with_fit) as i64,
+        neighbours: NEIGHBOURS as i64,
+        correlation_length_m: h.map(|h| h.ell),
+        correlation_length_lo_m: Some(ell_bounds.0),
+        correlation_length_hi_m: Some(ell_bounds.1),
+        field_cov: [h.map(|h| h.b.pp), h.map(|h| h.b.ps), h.map(|h| h.b.ss)],
+        scatter_var: [h.map(|h| h.t.pp), h.map(|h| h.t.ss)],
+        log_likelihood: field.as_ref().and_then(|f| f.log_likelihood),
+        hyper_source: field
+            .as_ref()
+            .map_or(model::HyperSource::Defaults, |f| f.source)
+            .as_str()
+            .to_string(),
+        loo_z_std: z_std,
+        n_field_outliers: rows.iter().filter(|r| r.field_outlier).count() as i64,
+        n_labels_rejected: rows.iter().filter(|r| r.label_rejected).count() as i64,
+        elapsed_s: None,
+        created_at: None,
+    };
+    let mut run = run;
+    run.elapsed_s = Some(started.elapsed().as_secs_f64());
+    let id = store::replace_field(conn, &run, &classes, &rows, &predictions)?;
+    run.id = Some(id);
+    Ok(FieldUpdate {
+        up_to_date: false,
+        run,
+    })
+}

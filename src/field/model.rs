@@ -1,0 +1,956 @@
+//! The Gaussian soil field of the network (physics §7.12, P78–P80) in the two coordinates the
+//! fits determine, u = (ln c_P, ln c_S):
+//!
+//! u_s = μ_k(s) + w(x_s) + ε_s,  Cov(w(x), w(x′)) = B e^(−|x − x′|/ℓ),  ε_s ~ N(0, T),
+//!
+//! observed through each fit as û_s with information I_s (P79). A fit's noise is I_s⁻¹, taken
+//! as (I_s + ε·1)⁻¹ with ε = [`UNSEEN_PRECISION`]: a direction the data do not see keeps a
+//! variance so large that it carries no weight, which is the information form of P80 without
+//! a pseudo-inverse. The class means μ_k have a broad Gaussian prior about a typical soil and
+//! are integrated out of the marginal likelihood exactly (they enter linearly), so a class with
+//! no measured member keeps the prior and one seen only by metal pipes keeps the prior in c_S.
+//!
+//! Scale: every conditional is taken on the m = [`NEIGHBOURS`] nearest measured segments
+//! (Vecchia 1988; Datta et al. 2016): the likelihood as the product of each member's density
+//! given its nearest predecessors in a fixed order, the predictions given their nearest
+//! members. Cost O(n m³), memory O(n m).
+
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use rstar::primitives::GeomWithData;
+use rstar::RTree;
+
+use crate::optimize::simplex::NelderMead;
+use crate::optimize::{Bounds, FnObjective};
+
+/// Measured neighbours each conditional is taken on (m of the nearest-neighbour GP; 16–32
+/// reproduce the full GP's predictions to well below their error for an exponential kernel).
+pub const NEIGHBOURS: usize = 16;
+
+/// Precision added to every fit's information (in 1/(ln units)²): a direction the fit does not
+/// see gets a standard deviation of 1/√ε = 30 in ln(speed), a factor e³⁰, i.e. no weight.
+pub const UNSEEN_PRECISION: f64 = 1.0 / 900.0;
+
+/// The typical soil the class means are drawn towards where no fit sees them (the
+/// correlator's table soil of physics §7.12: E_m = 5e7 Pa, ν_m = 0.33, ρ_m = 1900 kg/m³):
+/// ln c_P and ln c_S, with c_P = 197.5 m/s and c_S = 99.5 m/s (P63, P64).
+pub const TYPICAL_LN_SPEEDS: [f64; 2] = [5.285_7, 4.600_2];
+
+/// Standard deviation of the class means' prior about [`TYPICAL_LN_SPEEDS`], ln units: a factor
+/// e either way, wider than the range of c_P and c_S between soft clay and dense gravel.
+pub const CLASS_PRIOR_SD: f64 = 1.0;
+
+/// Fewer measured segments than this and the hyper-parameters are not estimated: the defaults
+/// below are used and the field says so.
+pub const MIN_MEMBERS_FOR_HYPER: usize = 12;
+
+/// Default field variance of ln c_P and ln c_S (a 20 % spread inside a class), used with too
+/// few members to estimate it.
+pub const DEFAULT_FIELD_VAR: f64 = 0.04;
+/// Default per-pipe scatter variance (7 % in speed: trench and backfill).
+pub const DEFAULT_SCATTER_VAR: f64 = 0.005;
+/// Default correlation between the field's ln c_P and ln c_S.
+pub const DEFAULT_FIELD_CORR: f64 = 0.5;
+
+/// Evaluation budget of the marginal-likelihood search over the six hyper-parameters.
+pub const HYPER_EVALUATIONS: usize = 400;
+
+/// Range of the variances searched (ln units²): from a 0.1 % spread to a factor e^1.4.
+const VAR_RANGE: (f64, f64) = (1e-6, 2.0);
+/// Range of the field's correlation between ln c_P and ln c_S.
+const CORR_RANGE: (f64, f64) = (-0.95, 0.95);
+
+/// A symmetric 2 × 2 matrix [[pp, ps], [ps, ss]] in (ln c_P, ln c_S).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sym2 {
+    /// (ln c_P, ln c_P) entry.
+    pub pp: f64,
+    /// Off-diagonal entry.
+    pub ps: f64,
+    /// (ln c_S, ln c_S) entry.
+    pub ss: f64,
+}
+
+impl Sym2 {
+    /// From its three entries.
+    pub const fn new(pp: f64, ps: f64, ss: f64) -> Self {
+        Sym2 { pp, ps, ss }
+    }
+
+    /// k times the identity.
+    pub const fn diag(k: f64) -> Self {
+        Sym2::new(k, 0.0, k)
+    }
+
+    /// Entry (i, j), i, j ∈ {0, 1}.
+    pub fn at(&self, i: usize, j: usize) -> f64 {
+        match (i, j) {
+            (0, 0) => self.pp,
+            (1, 1) => self.ss,
+            _ => self.ps,
+        }
+    }
+
+    /// The sum.
+    pub fn add(&self, o: &Sym2) -> Sym2 {
+        Sym2::new(self.pp + o.pp, self.ps + o.ps, self.ss + o.ss)
+    }
+
+    /// Times a scalar.
+    pub fn scale(&self, k: f64) -> Sym2 {
+        Sym2::new(k * self.pp, k * self.ps, k * self.ss)
+    }
+
+    /// Determinant.
+    pub fn det(&self) -> f64 {
+        self.pp * self.ss - self.ps * self.ps
+    }
+
+    /// The inverse, `None` unless positive definite.
+    pub fn inverse(&self) -> Option<Sym2> {
+        let d = self.det();
+        (self.pp > 0.0 && d > 0.0).then(|| Sym2::new(self.ss / d, -self.ps / d, self.pp / d))
+    }
+
+    /// The quadratic form vᵀ S v.
+    pub fn quad(&self, v: [f64; 2]) -> f64 {
+        self.pp * v[0] * v[0] + 2.0 * self.ps * v[0] * v[1] + self.ss * v[1] * v[1]
+    }
+
+    /// S v.
+    pub fn mul(&self, v: [f64; 2]) -> [f64; 2] {
+        [
+            self.pp * v[0] + self.ps * v[1],
+            self.ps * v[0] + self.ss * v[1],
+        ]
+    }
+
+    /// The lower Cholesky factor [[l00, 0], [l10, l11]], `None` unless positive definite.
+    pub fn cholesky(&self) -> Option<[f64; 3]> {
+        if self.pp.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        let l00 = self.pp.sqrt();
+        let l10 = self.ps / l00;
+        let r = self.ss - l10 * l10;
+        (r > 0.0).then(|| [l00, l10, r.sqrt()])
+    }
+}
+
+/// One measured segment as the field sees it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Its midpoint, m (None: no geometry; it then informs its class mean only).
+    pub pos: Option<[f64; 2]>,
+    /// Its soil class (index into the field's classes).
+    pub class: usize,
+    /// The fitted (ln c_P, ln c_S).
+    pub u: [f64; 2],
+    /// The fit's information about u (P79), divided by its variance factor.
+    pub info: Sym2,
+    /// A key fixing its place in the conditioning order (a hash of the segment id, so the
+    /// order does not depend on how the segments were read).
+    pub key: u64,
+}
+
+impl Observation {
+    /// The fit's noise covariance (I_s + ε·1)⁻¹.
+    pub fn noise(&self) -> Sym2 {
+        self.info
+            .add(&Sym2::diag(UNSEEN_PRECISION))
+            .inverse()
+            .unwrap_or(Sym2::diag(1.0 / UNSEEN_PRECISION))
+    }
+}
+
+/// The field's hyper-parameters θ = (B, ℓ, T) of P78 (the class means are integrated out).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hyper {
+    /// Field covariance B of (ln c_P, ln c_S).
+    pub b: Sym2,
+    /// Correlation length ℓ, m.
+    pub ell: f64,
+    /// Per-pipe scatter T (diagonal).
+    pub t: Sym2,
+}
+
+impl Hyper {
+    /// The defaults used when too few segments are measured to estimate them.
+    pub fn defaults(ell: f64) -> Hyper {
+        let c = DEFAULT_FIELD_CORR * DEFAULT_FIELD_VAR;
+        Hyper {
+            b: Sym2::new(DEFAULT_FIELD_VAR, c, DEFAULT_FIELD_VAR),
+            ell,
+            t: Sym2::diag(DEFAULT_SCATTER_VAR),
+        }
+    }
+
+    /// Field covariance between two points a distance `d` (m) apart: B e^(−d/ℓ) (P78).
+    pub fn kernel(&self, d: f64) -> Sym2 {
+        self.b.scale((-d / self.ell).exp())
+    }
+
+    /// Between two points of which either has no position: independent.
+    fn kernel_between(&self, a: Option<[f64; 2]>, b: Option<[f64; 2]>) -> Sym2 {
+        match (a, b) {
+            (Some(a), Some(b)) => self.kernel(dist(a, b)),
+            _ => Sym2::default(),
+        }
+    }
+}
+
+/// Euclidean distance, m.
+pub fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// A spatial index of points carrying their index.
+pub type Index = RTree<GeomWithData<[f64; 2], u32>>;
+
+/// The index of the positioned points of `pos` (bulk-loaded: the same tree for the same
+/// points, whatever the thread count).
+pub fn index_of(pos: impl Iterator<Item = Option<[f64; 2]>>) -> Index {
+    let pts: Vec<_> = pos
+        .enumerate()
+        .filter_map(|(i, p)| p.map(|p| GeomWithData::new(p, i as u32)))
+        .collect();
+    RTree::bulk_load(pts)
+}
+
+/// The conditional of a target given neighbours: A = c C⁻¹ (2 × 2k, the kriging weights) and
+/// V = C_tt − A cᵀ, where C is the neighbours' covariance (field + their noise) and c the
+/// target's cross-covariance with them.
+struct Conditional {
+    a: DMatrix<f64>,
+    v: Sym2,
+}
+
+/// The conditional of a target at `pos` with variance `target_var`, given the observations
+/// `nbrs` of `obs` (their noise `noise[j]` on the diagonal).
+fn conditional(
+    hyper: &Hyper,
+    pos: Option<[f64; 2]>,
+    target_var: Sym2,
+    nbrs: &[usize],
+    obs: &[Observation],
+    noise: &[Sym2],
+) -> Option<Conditional> {
+    let k = nbrs.len();
+    if k == 0 {
+        return Some(Conditional {
+            a: DMatrix::zeros(2, 0),
+            v: target_var,
+        });
+    }
+    let mut c = DMatrix::<f64>::zeros(2 * k, 2 * k);
+    let mut ct = DMatrix::<f64>::zeros(2 * k, 2);
+    for (p, &i) in nbrs.iter().enumerate() {
+        let oi = &obs[i];
+        for (q, &j) in nbrs.iter().enumerate().take(p + 1) {
+            let mut s = hyper.kernel_between(oi.pos, obs[j].pos);
+            if p == q {
+                s = hyper.b.add(&noise[i]);
+            }
+            for a in 0..2 {
+                for b in 0..2 {
+                    c[(2 * p + a, 2 * q + b)] = s.at(a, b);
+                    c[(2 * q + b, 2 * p + a)] = s.at(a, b);
+                }
+            }
+        }
+        let s = hyper.kernel_between(pos, oi.pos);
+        for a in 0..2 {
+            for b in 0..2 {
+                ct[(2 * p + a, b)] = s.at(a, b);
+            }
+        }
+    }
+    let chol = c.cholesky()?;
+    let x = chol.solve(&ct); // C⁻¹ cᵀ (2k × 2)
+    let reduce = ct.transpose() * &x; // c C⁻¹ cᵀ
+    let v = Sym2::new(
+        target_var.pp - reduce[(0, 0)],
+        target_var.ps - 0.5 * (reduce[(0, 1)] + reduce[(1, 0)]),
+        target_var.ss - reduce[(1, 1)],
+    );
+    Some(Conditional {
+        a: x.transpose(),
+        v,
+    })
+}
+
+/// The Vecchia structure: each member's nearest predecessors in a fixed order.
+#[derive(Debug, Clone)]
+pub struct Vecchia {
+    /// Member indices in conditioning order.
+    order: Vec<usize>,
+    /// Offsets into `nbrs` per position of `order` (length n + 1).
+    start: Vec<usize>,
+    /// Neighbour member indices, flat.
+    nbrs: Vec<u32>,
+}
+
+impl Vecchia {
+    /// Order the members by their keys and find each one's `m` nearest predecessors (members
+    /// without a position have none, and are nobody's neighbour).
+    pub fn new(obs: &[Observation], m: usize) -> Vecchia {
+        let mut order: Vec<usize> = (0..obs.len()).collect();
+        order.sort_by_key(|&i| (obs[i].key, i));
+        let mut tree: Index = RTree::new();
+        let mut start = Vec::with_capacity(obs.len() + 1);
+        let mut nbrs = Vec::with_capacity(obs.len() * m);
+        start.push(0);
+        for &i in &order {
+            if let Some(p) = obs[i].pos {
+                nbrs.extend(tree.nearest_neighbor_iter(&p).take(m).map(|g| g.data));
+                tree.insert(GeomWithData::new(p, i as u32));
+            }
+            start.push(nbrs.len());
+        }
+        Vecchia { order, start, nbrs }
+    }
+
+    fn neighbours(&self, pos: usize) -> Vec<usize> {
+        self.nbrs[self.start[pos]..self.start[pos + 1]]
+            .iter()
+            .map(|&j| j as usize)
+            .collect()
+    }
+}
+
+/// Sufficient statistics of one Vecchia pass: the Gaussian in the class means.
+struct Pass {
+    /// Σ Zᵀ V⁻¹ Z (2K × 2K).
+    g: DMatrix<f64>,
+    /// Σ Zᵀ V⁻¹ ỹ.
+    r: DVector<f64>,
+    /// Σ ỹᵀ V⁻¹ ỹ.
+    s: f64,
+    /// Σ ln det V.
+    logdet: f64,
+}
+
+impl Pass {
+    fn zero(nk: usize) -> Pass {
+        Pass {
+            g: DMatrix::zeros(2 * nk, 2 * nk),
+            r: DVector::zeros(2 * nk),
+            s: 0.0,
+            logdet: 0.0,
+        }
+    }
+
+    fn absorb(&mut self, o: Pass) {
+        self.g += o.g;
+        self.r += o.r;
+        self.s += o.s;
+        self.logdet += o.logdet;
+    }
+}
+
+/// The design row Z = X_t − A X_N of a target in class `class` given neighbours `nbrs`: per
+/// touched class, its 2 × 2 block.
+fn design(
+    class: usize,
+    a: &DMatrix<f64>,
+    nbrs: &[usize],
+    obs: &[Observation],
+) -> Vec<(usize, [f64; 4])> {
+    let mut z: Vec<(usize, [f64; 4])> = vec![(class, [1.0, 0.0, 0.0, 1.0])];
+    for (p, &j) in nbrs.iter().enumerate() {
+        let k = obs[j].class;
+        let blk = [
+            -a[(0, 2 * p)],
+            -a[(0, 2 * p + 1)],
+            -a[(1, 2 * p)],
+            -a[(1, 2 * p + 1)],
+        ];
+        match z.iter_mut().find(|(c, _)| *c == k) {
+            Some((_, b)) => {
+                for (x, y) in b.iter_mut().zip(blk) {
+                    *x += y;
+                }
+            }
+            None => z.push((k, blk)),
+        }
+    }
+    z
+}
+
+/// Members per parallel chunk of a pass (fixed, so sums are taken in one order whatever the
+/// thread count).
+const PASS_CHUNK: usize = 256;
+
+/// One Vecchia pass at `hyper`: `None` when a conditional is not positive definite.
+fn pass(
+    hyper: &Hyper,
+    obs: &[Observation],
+    noise: &[Sym2],
+    v: &Vecchia,
+    nk: usize,
+) -> Option<Pass> {
+    let positions: Vec<usize> = (0..v.order.len()).collect();
+    let parts: Vec<Option<Pass>> = positions
+        .par_chunks(PASS_CHUNK)
+        .map(|chunk| {
+            let mut acc = Pass::zero(nk);
+            for &pos in chunk {
+                let i = v.order[pos];
+                let nb = v.neighbours(pos);
+                let o = &obs[i];
+                let cond = conditional(hyper, o.pos, hyper.b.add(&noise[i]), &nb, obs, noise)?;
+                let vinv = cond.v.inverse()?;
+                let mut yt = o.u;
+                for (p, &j) in nb.iter().enumerate() {
+                    for (a, y) in yt.iter_mut().enumerate() {
+                        *y -=
+                            cond.a[(a, 2 * p)] * obs[j].u[0] + cond.a[(a, 2 * p + 1)] * obs[j].u[1];
+                    }
+                }
+                acc.s += vinv.quad(yt);
+                acc.logdet += cond.v.det().ln();
+                let z = design(o.class, &cond.a, &nb, obs);
+                // Zᵀ V⁻¹ for each touched class block: blockᵀ V⁻¹.
+                let zt_vinv: Vec<(usize, [f64; 4])> = z
+                    .iter()
+                    .map(|(k, b)| {
+                        // (bᵀ V⁻¹)[r][c] = Σ_a b[a][r] V⁻¹[a][c]
+                        let mut m = [0.0; 4];
+                        for r in 0..2 {
+                            for c in 0..2 {
+                                m[2 * r + c] = b[r] * vinv.at(0, c) + b[2 + r] * vinv.at(1, c);
+                            }
+                        }
+                        (*k, m)
+                    })
+                    .collect();
+                for (k, m) in &zt_vinv {
+                    for r in 0..2 {
+                        acc.r[2 * k + r] += m[2 * r] * yt[0] + m[2 * r + 1] * yt[1];
+                    }
+                    for (l, b) in &z {
+                        for r in 0..2 {
+                            for c in 0..2 {
+                                acc.g[(2 * k + r, 2 * l + c)] +=
+                                    m[2 * r] * b[c] + m[2 * r + 1] * b[2 + c];
+                            }
+                        }
+                    }
+                }
+            }
+            Some(acc)
+        })
+        .collect();
+    let mut total = Pass::zero(nk);
+    for p in parts {
+        total.absorb(p?);
+    }
+    Some(total)
+}
+
+/// The class means' prior precision (diagonal) and mean.
+fn class_prior(nk: usize) -> (f64, DVector<f64>) {
+    let prec = 1.0 / (CLASS_PRIOR_SD * CLASS_PRIOR_SD);
+    let m0 = DVector::from_fn(2 * nk, |i, _| TYPICAL_LN_SPEEDS[i % 2]);
+    (prec, m0)
+}
+
+/// The class means' posterior given a pass: mean and covariance (2K).
+fn class_posterior(p: &Pass, nk: usize) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
+    let (prec, m0) = class_prior(nk);
+    let mut m = p.g.clone();
+    for i in 0..2 * nk {
+        m[(i, i)] += prec;
+    }
+    let rr = &p.r + &m0 * prec;
+    let chol = m.cholesky()?;
+    let mean = chol.solve(&rr);
+    let cov = chol.inverse();
+    let logdet_m: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
+    // log p(û | θ) with μ integrated out under its prior:
+    // −½[s + m0ᵀP0 m0 − rrᵀ M⁻¹ rr + Σ ln det V + ln det M − ln det P0] − n ln 2π.
+    let quad = p.s + prec * m0.dot(&m0) - rr.dot(&mean);
+    let loglik = -0.5 * (quad + p.logdet + logdet_m - 2.0 * nk as f64 * prec.ln());
+    Some((mean, cov, loglik))
+}
+
+/// Log marginal likelihood of the observations at `hyper` (P80, Vecchia form, class means
+/// integrated out), without the constant −n ln 2π; `None` where not defined.
+pub fn log_likelihood(hyper: &Hyper, obs: &[Observation], v: &Vecchia, nk: usize) -> Option<f64> {
+    let noise: Vec<Sym2> = obs.iter().map(|o| hyper.t.add(&o.noise())).collect();
+    let p = pass(hyper, obs, &noise, v, nk)?;
+    class_posterior(&p, nk).map(|x| x.2)
+}
+
+/// The hyper-parameters' search coordinates: ln ℓ, ln B_PP, ln B_SS, corr(B), ln T_PP, ln T_SS.
+fn hyper_of(x: &[f64]) -> Hyper {
+    let (bp, bs) = (x[1].exp(), x[2].exp());
+    Hyper {
+        b: Sym2::new(bp, x[3] * (bp * bs).sqrt(), bs),
+        ell: x[0].exp(),
+        t: Sym2::new(x[4].exp(), 0.0, x[5].exp()),
+    }
+}
+
+/// How the hyper-parameters were chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HyperSource {
+    /// Maximum marginal likelihood (P80).
+    MarginalLikelihood,
+    /// Too few measured segments: the stated defaults.
+    Defaults,
+}
+
+impl HyperSource {
+    /// As stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            HyperSource::MarginalLikelihood => "marginal_likelihood",
+            HyperSource::Defaults => "defaults",
+        }
+    }
+}
+
+/// The fitted field: hyper-parameters, class means, and the members it conditions on.
+#[derive(Debug)]
+pub struct Field {
+    /// θ.
+    pub hyper: Hyper,
+    /// How θ was chosen.
+    pub source: HyperSource,
+    /// ln p(û | θ) at θ (without the −n ln 2π).
+    pub log_likelihood: Option<f64>,
+    /// Bounds of ℓ searched: a typical segment length and the network's extent, m.
+    pub ell_bounds: (f64, f64),
+    /// Class means' posterior mean (2K: ln c_P, ln c_S per class).
+    pub class_mean: DVector<f64>,
+    /// Their posterior covariance (2K × 2K).
+    pub class_cov: DMatrix<f64>,
+    /// The members.
+    pub obs: Vec<Observation>,
+    /// Each member's noise T + (I + ε)⁻¹.
+    noise: Vec<Sym2>,
+    /// Spatial index of the positioned members.
+    tree: Index,
+}
+
+/// The field's posterior of one pipe's u (P80, plus its own scatter T).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Posterior {
+    /// Mean of (ln c_P, ln c_S).
+    pub mean: [f64; 2],
+    /// Covariance.
+    pub cov: Sym2,
+    /// The measured segments conditioned on, with their distances (m), nearest first.
+    pub neighbours: Vec<(usize, f64)>,
+}
+
+impl Field {
+    /// Fit the field to the members: θ by maximum marginal likelihood when there are at least
+    /// [`MIN_MEMBERS_FOR_HYPER`] members (defaults otherwise), ℓ within `ell_bounds`.
+    pub fn fit(obs: Vec<Observation>, nk: usize, ell_bounds: (f64, f64)) -> Field {
+        Self::build(obs, nk, ell_bounds, None)
+    }
+
+    /// The field with given hyper-parameters (those of a stored update): only the class means
+    /// are estimated.
+    pub fn with_hyper(
+        obs: Vec<Observation>,
+        nk: usize,
+        ell_bounds: (f64, f64),
+        hyper: Hyper,
+        source: HyperSource,
+    ) -> Field {
+        Self::build(obs, nk, ell_bounds, Some((hyper, source)))
+    }
+
+    fn build(
+        obs: Vec<Observation>,
+        nk: usize,
+        ell_bounds: (f64, f64),
+        given: Option<(Hyper, HyperSource)>,
+    ) -> Field {
+        let (lo, hi) = (
+            ell_bounds.0.max(1e-3),
+            ell_bounds.1.max(ell_bounds.0 * 1.001),
+        );
+        let v = Vecchia::new(&obs, NEIGHBOURS);
+        let start = Hyper::defaults((lo * hi).sqrt());
+        let (mut hyper, mut source) = given.unwrap_or((start, HyperSource::Defaults));
+        if given.is_none() && obs.len() >= MIN_MEMBERS_FOR_HYPER {
+            let x0 = [
+                start.ell.ln(),
+                start.b.pp.ln(),
+                start.b.ss.ln(),
+                DEFAULT_FIELD_CORR,
+                start.t.pp.ln(),
+                start.t.ss.ln(),
+            ];
+            let bounds = Bounds::new(
+                vec![
+                    lo.ln(),
+                    VAR_RANGE.0.ln(),
+                    VAR_RANGE.0.ln(),
+                    CORR_RANGE.0,
+                    VAR_RANGE.0.ln(),
+                    VAR_RANGE.0.ln(),
+                ],
+                vec![
+                    hi.ln(),
+                    VAR_RANGE.1.ln(),
+                    VAR_RANGE.1.ln(),
+                    CORR_RANGE.1,
+                    VAR_RANGE.1.ln(),
+                    VAR_RANGE.1.ln(),
+                ],
+            );
+            let objective = FnObjective::new(6, |x: &[f64]| {
+                log_likelihood(&hyper_of(x), &obs, &v, nk).map_or(f64::INFINITY, |l| -l)
+            });
+            let steps = [0.7, 1.0, 1.0, 0.3, 1.0, 1.0];
+            let found = bounds.ok().and_then(|b| {
+                NelderMead::new()
+                    .max_evaluations(HYPER_EVALUATIONS)
+                    .and_then(|nm| nm.stall(80, 1e-4))
+                    .ok()?
+                    .minimize(&objective, &b, &x0, &steps)
+                    .ok()
+            });
+            if let Some(r) = found.filter(|r| r.f.is_finite()) {
+                hyper = hyper_of(&r.x);
+                source = HyperSource::MarginalLikelihood;
+            }
+        }
+        let noise: Vec<Sym2> = obs.iter().map(|o| hyper.t.add(&o.noise())).collect();
+        let post = pass(&hyper, &obs, &noise, &v, nk).and_then(|p| class_posterior(&p, nk));
+        let (class_mean, class_cov, log_likelihood) = match post {
+            Some((m, c, l)) => (m, c, Some(l)),
+            None => {
+                let (prec, m0) = class_prior(nk);
+                (m0, DMatrix::identity(2 * nk, 2 * nk) / prec, None)
+            }
+        };
+        let tree = index_of(obs.iter().map(|o| o.pos));
+        Field {
+            hyper,
+            source,
+            log_likelihood,
+            ell_bounds: (lo, hi),
+            class_mean,
+            class_cov,
+            obs,
+            noise,
+            tree,
+        }
+    }
+
+    /// Number of classes.
+    pub fn n_classes(&self) -> usize {
+        self.class_mean.len() / 2
+    }
+
+    /// The kriging weights A (2 × 2k) and neighbours of a pipe at `pos` (as [`Self::posterior`]
+    /// uses them), for the plan's cross-covariances.
+    pub fn weights(&self, pos: [f64; 2]) -> (Vec<f64>, Vec<usize>) {
+        let h = &self.hyper;
+        let idx: Vec<usize> = self.neighbours_of(pos, None).iter().map(|n| n.0).collect();
+        match conditional(h, Some(pos), h.b.add(&h.t), &idx, &self.obs, &self.noise) {
+            Some(c) if c.a.ncols() > 0 => {
+                let k = idx.len();
+                let mut a = Vec::with_capacity(4 * k);
+                for r in 0..2 {
+                    for col in 0..2 * k {
+                        a.push(c.a[(r, col)]);
+                    }
+                }
+                (a, idx)
+            }
+            _ => (Vec::new(), Vec::new()),
+        }
+    }
+
+    /// Class k's mean (ln c_P, ln c_S) and its covariance.
+    pub fn class(&self, k: usize) -> ([f64; 2], Sym2) {
+        let c = &self.class_cov;
+        (
+            [self.class_mean[2 * k], self.class_mean[2 * k + 1]],
+            Sym2::new(
+                c[(2 * k, 2 * k)],
+                c[(2 * k, 2 * k + 1)],
+                c[(2 * k + 1, 2 * k + 1)],
+            ),
+        )
+    }
+
+    /// The members nearest to `pos` (at most [`NEIGHBOURS`]), leaving out member `skip`.
+    pub fn neighbours_of(&self, pos: [f64; 2], skip: Option<usize>) -> Vec<(usize, f64)> {
+        self.tree
+            .nearest_neighbor_iter(&pos)
+            .map(|g| g.data as usize)
+            .filter(|&j| Some(j) != skip)
+            .take(NEIGHBOURS)
+            .map(|j| (j, self.obs[j].pos.map_or(f64::INFINITY, |p| dist(p, pos))))
+            .collect()
+    }
+
+    /// The posterior of the u of a pipe at `pos` in class `class` (P80, universal kriging on
+    /// its nearest members, the class means' error included), leaving out member `skip` (its
+    /// leave-one-out prediction, P82). Without a position: its class mean, B and T added.
+    pub fn posterior(&self, pos: Option<[f64; 2]>, class: usize, skip: Option<usize>) -> Posterior {
+        let h = &self.hyper;
+        let target_var = h.b.add(&h.t);
+        let neighbours = pos.map_or_else(Vec::new, |p| self.neighbours_of(p, skip));
+        let idx: Vec<usize> = neighbours.iter().map(|n| n.0).collect();
+        let cond =
+            conditional(h, pos, target_var, &idx, &self.obs, &self.noise).unwrap_or(Conditional {
+                a: DMatrix::zeros(2, 0),
+                v: target_var,
+            });
+        let used: &[usize] = if cond.a.ncols() == 0 { &[] } else { &idx };
+        let (mu, _) = self.class(class);
+        let mut mean = mu;
+        for (p, &j) in used.iter().enumerate() {
+            let (mj, _) = self.class(self.obs[j].class);
+            let d = [self.obs[j].u[0] - mj[0], self.obs[j].u[1] - mj[1]];
+            for (a, m) in mean.iter_mut().enumerate() {
+                *m += cond.a[(a, 2 * p)] * d[0] + cond.a[(a, 2 * p + 1)] * d[1];
+            }
+        }
+        // Z Cov(μ) Zᵀ over the touched classes (universal kriging's term for the means).
+        let z = design(class, &cond.a, used, &self.obs);
+        let mut extra = [[0.0; 2]; 2];
+        for (k, bk) in &z {
+            for (l, bl) in &z {
+                for r in 0..2 {
+                    for c in 0..2 {
+                        let mut s = 0.0;
+                        for a in 0..2 {
+                            for b in 0..2 {
+                                s += bk[2 * r + a]
+                                    * self.class_cov[(2 * k + a, 2 * l + b)]
+                                    * bl[2 * c + b];
+                            }
+                        }
+                        extra[r][c] += s;
+                    }
+                }
+            }
+        }
+        let cov = cond.v.add(&Sym2::new(
+            extra[0][0],
+            0.5 * (extra[0][1] + extra[1][0]),
+            extra[1][1],
+        ));
+        Posterior {
+            mean,
+            cov,
+            neighbours,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr_free::normal;
+
+    /// A standard normal deviate by Box–Muller (the tests need no distribution crate).
+    mod rand_distr_free {
+        use rand::Rng;
+        pub fn normal(rng: &mut impl Rng) -> f64 {
+            let u1: f64 = rng.gen_range(f64::MIN_POSITIVE..1.0);
+            let u2: f64 = rng.gen();
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        }
+    }
+
+    /// Draw a field from the model itself (exact, by Cholesky of the full covariance) on `n`
+    /// random points in a square of side `side` m with two classes split at x = side/2, and
+    /// observe every point with information `info`.
+    fn draw(
+        seed: u64,
+        n: usize,
+        side: f64,
+        truth: &Hyper,
+        mu: [[f64; 2]; 2],
+        info: Sym2,
+    ) -> Vec<Observation> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let pos: Vec<[f64; 2]> = (0..n)
+            .map(|_| [rng.gen_range(0.0..side), rng.gen_range(0.0..side)])
+            .collect();
+        let mut k = DMatrix::<f64>::zeros(2 * n, 2 * n);
+        for i in 0..n {
+            for j in 0..n {
+                let s = truth.kernel(dist(pos[i], pos[j]));
+                for a in 0..2 {
+                    for b in 0..2 {
+                        k[(2 * i + a, 2 * j + b)] = s.at(a, b);
+                    }
+                }
+            }
+        }
+        let l = k.cholesky().expect("kernel is positive definite").l();
+        let z = DVector::from_fn(2 * n, |_, _| normal(&mut rng));
+        let w = l * z;
+        let noise = info.inverse().unwrap();
+        let nl = noise.cholesky().unwrap();
+        let tl = truth.t.cholesky().unwrap();
+        (0..n)
+            .map(|i| {
+                let class = usize::from(pos[i][0] > side / 2.0);
+                let mut u = [mu[class][0] + w[2 * i], mu[class][1] + w[2 * i + 1]];
+                for l in [tl, nl] {
+                    let (a, b) = (normal(&mut rng), normal(&mut rng));
+                    u[0] += l[0] * a;
+                    u[1] += l[1] * a + l[2] * b;
+                }
+                Observation {
+                    pos: Some(pos[i]),
+                    class,
+                    u,
+                    info,
+                    key: crate::db::hash::fnv1a64(format!("s{i}").as_bytes()),
+                }
+            })
+            .collect()
+    }
+
+    fn truth() -> (Hyper, [[f64; 2]; 2]) {
+        (
+            Hyper {
+                b: Sym2::new(0.04, 0.02, 0.05),
+                ell: 300.0,
+                t: Sym2::new(0.002, 0.0, 0.003),
+            },
+            [[5.3, 4.6], [5.6, 4.9]],
+        )
+    }
+
+    #[test]
+    fn sym2_inverse_and_cholesky_are_exact() {
+        let s = Sym2::new(4.0, 1.0, 3.0);
+        let i = s.inverse().unwrap();
+        // [[4,1],[1,3]]⁻¹ = [[3,−1],[−1,4]]/11.
+        assert!((i.pp - 3.0 / 11.0).abs() < 1e-15 && (i.ps + 1.0 / 11.0).abs() < 1e-15);
+        let l = s.cholesky().unwrap();
+        assert!((l[0] * l[0] - 4.0).abs() < 1e-14);
+        assert!((l[1] * l[1] + l[2] * l[2] - 3.0).abs() < 1e-14);
+        assert!(Sym2::new(1.0, 2.0, 1.0).inverse().is_none());
+    }
+
+    /// With every neighbour used (n ≤ m), the Vecchia likelihood is the exact Gaussian one:
+    /// compare with log N(û; μ, K + N) computed densely, class means fixed by a tight prior
+    /// being impossible here, so compare differences between two θ instead (the μ-integral
+    /// is the same Gaussian identity in both).
+    #[test]
+    fn vecchia_with_all_neighbours_is_the_exact_likelihood() {
+        let (t, mu) = truth();
+        let obs = draw(1, 14, 1000.0, &t, mu, Sym2::new(400.0, 0.0, 400.0));
+        let v = Vecchia::new(&obs, 32);
+        let exact = |h: &Hyper| {
+            // Dense: y ~ N(Xm0, K + N + X P0⁻¹ Xᵀ).
+            let n = obs.len();
+            let mut c = DMatrix::<f64>::zeros(2 * n, 2 * n);
+            let prior = CLASS_PRIOR_SD * CLASS_PRIOR_SD;
+            for i in 0..n {
+                for j in 0..n {
+                    let mut s = h.kernel(dist(obs[i].pos.unwrap(), obs[j].pos.unwrap()));
+                    if i == j {
+                        s = s.add(&h.t).add(&obs[i].noise());
+                    }
+                    for a in 0..2 {
+                        for b in 0..2 {
+                            c[(2 * i + a, 2 * j + b)] = s.at(a, b)
+                                + if obs[i].class == obs[j].class && a == b {
+                                    prior
+                                } else {
+                                    0.0
+                                };
+                        }
+                    }
+                }
+            }
+            let y = DVector::from_fn(2 * n, |r, _| obs[r / 2].u[r % 2] - TYPICAL_LN_SPEEDS[r % 2]);
+            let ch = c.cholesky().unwrap();
+            let q = y.dot(&ch.solve(&y));
+            let ld: f64 = ch.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
+            -0.5 * (q + ld)
+        };
+        let h2 = Hyper { ell: 150.0, ..t };
+        let (a1, a2) = (
+            log_likelihood(&t, &obs, &v, 2).unwrap(),
+            log_likelihood(&h2, &obs, &v, 2).unwrap(),
+        );
+        let (e1, e2) = (exact(&t), exact(&h2));
+        assert!(
+            ((a1 - a2) - (e1 - e2)).abs() < 1e-8,
+            "{a1} {a2} vs {e1} {e2}"
+        );
+        assert!((a1 - e1).abs() < 1e-8, "{a1} vs {e1}");
+    }
+
+    /// Data drawn from the model: the class means and ℓ are recovered, and leave-one-out z of
+    /// u is N(0, 1) (its spread within 0.8–1.25).
+    #[test]
+    fn recovers_class_means_and_hyper_parameters() {
+        let (t, mu) = truth();
+        let obs = draw(7, 400, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let field = Field::fit(obs, 2, (50.0, 4243.0));
+        assert_eq!(field.source, HyperSource::MarginalLikelihood);
+        for (k, m) in mu.iter().enumerate() {
+            let (est, cov) = field.class(k);
+            for a in 0..2 {
+                let sd = cov.at(a, a).sqrt();
+                assert!(
+                    (est[a] - m[a]).abs() < 3.0 * sd,
+                    "class {k} coord {a}: {} vs {} ± {sd}",
+                    est[a],
+                    m[a]
+                );
+                assert!(sd < 0.2, "{sd}");
+            }
+        }
+        let h = field.hyper;
+        assert!(h.ell > 120.0 && h.ell < 750.0, "ell {}", h.ell);
+        assert!(h.b.pp > 0.015 && h.b.pp < 0.1, "B_pp {}", h.b.pp);
+        // Leave-one-out z of ln c_P: (u − m*)/√(S* + noise).
+        let z: Vec<f64> = (0..field.obs.len())
+            .map(|i| {
+                let o = &field.obs[i];
+                let p = field.posterior(o.pos, o.class, Some(i));
+                let var = p.cov.pp + o.noise().pp;
+                (o.u[0] - p.mean[0]) / var.sqrt()
+            })
+            .collect();
+        let mean = z.iter().sum::<f64>() / z.len() as f64;
+        let sd = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / z.len() as f64).sqrt();
+        assert!(
+            mean.abs() < 0.15 && (0.8..1.25).contains(&sd),
+            "z mean {mean}, sd {sd}"
+        );
+    }
+
+    /// A fit that does not see c_S (a metal pipe) leaves c_S at the class prior: its
+    /// information carries no weight in the unseen direction.
+    #[test]
+    fn an_unseen_direction_carries_no_weight() {
+        let obs: Vec<Observation> = (0..5)
+            .map(|i| Observation {
+                pos: Some([i as f64 * 10.0, 0.0]),
+                class: 0,
+                u: [5.0, 7.0],
+                info: Sym2::new(1e4, 0.0, 0.0),
+                key: i,
+            })
+            .collect();
+        let field = Field::fit(obs, 1, (10.0, 100.0));
+        let (m, cov) = field.class(0);
+        assert!((m[0] - 5.0).abs() < 0.05, "{m:?}");
+        // c_S: the prior's mean and spread, untouched by the value 7.0 the fits report.
+        assert!((m[1] - TYPICAL_LN_SPEEDS[1]).abs() < 0.05, "{m:?}");
+        assert!((cov.ss.sqrt() - CLASS_PRIOR_SD).abs() < 0.05, "{cov:?}");
+    }
+}
