@@ -8,7 +8,8 @@
 //! ξ 0.5, and of the true soil with ξ 0.5, for plastic and metal pipes.
 //!
 //! `cargo build --release && cargo run --release --example field_acceptance -- grid [NETWORKS]
-//! [SEGMENTS] [SEED] [JOBS]` (default 5 600 390001 2): measured fraction 5, 15, 30 % ×
+//! [SEGMENTS] [SEED] [JOBS] [CELLS]` (default 5 600 390001 2, all cells; CELLS such as
+//! `15:350,15:1000` runs only those): measured fraction 5, 15, 30 % ×
 //! correlation length 100, 350, 1000 m, 10 % wrong labels, NETWORKS fresh networks per cell.
 //! Each network is written, imported and calibrated by the `pipewave` binary beside this
 //! example (target/release/pipewave); for the segments without measurements the predictions
@@ -277,6 +278,8 @@ struct Cell {
     table: [Vec<f64>; 2],
     /// 2σ / ĉ of each prediction.
     width: [Vec<f64>; 2],
+    /// Plastic segments: (true class, label wrong, signed error, z of the truth = error / σ).
+    plastic: Vec<(&'static str, bool, f64, f64)>,
     covered: usize,
     with_speed: usize,
     unmeasured: usize,
@@ -303,6 +306,14 @@ impl Cell {
             }
             self.with_speed += 1;
             self.error[k].push(c / truth - 1.0);
+            if k == 0 {
+                self.plastic.push((
+                    s.soil_type,
+                    s.soil_label != s.soil_type,
+                    c / truth - 1.0,
+                    (c - truth) / sd,
+                ));
+            }
             self.width[k].push(2.0 * sd / c);
             if (c - truth).abs() <= 2.0 * sd {
                 self.covered += 1;
@@ -344,12 +355,52 @@ impl Cell {
             self.unmeasured,
         );
     }
+
+    /// The plastic errors by true soil class and by label (signed median shows a bias), and
+    /// the spread of (ĉ − c)/σ against the truth.
+    fn breakdown(&self) {
+        let show = |name: &str, rows: Vec<&(&str, bool, f64, f64)>| {
+            let mut abs: Vec<f64> = rows.iter().map(|r| 100.0 * r.2.abs()).collect();
+            let mut signed: Vec<f64> = rows.iter().map(|r| 100.0 * r.2).collect();
+            abs.sort_by(f64::total_cmp);
+            signed.sort_by(f64::total_cmp);
+            let z: Vec<f64> = rows.iter().map(|r| r.3).collect();
+            let zsd = (z.iter().map(|v| v * v).sum::<f64>() / z.len().max(1) as f64).sqrt();
+            println!(
+                "    plastic {name:18} n {:4}: |error| median {:.2} % p90 {:.2} %, signed median                  {:+.2} %, rms (ĉ − c)/σ {:.2}",
+                rows.len(),
+                quantile(&abs, 0.5),
+                quantile(&abs, 0.9),
+                quantile(&signed, 0.5),
+                zsd
+            );
+        };
+        let mut classes: Vec<&str> = self.plastic.iter().map(|r| r.0).collect();
+        classes.sort_unstable();
+        classes.dedup();
+        for c in classes {
+            show(c, self.plastic.iter().filter(|r| r.0 == c).collect());
+        }
+        show(
+            "label right",
+            self.plastic.iter().filter(|r| !r.1).collect(),
+        );
+        show("label wrong", self.plastic.iter().filter(|r| r.1).collect());
+    }
 }
 
 /// Measured fractions of the grid.
 const MEASURED_FRACTIONS: [f64; 3] = [0.05, 0.15, 0.30];
 
-fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize) {
+/// Whether cell (measured fraction, ℓ) is among `cells` ("15:350,15:1000"; empty: all).
+fn selected(cells: &str, frac: f64, ell: f64) -> bool {
+    cells.is_empty()
+        || cells
+            .split(',')
+            .any(|c| c == format!("{:.0}:{:.0}", 100.0 * frac, ell))
+}
+
+fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) {
     println!(
         "grid: {networks} networks of {segments} segments per cell, {UNITS} units, 10 % wrong \
          labels, seeds from {seed0}; errors as median / p90 of |ĉ/c − 1|"
@@ -359,6 +410,9 @@ fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize) {
     let mut all = Cell::default();
     for (a, &frac) in MEASURED_FRACTIONS.iter().enumerate() {
         for (b, &ell) in CORRELATION_LENGTHS_M.iter().enumerate() {
+            if !selected(cells, frac, ell) {
+                continue;
+            }
             let mut cell = Cell::default();
             for n in 0..networks {
                 let seed = seed0 + 100 * (3 * a + b) as u64 + n;
@@ -368,6 +422,7 @@ fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize) {
                 let _ = std::fs::remove_dir_all(&net.dir);
             }
             cell.report(&format!("measured {:2.0} % ℓ {:4} m", 100.0 * frac, ell));
+            cell.breakdown();
             for k in 0..2 {
                 all.error[k].extend(&cell.error[k]);
                 all.table[k].extend(&cell.table[k]);
@@ -502,6 +557,7 @@ fn main() {
             arg(&args, 2, 600),
             arg(&args, 3, 390_001),
             arg(&args, 4, 2),
+            args.get(5).map_or("", String::as_str),
         ),
         Some("plan") => plan_check(
             arg(&args, 1, 3),

@@ -349,13 +349,6 @@ impl NetworkTables {
             "hidden_effect_value",
             "defect",
         ];
-        if zoned {
-            header.extend([
-                "soil_zone",
-                "zone_soil_youngs_modulus_pa",
-                "zone_soil_poisson",
-            ]);
-        }
         let united = self.truth.iter().any(|t| t.geological_unit.is_some());
         header.extend([
             "leak_band_speed_m_per_s",
@@ -365,6 +358,13 @@ impl NetworkTables {
         ]);
         if united {
             header.push("geological_unit");
+        }
+        if zoned {
+            header.extend([
+                "soil_zone",
+                "zone_soil_youngs_modulus_pa",
+                "zone_soil_poisson",
+            ]);
         }
         csv_text(
             header,
@@ -380,13 +380,6 @@ impl NetworkTables {
                     opt(t.hidden_effect_value),
                     t.defect.clone().unwrap_or_default(),
                 ];
-                if zoned {
-                    row.extend([
-                        t.soil_zone.clone().unwrap_or_default(),
-                        opt(t.zone_soil_youngs_modulus_pa),
-                        opt(t.zone_soil_poisson),
-                    ]);
-                }
                 row.extend([
                     opt(t.leak_band_speed_m_per_s),
                     opt(t.table_leak_band_speed_m_per_s),
@@ -395,6 +388,13 @@ impl NetworkTables {
                 ]);
                 if united {
                     row.push(t.geological_unit.clone().unwrap_or_default());
+                }
+                if zoned {
+                    row.extend([
+                        t.soil_zone.clone().unwrap_or_default(),
+                        opt(t.zone_soil_youngs_modulus_pa),
+                        opt(t.zone_soil_poisson),
+                    ]);
                 }
                 row
             }),
