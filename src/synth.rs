@@ -8,6 +8,9 @@ use num_complex::Complex64;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+pub mod field;
+
+use crate::invert::fit::leak_band_speed_of;
 use crate::physics::effects::Effect;
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
@@ -25,6 +28,26 @@ pub const ZONE_SCATTER_E_DECADES: f64 = 0.04;
 pub const ZONE_SCATTER_NU: f64 = 0.01;
 /// Stream of [`crate::seed::derive`] for the zones' soils (independent of the segments').
 const ZONE_SEED_STREAM: u64 = 12;
+/// Stream for the geological units and their soil field.
+const GEOLOGY_SEED_STREAM: u64 = 13;
+/// Stream for the per-pipe soil scatter inside the units.
+const PIPE_SOIL_SEED_STREAM: u64 = 14;
+/// Stream for the choice of the measured segments.
+const MEASURED_SEED_STREAM: u64 = 15;
+/// Stream for the choice of the wrong labels.
+const LABEL_SEED_STREAM: u64 = 16;
+
+/// Default correlation length of the soil field inside a geological unit, m (physics §7.12: a
+/// few hundred metres).
+pub const DEFAULT_CORRELATION_LENGTH_M: f64 = 350.0;
+
+/// The "table" soil a correlator's material/diameter table assumes (physics §7.12): E_m 5e7 Pa,
+/// ν_m 0.33, and the contact ξ 0.5; the density is the inventory's.
+pub const TABLE_SOIL_MODULUS: f64 = 5e7;
+/// Poisson's ratio of the table soil.
+pub const TABLE_SOIL_POISSON: f64 = 0.33;
+/// Contact coefficient of the table soil.
+pub const TABLE_CONTACT: f64 = 0.5;
 
 /// A pipe size from a standard: nominal size, outside diameter and wall thickness (mm).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -254,6 +277,21 @@ pub struct SynthSegment {
     pub soil_zone: Option<String>,
     /// The zone's true soil (E_m Pa, ν_m), about which this segment's soil scatters.
     pub zone_soil: Option<(f64, f64)>,
+    /// The soil class the inventory states (`soil_type` of segments.csv): `soil_type`, unless
+    /// the label is wrong (`synth --wrong-labels`).
+    pub soil_label: &'static str,
+    /// Geological unit (`synth --units`), if any.
+    pub unit: Option<usize>,
+    /// Whether its measurements are kept in measurements.csv (`synth --measured-fraction`);
+    /// the others' measurements are what a later campaign would take.
+    pub measured: bool,
+    /// True mean phase speed over the leak band of the pipe as it is (its soil, contact and
+    /// any hidden effect), m/s; `None` if the forward model fails in the band.
+    pub leak_band_speed: Option<f64>,
+    /// The "table speed": the same for the inventory's pipe in the table soil
+    /// ([`TABLE_SOIL_MODULUS`], [`TABLE_SOIL_POISSON`], [`TABLE_CONTACT`], the inventory's
+    /// density).
+    pub table_leak_band_speed: Option<f64>,
 }
 
 /// Options of a synthetic network.
@@ -282,6 +320,16 @@ pub struct SynthOptions {
     pub zones: usize,
     /// Scatter of the segments' soil about their zone's: (log10 E_m decades, ν_m), one sigma.
     pub zone_scatter: (f64, f64),
+    /// Geological units (0: none, every segment draws its own soil class): a Voronoi partition
+    /// of the map with a correlated soil inside each unit ([`field`], physics §7.12).
+    pub units: usize,
+    /// Correlation length of the soil field inside the units, m.
+    pub correlation_length_m: f64,
+    /// Fraction of segments whose measurements are kept (exactly `round(F n)` of them).
+    pub measured_fraction: f64,
+    /// Fraction of segments whose `soil_type` label is wrong (exactly `round(F n)`, each given
+    /// the class of another unit, or another class without units).
+    pub wrong_label_fraction: f64,
 }
 
 impl Default for SynthOptions {
@@ -299,6 +347,10 @@ impl Default for SynthOptions {
             srid: 27700,
             zones: 0,
             zone_scatter: (ZONE_SCATTER_E_DECADES, ZONE_SCATTER_NU),
+            units: 0,
+            correlation_length_m: DEFAULT_CORRELATION_LENGTH_M,
+            measured_fraction: 1.0,
+            wrong_label_fraction: 0.0,
         }
     }
 }
@@ -424,6 +476,71 @@ pub fn zone_name(z: usize) -> String {
     format!("Z{:02}", z + 1)
 }
 
+/// The street-grid edge of segment slot `i`: blocks 120 m × 90 m, `cols` blocks a row, even
+/// slots along a block's south edge, odd ones along its west edge. Returns its two ends.
+fn slot_ends(opts: &SynthOptions, cols: usize, i: usize) -> ((f64, f64), (f64, f64)) {
+    let (row, col) = (i / cols, i % cols);
+    let (x0, y0) = (
+        opts.origin.0 + 120.0 * col as f64,
+        opts.origin.1 + 90.0 * row as f64,
+    );
+    if i % 2 == 0 {
+        ((x0, y0), (x0 + 120.0, y0))
+    } else {
+        ((x0, y0), (x0, y0 + 90.0))
+    }
+}
+
+/// The midpoint of a slot's street edge (before the small jitter of the drawn geometry).
+fn slot_midpoint(opts: &SynthOptions, cols: usize, i: usize) -> (f64, f64) {
+    let (a, b) = slot_ends(opts, cols, i);
+    (0.5 * (a.0 + b.0), 0.5 * (a.1 + b.1))
+}
+
+/// Mean phase speed over the leak band (the fits' definition, [`leak_band_speed_of`]) of
+/// `sys` and of the table's view of the same inventory pipe (the table soil of physics §7.12 at
+/// the inventory's density, no hidden effect).
+fn truth_speeds(
+    opts: &SynthOptions,
+    sys: &System,
+    inventory_pipe: Pipe,
+    density: f64,
+) -> (Option<f64>, Option<f64>) {
+    let table = Soil::new(TABLE_SOIL_MODULUS, TABLE_SOIL_POISSON, density, 0.0)
+        .and_then(|soil| {
+            System::new(
+                Fluid::water(),
+                inventory_pipe,
+                soil,
+                TABLE_CONTACT,
+                opts.model,
+                opts.contact_mode,
+            )
+        })
+        .ok();
+    (
+        leak_band_speed_of(sys),
+        table.as_ref().and_then(leak_band_speed_of),
+    )
+}
+
+/// The geological units and soil field of the network `opts` generates (`None` without
+/// units): the units' means, for comparisons with the truth.
+pub fn geology(opts: &SynthOptions) -> Option<field::Geology> {
+    let cols = ((opts.segments as f64).sqrt().ceil() as usize).max(2);
+    (opts.units > 0).then(|| {
+        let sites: Vec<(f64, f64)> = (0..opts.segments)
+            .map(|i| slot_midpoint(opts, cols, i))
+            .collect();
+        field::Geology::draw(
+            crate::seed::derive(opts.seed, GEOLOGY_SEED_STREAM),
+            opts.units,
+            &sites,
+            opts.correlation_length_m,
+        )
+    })
+}
+
 /// Generate a network. Deterministic for given options.
 pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
     let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
@@ -441,6 +558,10 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             (class, e, nu)
         })
         .collect();
+    // Geological units and their soil field (P78), also from their own streams.
+    let geology = geology(opts);
+    let mut pipe_soil_rng =
+        ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, PIPE_SOIL_SEED_STREAM));
     let mut i = 0usize;
     let mut attempts = 0usize;
     while out.len() < opts.segments && attempts < opts.segments * 20 {
@@ -460,6 +581,16 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             nu = (nuz + opts.zone_scatter.1 * normal(&mut zone_rng)).clamp(0.0, ZONE_NU_MAX);
             rho = zone_rng.gen_range(class.3 .0..class.3 .1).round();
         }
+        // Unit of segment i and its soil from the field at the slot's midpoint (P78).
+        let unit = geology.as_ref().map(|g| {
+            let at = slot_midpoint(opts, cols, i);
+            let class = g.units[g.unit_at(at)].class;
+            rho = pipe_soil_rng.gen_range(class.3 .0..class.3 .1).round();
+            let (u, eu, nuu) = g.pipe_soil(at, rho, &mut pipe_soil_rng);
+            soil_type = class.0;
+            (e, nu) = (eu, nuu);
+            u
+        });
         let xi = rng.gen::<f64>();
         let pipe = pipe_of(material, &sz);
         let soil = Soil::new(e, nu, rho, 0.0).expect("soil classes are valid");
@@ -540,17 +671,7 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
         } else {
             sizes(inv_material)[0]
         };
-        let (row, col) = (i / cols, i % cols);
-        let horizontal = i % 2 == 0;
-        let (x0, y0) = (
-            opts.origin.0 + 120.0 * col as f64,
-            opts.origin.1 + 90.0 * row as f64,
-        );
-        let (x1, y1) = if horizontal {
-            (x0 + 120.0, y0)
-        } else {
-            (x0, y0 + 90.0)
-        };
+        let ((x0, y0), (x1, y1)) = slot_ends(opts, cols, i);
         let mid = (
             (x0 + x1) / 2.0 + rng.gen_range(-3.0..3.0),
             (y0 + y1) / 2.0 + rng.gen_range(-3.0..3.0),
@@ -560,6 +681,8 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             .windows(2)
             .map(|w| ((w[1].0 - w[0].0).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt())
             .sum();
+        let (leak_band_speed, table_leak_band_speed) =
+            truth_speeds(opts, &sys, pipe_of(inv_material, &sz_inv), rho);
         out.push(SynthSegment {
             id: format!("WM{:05}", 10001 + i),
             material: inv_material,
@@ -581,8 +704,68 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             },
             soil_zone: zone.map(zone_name),
             zone_soil: zone.map(|z| (zone_soils[z].1, zone_soils[z].2)),
+            soil_label: soil_type,
+            unit,
+            measured: true,
+            leak_band_speed,
+            table_leak_band_speed,
         });
         i += 1;
     }
+    keep_measured_fraction(opts, &mut out);
+    mislabel(opts, geology.as_ref(), &mut out);
     out
+}
+
+/// Keep the measurements of exactly `round(F n)` segments, chosen at random (F the measured
+/// fraction); the others are marked unmeasured (their measurements stay in the segment, as
+/// the ones a later campaign would take).
+fn keep_measured_fraction(opts: &SynthOptions, segments: &mut [SynthSegment]) {
+    if opts.measured_fraction >= 1.0 {
+        return;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, MEASURED_SEED_STREAM));
+    let keep = field::choose(
+        &mut rng,
+        segments.len(),
+        field::count_of(opts.measured_fraction, segments.len()),
+    );
+    for s in segments.iter_mut() {
+        s.measured = false;
+    }
+    for k in keep {
+        segments[k].measured = true;
+    }
+}
+
+/// Give exactly `round(F n)` segments, chosen at random, a wrong `soil_label`: the class of
+/// another unit (isolated mistakes of the map: a label that exists nearby), or without units
+/// another class of [`SOILS`].
+fn mislabel(opts: &SynthOptions, geology: Option<&field::Geology>, segments: &mut [SynthSegment]) {
+    if opts.wrong_label_fraction <= 0.0 {
+        return;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, LABEL_SEED_STREAM));
+    let mut labels: Vec<&'static str> = match geology {
+        Some(g) => g.units.iter().map(|u| u.class.0).collect(),
+        None => SOILS.iter().map(|c| c.0).collect(),
+    };
+    labels.sort_unstable();
+    labels.dedup();
+    if labels.len() < 2 {
+        labels = SOILS.iter().map(|c| c.0).collect();
+    }
+    let wrong = field::choose(
+        &mut rng,
+        segments.len(),
+        field::count_of(opts.wrong_label_fraction, segments.len()),
+    );
+    for k in wrong {
+        let others: Vec<&'static str> = labels
+            .iter()
+            .copied()
+            .filter(|&l| l != segments[k].soil_type)
+            .collect();
+        segments[k].soil_label = others[rng.gen_range(0..others.len())];
+    }
 }

@@ -1,5 +1,6 @@
 //! `pipewave synth --out DIR [--segments N] [--seed S] [--defects FRACTION] [--no-real-cases]
-//! [--force]`: write a synthetic network directory.
+//! [--force] [--units N [--correlation-length M]] [--measured-fraction F] [--wrong-labels F]
+//! [--campaign-out FILE]`: write a synthetic network directory.
 
 use std::path::{Path, PathBuf};
 
@@ -77,7 +78,31 @@ pub struct SynthArgs {
     #[arg(long, value_name = "S", requires = "leaks",
           default_value_t = pipewave::locate::synth::DEFAULT_LEAK_SECONDS)]
     leak_seconds: f64,
+    /// Geological units: split the map into N contiguous units (a Voronoi partition), from
+    /// soft to stiff ground, each with a soil that varies smoothly inside it (a Gaussian field
+    /// of the soil's wave speeds, physics §7.12); the unit is in truth.csv.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    units: u32,
+    /// Correlation length of the soil field inside the units, m (with --units; default 350).
+    #[arg(long, value_name = "M")]
+    correlation_length: Option<f64>,
+    /// Keep the measurements of this fraction of the synthetic segments only (0 - 1, exactly
+    /// round(F n) segments); truth.csv still describes every segment.
+    #[arg(long, value_name = "F", default_value_t = 1.0)]
+    measured_fraction: f64,
+    /// Give this fraction of the synthetic segments a wrong soil_type label (0 - 1): another
+    /// unit's class, or another class without --units.
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    wrong_labels: f64,
+    /// Also write every synthetic segment's measurements (campaign `later`) to FILE, in the
+    /// measurements.csv format: what a later campaign would measure on any segment, for
+    /// `import --measurements` of the segments chosen (e.g. by `plan`).
+    #[arg(long, value_name = "FILE")]
+    campaign_out: Option<PathBuf>,
 }
+
+/// Campaign name of the measurements `--campaign-out` writes.
+pub const LATER_CAMPAIGN: &str = "later";
 
 /// Generate and write the network.
 pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
@@ -138,6 +163,26 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             args.hidden_fraction
         );
     }
+    for (name, v) in [
+        ("--measured-fraction", args.measured_fraction),
+        ("--wrong-labels", args.wrong_labels),
+    ] {
+        if !(0.0..=1.0).contains(&v) {
+            bail!("{name} {v} is outside 0 - 1 (it is a fraction of the segments)");
+        }
+    }
+    if args.units > 0 && args.zones > 0 {
+        bail!("--units and --zones are two ways to give the soil a structure: choose one");
+    }
+    if args.correlation_length.is_some() && args.units == 0 {
+        bail!("--correlation-length needs --units (it is the scale of the soil inside a unit)");
+    }
+    let correlation_length_m = args
+        .correlation_length
+        .unwrap_or(pipewave::synth::DEFAULT_CORRELATION_LENGTH_M);
+    if !(correlation_length_m.is_finite() && correlation_length_m > 0.0) {
+        bail!("--correlation-length {correlation_length_m} must be a positive number of metres");
+    }
     let opts = SynthOptions {
         segments: args.segments as usize,
         seed: args.seed,
@@ -145,6 +190,10 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         hidden_effect,
         hidden_fraction: args.hidden_fraction,
         zones: args.zones as usize,
+        units: args.units as usize,
+        correlation_length_m,
+        measured_fraction: args.measured_fraction,
+        wrong_label_fraction: args.wrong_labels,
         ..SynthOptions::default()
     };
     if opts.zones > opts.segments {
@@ -191,6 +240,13 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             return Ok(Outcome::Done);
         }
     }
+    if opts.units > opts.segments {
+        bail!(
+            "--units {} is more than --segments {} (every unit needs segments)",
+            opts.units,
+            opts.segments
+        );
+    }
     let mut tables = NetworkTables::from_synth(&synthetic, opts.srid);
     if !args.no_real_cases {
         for case in published::published_cases()? {
@@ -198,6 +254,11 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         }
     }
     tables.write_dir(&args.out)?;
+    if let Some(path) = &args.campaign_out {
+        let campaign = NetworkTables::campaign(&synthetic, LATER_CAMPAIGN);
+        std::fs::write(path, campaign.measurements_csv())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if !args.no_real_cases {
         write_real_copies(&args.out.join(REAL_DIR))?;
     }
@@ -217,6 +278,30 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         100.0 * NOISE_ATTENUATION,
         args.out.display()
     );
+    let measured = synthetic.iter().filter(|s| s.measured).count();
+    if measured < synthetic.len() {
+        println!(
+            "synth: measurements kept for {measured} of {} synthetic segments",
+            synthetic.len()
+        );
+    }
+    if opts.units > 0 || opts.wrong_label_fraction > 0.0 {
+        println!(
+            "synth: {} geological units (correlation length {} m), {} wrong soil_type labels",
+            opts.units,
+            opts.correlation_length_m,
+            synthetic
+                .iter()
+                .filter(|s| s.soil_label != s.soil_type)
+                .count()
+        );
+    }
+    if let Some(path) = &args.campaign_out {
+        println!(
+            "synth: wrote every synthetic segment's later-campaign measurements to {}",
+            path.display()
+        );
+    }
     if synthetic.len() < opts.segments {
         eprintln!(
             "note: only {} of {} segments could be generated (the forward model failed for \

@@ -1562,7 +1562,8 @@ fn polish_with(
     }
 }
 
-/// Mean phase speed over [`LEAK_BAND_HZ`] of `sys`, m/s.
+/// Mean phase speed over [`LEAK_BAND_HZ`] of `sys`, m/s: the leak-band speed every fit and
+/// prediction reports, and the truth of a synthetic network.
 pub fn leak_band_speed_of(sys: &System) -> Option<f64> {
     let band: Vec<f64> = STANDARD_GRID_HZ
         .iter()

@@ -55,6 +55,16 @@ pub struct TruthRow {
     pub zone_soil_youngs_modulus_pa: Option<f64>,
     /// The zone's true ν_m.
     pub zone_soil_poisson: Option<f64>,
+    /// True mean phase speed over the leak band 100–800 Hz, m/s (the fits' definition).
+    pub leak_band_speed_m_per_s: Option<f64>,
+    /// The same pipe's leak-band speed in the table soil (physics §7.12), m/s.
+    pub table_leak_band_speed_m_per_s: Option<f64>,
+    /// Whether the segment's measurements are in measurements.csv.
+    pub measured: Option<bool>,
+    /// Geological unit (`U1`, `U2`, …), if the network has units.
+    pub geological_unit: Option<String>,
+    /// Whether the inventory's `soil_type` differs from the true class (`soil_type` here).
+    pub label_wrong: Option<bool>,
 }
 
 impl TruthRow {
@@ -73,6 +83,11 @@ impl TruthRow {
             soil_zone: None,
             zone_soil_youngs_modulus_pa: None,
             zone_soil_poisson: None,
+            leak_band_speed_m_per_s: None,
+            table_leak_band_speed_m_per_s: None,
+            measured: None,
+            geological_unit: None,
+            label_wrong: None,
         }
     }
 }
@@ -139,7 +154,7 @@ impl NetworkTables {
                 fluid_density_kg_m3: None,
                 fluid_bulk_modulus_pa: None,
                 length_m: Some(round_to(s.length_m, 2)),
-                soil_type: Some(s.soil_type.to_string()),
+                soil_type: Some(s.soil_label.to_string()),
                 install_year: Some(i64::from(s.install_year)),
                 soil_zone: s.soil_zone.clone(),
                 srid: geometry.as_ref().map(|_| i64::from(srid)),
@@ -149,6 +164,7 @@ impl NetworkTables {
                 measurements: s
                     .measurements
                     .iter()
+                    .filter(|_| s.measured)
                     .map(|m| MeasurementRecord {
                         omega_rad_s: crate::units::hz_to_omega(m.frequency_hz),
                         frequency_hz: m.frequency_hz,
@@ -178,7 +194,32 @@ impl NetworkTables {
                 soil_zone: s.soil_zone.clone(),
                 zone_soil_youngs_modulus_pa: s.zone_soil.map(|z| z.0),
                 zone_soil_poisson: s.zone_soil.map(|z| z.1),
+                leak_band_speed_m_per_s: s.leak_band_speed,
+                table_leak_band_speed_m_per_s: s.table_leak_band_speed,
+                measured: Some(s.measured),
+                geological_unit: s.unit.map(unit_name),
+                label_wrong: Some(s.soil_label != s.soil_type),
             });
+        }
+        t
+    }
+
+    /// Every synthetic segment's measurements, measured or not, under campaign `campaign`:
+    /// what a later campaign would measure (the records carry the inventory too, but only
+    /// [`NetworkTables::measurements_csv`] is meant to be written).
+    pub fn campaign(segments: &[SynthSegment], campaign: &str) -> NetworkTables {
+        let all: Vec<SynthSegment> = segments
+            .iter()
+            .map(|s| SynthSegment {
+                measured: true,
+                ..s.clone()
+            })
+            .collect();
+        let mut t = NetworkTables::from_synth(&all, 0);
+        for rec in &mut t.segments {
+            for m in &mut rec.measurements {
+                m.campaign = Some(campaign.to_string());
+            }
         }
         t
     }
@@ -308,6 +349,16 @@ impl NetworkTables {
             "hidden_effect_value",
             "defect",
         ];
+        let united = self.truth.iter().any(|t| t.geological_unit.is_some());
+        header.extend([
+            "leak_band_speed_m_per_s",
+            "table_leak_band_speed_m_per_s",
+            "measured",
+            "label_wrong",
+        ]);
+        if united {
+            header.push("geological_unit");
+        }
         if zoned {
             header.extend([
                 "soil_zone",
@@ -329,6 +380,15 @@ impl NetworkTables {
                     opt(t.hidden_effect_value),
                     t.defect.clone().unwrap_or_default(),
                 ];
+                row.extend([
+                    opt(t.leak_band_speed_m_per_s),
+                    opt(t.table_leak_band_speed_m_per_s),
+                    flag(t.measured),
+                    flag(t.label_wrong),
+                ]);
+                if united {
+                    row.push(t.geological_unit.clone().unwrap_or_default());
+                }
                 if zoned {
                     row.extend([
                         t.soil_zone.clone().unwrap_or_default(),
@@ -374,6 +434,17 @@ fn round_to(v: f64, digits: i32) -> f64 {
 /// A number as the shortest decimal that reads back to the same `f64`, or blank.
 fn opt(v: Option<f64>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
+}
+
+/// A yes/no as `1` / `0`, or blank.
+fn flag(v: Option<bool>) -> String {
+    v.map(|b| if b { "1" } else { "0" }.to_string())
+        .unwrap_or_default()
+}
+
+/// Name of geological unit `u` in truth.csv: `U1`, `U2`, …
+pub fn unit_name(u: usize) -> String {
+    format!("U{}", u + 1)
 }
 
 /// A CSV file as text: the header, then the rows (cells quoted by the `csv` crate where they
@@ -435,6 +506,19 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, NetworkError> {
                 })
                 .transpose()
         };
+        let yes_no = |name: &str| -> Result<Option<bool>, NetworkError> {
+            cell(name)
+                .map(|s| match s.as_str() {
+                    "1" => Ok(true),
+                    "0" => Ok(false),
+                    _ => Err(NetworkError::Row {
+                        path: path.to_path_buf(),
+                        line,
+                        message: format!("column {name}: '{s}' is not 0 or 1"),
+                    }),
+                })
+                .transpose()
+        };
         out.push(TruthRow {
             segment_id: rec.get(id_col).unwrap_or("").trim().to_string(),
             source: cell("source").unwrap_or_default(),
@@ -448,6 +532,11 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, NetworkError> {
             soil_zone: cell("soil_zone"),
             zone_soil_youngs_modulus_pa: num("zone_soil_youngs_modulus_pa")?,
             zone_soil_poisson: num("zone_soil_poisson")?,
+            leak_band_speed_m_per_s: num("leak_band_speed_m_per_s")?,
+            table_leak_band_speed_m_per_s: num("table_leak_band_speed_m_per_s")?,
+            measured: yes_no("measured")?,
+            geological_unit: cell("geological_unit"),
+            label_wrong: yes_no("label_wrong")?,
         });
     }
     Ok(out)
