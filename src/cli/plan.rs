@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::Args;
 use pipewave::field::plan;
 
-use super::export::open_existing;
+use super::open_database as open_existing;
 use super::Outcome;
 
 /// Arguments of `plan`.

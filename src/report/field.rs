@@ -175,14 +175,16 @@ fn z_map(db: &Database, rows: &[FieldSegmentRow]) -> Result<String, ExportError>
             line,
             value: *v,
             label: v.filter(|_| tooltips).map(|z| format!("z = {z:.2}")),
+            trust: svg::Trust::Trusted,
         })
         .collect();
     let style = MapStyle {
         unit: "",
         decimals: 1,
         scale: None,
-        reversed: false,
+        palette: &svg::VIRIDIS_9,
         width: 720.0,
+        metres_per_unit: None,
     };
     let geographic = srid.is_some_and(crate::export::crs::is_geographic);
     Ok(svg::map(&map_lines, geographic, &style))
