@@ -52,8 +52,20 @@ pub const DEFAULT_SCATTER_VAR: f64 = 0.005;
 /// Default correlation between the field's ln c_P and ln c_S.
 pub const DEFAULT_FIELD_CORR: f64 = 0.5;
 
+/// Predecessors each member is conditioned on in the marginal likelihood (the hyper-parameter
+/// search evaluates it a few hundred times; an exponential kernel's Vecchia likelihood is
+/// already close to the exact one with 10, and the predictions keep [`NEIGHBOURS`]).
+pub const LIKELIHOOD_NEIGHBOURS: usize = 10;
+
 /// Evaluation budget of the marginal-likelihood search over the six hyper-parameters.
-pub const HYPER_EVALUATIONS: usize = 400;
+pub const HYPER_EVALUATIONS: usize = 250;
+
+/// The search stops when the log-likelihood improved by less than this over
+/// [`HYPER_STALL_EVALUATIONS`] evaluations: a change of 0.01 moves no hyper-parameter by more
+/// than a small fraction of its own uncertainty.
+pub const HYPER_STALL_TOL: f64 = 1e-2;
+/// See [`HYPER_STALL_TOL`].
+pub const HYPER_STALL_EVALUATIONS: usize = 50;
 
 /// Range of the variances searched (ln units²): from a 0.1 % spread to a factor e^1.4.
 const VAR_RANGE: (f64, f64) = (1e-6, 2.0);
@@ -574,7 +586,7 @@ impl Field {
             ell_bounds.0.max(1e-3),
             ell_bounds.1.max(ell_bounds.0 * 1.001),
         );
-        let v = Vecchia::new(&obs, NEIGHBOURS);
+        let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
         let start = Hyper::defaults((lo * hi).sqrt());
         let (mut hyper, mut source) = given.unwrap_or((start, HyperSource::Defaults));
         if given.is_none() && obs.len() >= MIN_MEMBERS_FOR_HYPER {
@@ -611,7 +623,7 @@ impl Field {
             let found = bounds.ok().and_then(|b| {
                 NelderMead::new()
                     .max_evaluations(HYPER_EVALUATIONS)
-                    .and_then(|nm| nm.stall(80, 1e-4))
+                    .and_then(|nm| nm.stall(HYPER_STALL_EVALUATIONS, HYPER_STALL_TOL))
                     .ok()?
                     .minimize(&objective, &b, &x0, &steps)
                     .ok()
