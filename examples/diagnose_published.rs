@@ -57,7 +57,7 @@ fn show(name: &str, d: &Diagnosis) {
 
 /// The outcome of a case in numbers, for the report: χ²/dof before, the best candidate's after,
 /// what was named, and where the residuals are off; when nothing closes the gap, what that
-/// leaves (spec §8, "Effects not in this list").
+/// leaves (model §8, "Effects not in this list").
 fn outcome(name: &str, d: &Diagnosis) -> String {
     let best = d
         .candidates
@@ -91,7 +91,7 @@ fn outcome(name: &str, d: &Diagnosis) -> String {
             .to_string(),
         None if d.structure.structured => "no effect of the library closes the gap: the \
              residuals point outside the model's effect list (joints, a trench or layered soil, \
-             a finite burial depth; spec §8) or to the wavenumber estimation itself"
+             a finite burial depth; model §8) or to the wavenumber estimation itself"
             .to_string(),
         None => "the misfit is within the noise".to_string(),
     };

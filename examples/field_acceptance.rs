@@ -1,4 +1,4 @@
-//! Acceptance figures of the network soil field (physics §7.12) on fresh synthetic networks
+//! Acceptance figures of the network soil field (model §7.12) on fresh synthetic networks
 //! with geological units (`synth --units`).
 //!
 //! `cargo run --release --example field_acceptance -- baseline [NETWORKS] [SEGMENTS] [SEED]`

@@ -1,4 +1,4 @@
-//! Honest errors where the model does not explain the data (physics §7.13): every figure of
+//! Honest errors where the model does not explain the data (model §7.13): every figure of
 //! docs/honest-errors.md.
 //!
 //! * For each effect `synth --hidden-effect` supports (viscoelastic_wall on plastics) and for

@@ -1,4 +1,4 @@
-//! Acceptance of `pipewave locate` (physics §11) on a fresh synthetic network:
+//! Acceptance of `pipewave locate` (model §11) on a fresh synthetic network:
 //!
 //! 1. Position from a given delay: paths of 1–4 segments, spans 40–400 m, mixed materials;
 //!    speeds from the segments' own fits; the delay from the TRUE soils through the P85 model

@@ -1,5 +1,5 @@
 //! Record-error trials for the diagnosis (too slow for CI at these sizes): synthetic segments
-//! whose inventory record is wrong in one of the ways of spec §8 E8, generated from a small
+//! whose inventory record is wrong in one of the ways of model §8 E8, generated from a small
 //! dimension list typed here from the standards (ISO 4427, EN 1452, ISO 2531, ISO 13, EN 10224
 //! and the class-20 asbestos-cement sizes of a utility's own inventory), independently of the
 //! candidate table in `src/diagnose/catalogue.rs`, plus controls whose record is right.

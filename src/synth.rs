@@ -37,11 +37,11 @@ const MEASURED_SEED_STREAM: u64 = 15;
 /// Stream for the choice of the wrong labels.
 const LABEL_SEED_STREAM: u64 = 16;
 
-/// Default correlation length of the soil field inside a geological unit, m (physics §7.12: a
+/// Default correlation length of the soil field inside a geological unit, m (model §7.12: a
 /// few hundred metres).
 pub const DEFAULT_CORRELATION_LENGTH_M: f64 = 350.0;
 
-/// The "table" soil a correlator's material/diameter table assumes (physics §7.12): E_m 5e7 Pa,
+/// The "table" soil a correlator's material/diameter table assumes (model §7.12): E_m 5e7 Pa,
 /// ν_m 0.33, and the contact ξ 0.5; the density is the inventory's.
 pub const TABLE_SOIL_MODULUS: f64 = 5e7;
 /// Poisson's ratio of the table soil.
@@ -321,7 +321,7 @@ pub struct SynthOptions {
     /// Scatter of the segments' soil about their zone's: (log10 E_m decades, ν_m), one sigma.
     pub zone_scatter: (f64, f64),
     /// Geological units (0: none, every segment draws its own soil class): a Voronoi partition
-    /// of the map with a correlated soil inside each unit ([`field`], physics §7.12).
+    /// of the map with a correlated soil inside each unit ([`field`], model §7.12).
     pub units: usize,
     /// Correlation length of the soil field inside the units, m.
     pub correlation_length_m: f64,
@@ -498,7 +498,7 @@ fn slot_midpoint(opts: &SynthOptions, cols: usize, i: usize) -> (f64, f64) {
 }
 
 /// Mean phase speed over the leak band (the fits' definition, [`leak_band_speed_of`]) of
-/// `sys` and of the table's view of the same inventory pipe (the table soil of physics §7.12 at
+/// `sys` and of the table's view of the same inventory pipe (the table soil of model §7.12 at
 /// the inventory's density, no hidden effect).
 fn truth_speeds(
     opts: &SynthOptions,

@@ -581,7 +581,7 @@ fn run_does_everything_once_and_nothing_the_second_time() {
     let lines: Vec<&str> = out.lines().collect();
     assert!(lines[0].starts_with("imported: segments 6 new"), "{out}");
     assert!(lines[1].starts_with("calibrate: 6 fitted"), "{out}");
-    // The soil field learns from the six (physics §7.12); every segment is measured.
+    // The soil field learns from the six (model §7.12); every segment is measured.
     assert!(
         lines[2].starts_with("field: 0 segments predicted from 6 measured"),
         "{out}"

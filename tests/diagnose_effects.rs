@@ -1,5 +1,5 @@
 //! Recovery of the new effects of issue 13 on synthetic data (the fit never sees the truth):
-//! the viscoelastic wall's exponent (spec §8 E7) and wrong inventory records (§8 E8).
+//! the viscoelastic wall's exponent (model §8 E7) and wrong inventory records (§8 E8).
 
 use pipewave::diagnose::inventory::{fit_best_record_among, InventoryPipe, InventoryProfile};
 use pipewave::diagnose::trial::{effect_trial, record_error_trial, RecordError};

@@ -1,4 +1,4 @@
-//! The network soil field (physics §7.12): coverage of its predicted speeds on a field drawn
+//! The network soil field (model §7.12): coverage of its predicted speeds on a field drawn
 //! from the model, the plan's preference for a measurement among many unmeasured pipes, and
 //! the nightly run: every segment of the sample network gets a speed and an error.
 

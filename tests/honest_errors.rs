@@ -1,4 +1,4 @@
-//! Honest errors where the model does not explain the data (physics §7.13): coverage of the
+//! Honest errors where the model does not explain the data (model §7.13): coverage of the
 //! truth by the corrected curve over many synthetic segments hiding effects the fit lacks,
 //! fits the model explains left alone, the two published real cases, and what a user sees:
 //! `fits.curve_source`, the model-only curve kept beside the corrected one, the export

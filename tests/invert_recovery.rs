@@ -16,7 +16,7 @@ fn quantile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// What the data determine (issue 9, physics §7.10), over 100 synthetic segments: the soil's
+/// What the data determine (issue 9, model §7.10), over 100 synthetic segments: the soil's
 /// c_P and c_S inside their 2σ, the true E_m, ν_m and ξ inside their 95 % intervals, for at
 /// least 90 % of segments each; c_P within 5 % (median); at least 80 % of fits `ok`, and among
 /// those the leak-band speed within 1 % of the truth (90th percentile) and inside its 2σ for at

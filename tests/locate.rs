@@ -1,4 +1,4 @@
-//! `pipewave locate` (physics §11, P84–P87): the closed-form single-pipe limit, multi-segment
+//! `pipewave locate` (model §11, P84–P87): the closed-form single-pipe limit, multi-segment
 //! delays, recovery of known leaks from synthetic delays and recordings made from the true
 //! soils, coverage of the 95 % interval, and the messages for bad input, through the library and
 //! the binary.

@@ -1,5 +1,5 @@
 //! The paper's cast-iron field case (Lu et al. 2022, Table 2), under the stated geometry
-//! assumption (an inferred DN125: a = 69 mm, h = 6 mm; spec §7.7), and the buried MDPE pipe of
+//! assumption (an inferred DN125: a = 69 mm, h = 6 mm; model §7.7), and the buried MDPE pipe of
 //! Muggleton et al. (2004). Data from `tests/data/published/` (see its README for sources).
 
 use pipewave::invert::problem::Problem;
@@ -72,7 +72,7 @@ fn deviations_at_the_estimate_match_spec() {
 
 /// The paper's estimate is not the global optimum of this model, nor a stationary point:
 /// both the paper's DE and the default method find far lower f, and a local polish started at
-/// the estimate moves away from it down the E_m–ν_m valley (spec §7.8 items 1–2).
+/// the estimate moves away from it down the E_m–ν_m valley (model §7.8 items 1–2).
 #[test]
 fn paper_estimate_is_not_the_optimum() {
     let d = paper_data();
@@ -105,7 +105,7 @@ fn paper_estimate_is_not_the_optimum() {
         "default optimum has paper f = {f_default}"
     );
     // The high-E basin sits where the soil's compressional speed overtakes the pipe wave
-    // (spec §7.8 item 3): c_P above ~1250 m/s at the optimum.
+    // (model §7.8 item 3): c_P above ~1250 m/s at the optimum.
     let soil = pipewave::physics::Soil::new(x[0], x[1], 1999.0, 0.0).unwrap();
     assert!(
         soil.wave_speeds().0 > 1250.0,
@@ -154,7 +154,7 @@ fn paper_estimate_is_not_the_optimum() {
 /// The buried MDPE pipe (Muggleton et al. 2004): the raw 100–750 Hz rows binned into 50 Hz
 /// bands with standard errors of the mean, fitted with the default method. The fitted soil
 /// modulus lies within a factor 1.5 of the soil identified from the group's own model curves
-/// (E_m = 4.0e7 Pa, spec §3.4) and Re k is explained to within 7 % in every band; but the raw
+/// (E_m = 4.0e7 Pa, model §3.4) and Re k is explained to within 7 % in every band; but the raw
 /// data have structure far beyond their scatter (χ²/dof ≈ 38), which the fit must flag rather
 /// than hide. Issue 6 (diagnose) looks for the missing effect.
 #[test]
@@ -200,7 +200,7 @@ fn mdpe_measurements_fit() {
     );
 }
 
-/// Next to grazing (P44, spec §7.8 item 3) the fast search path can follow a root on the
+/// Next to grazing (P44, model §7.8 item 3) the fast search path can follow a root on the
 /// other side of the branch cut: at this point of the paper case it gives a misfit of 0.105
 /// where the reference path, on which answers are reported, gives 60.3. A start placed there
 /// (through the nested start of an extended fit) must not become the answer: the answer is

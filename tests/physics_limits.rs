@@ -1,4 +1,4 @@
-//! Closed-form limits and invariants of the model, spec §6 (T1–T11) and
+//! Closed-form limits and invariants of the model, model §6 (T1–T11) and
 //! `tests/data/vectors/limits.md`.
 
 // Reference values are copied verbatim from the spec, digits and all.

@@ -96,7 +96,7 @@ fn soil_stiffness_matches_vectors() {
 /// T12: every row of dispersion_roots.csv. Non-grazing rows to 1e-10 relative on k1 (the spec's
 /// tolerance; the issue asks 1e-8 in |k1|). The 3 near-grazing rows are solved and reported;
 /// they are asserted only to 1e-6, because the root there depends on which side of the branch
-/// cut it lies and two conforming implementations may disagree (spec §5.6 item 5).
+/// cut it lies and two conforming implementations may disagree (model §5.6 item 5).
 #[test]
 fn dispersion_roots_match_vectors() {
     let rows = read_csv("vectors/dispersion_roots.csv");

@@ -1,4 +1,4 @@
-//! Record errors and unit mix-ups (spec §8 E8): a plastic wall recorded in the wrong SDR is a
+//! Record errors and unit mix-ups (model §8 E8): a plastic wall recorded in the wrong SDR is a
 //! record to check, never a thinned wall; measurements recorded in other units are named with
 //! their factor and converted only on the user's confirmation; the sample network's WM10052
 //! (attenuation entered in dB/m) is named as such. The trials that measure the acceptance rates

@@ -1,4 +1,4 @@
-//! Synthetic networks with geological units (physics §7.12): contiguous units, the measured
+//! Synthetic networks with geological units (model §7.12): contiguous units, the measured
 //! fraction, wrong labels, the truth speeds against the forward model, determinism, and
 //! `pipewave synth` with the new options as a user runs it.
 

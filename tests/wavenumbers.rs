@@ -1,4 +1,4 @@
-//! `pipewave wavenumbers`: field wavenumbers from hydrant-test recordings (physics §10).
+//! `pipewave wavenumbers`: field wavenumbers from hydrant-test recordings (model §10).
 //!
 //! The acceptance of issue 15 on synthetic recordings made here with a seed the code was not
 //! tuned on (iron and plastic pipes, sensors 6–80 m from the source, sensor noise 30 % of the
@@ -505,7 +505,7 @@ fn field_mistakes_get_messages_naming_file_line_and_what() {
 }
 
 /// The noise-robust estimator: reference noise does not bias the attenuation (P77), while H1
-/// (two channels) comes out high as physics §10 says.
+/// (two channels) comes out high as model §10 says.
 #[test]
 fn three_channel_estimate_is_free_of_the_reference_noise_bias() {
     let (rec, positions) = small_recording();

@@ -1,4 +1,4 @@
-//! Soil zones (issue 12, physics §7.11): on a zoned synthetic network made with a seed the code
+//! Soil zones (issue 12, model §7.11): on a zoned synthetic network made with a seed the code
 //! was not tuned on (16 zones × 10 segments, the default material mix, 1 % / 5 % noise, 10 %
 //! scatter in E_m and 0.01 in ν_m within a zone), the zone estimates recover the zones' soils
 //! and their 95 % intervals cover the truth; with metal pipes only, the intervals are honestly
@@ -63,7 +63,7 @@ fn zones_of_a_fresh_synthetic_network_are_recovered_with_honest_intervals() {
     assert!(nu_med <= 0.02, "zone nu_m median error {nu_med}");
     assert!(cov_e >= 0.85, "E_m coverage {cov_e}");
     assert!(cov_nu >= 0.85, "nu_m coverage {cov_nu}");
-    // The joint estimate beats the median of the single fits (physics §7.11: 11 % median).
+    // The joint estimate beats the median of the single fits (model §7.11: 11 % median).
     let single: Vec<f64> = r
         .zones
         .iter()

@@ -248,7 +248,7 @@ pub struct CalibrateSummary {
     pub worker_ms: f64,
     /// The soil zones estimated after the fits, if the run finished.
     pub zones: Option<crate::zones::ZoneUpdate>,
-    /// The soil field's update after the fits (physics §7.12), if the run finished.
+    /// The soil field's update after the fits (model §7.12), if the run finished.
     pub field: Option<crate::field::FieldUpdate>,
 }
 

@@ -1,7 +1,7 @@
 //! `pipewave locate --db DB --jobs jobs.csv --out located.csv` or one correlation on the command
 //! line (`--sensor1 ID:CHAINAGE --sensor2 ID:CHAINAGE --delay S --delay-std S`, or
 //! `--recording1 FILE:CH --recording2 FILE:CH`): the leak's position across a path of one or
-//! more segments with its 95 % interval and error budget (physics §11, P84–P87).
+//! more segments with its 95 % interval and error budget (model §11, P84–P87).
 //!
 //! Exit codes: 0 every job located; 1 some jobs failed (each reported on its own row and in
 //! the summary); 2 the command could not run (bad arguments, unusable jobs file or database; a

@@ -80,7 +80,7 @@ pub struct SynthArgs {
     leak_seconds: f64,
     /// Geological units: split the map into N contiguous units (a Voronoi partition), from
     /// soft to stiff ground, each with a soil that varies smoothly inside it (a Gaussian field
-    /// of the soil's wave speeds, physics §7.12); the unit is in truth.csv.
+    /// of the soil's wave speeds, model §7.12); the unit is in truth.csv.
     #[arg(long, value_name = "N", default_value_t = 0)]
     units: u32,
     /// Correlation length of the soil field inside the units, m (with --units; default 350).

@@ -1,4 +1,4 @@
-//! The soil field's tables (physics §7.12): `field_runs`, `field_classes`, `field_segments`,
+//! The soil field's tables (model §7.12): `field_runs`, `field_classes`, `field_segments`,
 //! `predictions` with `prediction_curves`, and `plan_picks`. Each field update replaces the
 //! per-segment rows (only the latest are kept, naming the run that made them).
 

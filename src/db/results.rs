@@ -181,7 +181,7 @@ pub struct FitRow {
     /// Its information about ln c_S.
     pub soil_information_ss: Option<f64>,
     /// `model`, or `model+discrepancy` where the misfit is significant and the curve and the
-    /// leak-band speed are corrected by a fitted discrepancy (physics §7.13).
+    /// leak-band speed are corrected by a fitted discrepancy (model §7.13).
     pub curve_source: String,
     /// How far the leak band reaches beyond the measured frequencies, octaves.
     pub leak_band_extrapolation_octaves: Option<f64>,

@@ -1,5 +1,5 @@
-//! The speed curve of a segment for leak location (physics §11): its latest usable fit's
-//! `curves`, or, for a segment without one, its `prediction_curves` (physics §7.12, P81).
+//! The speed curve of a segment for leak location (model §11): its latest usable fit's
+//! `curves`, or, for a segment without one, its `prediction_curves` (model §7.12, P81).
 
 use rusqlite::{params, Connection, OptionalExtension};
 

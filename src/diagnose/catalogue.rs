@@ -1,4 +1,4 @@
-//! The standard pipe catalogues the inventory check draws its candidate records from (spec §8
+//! The standard pipe catalogues the inventory check draws its candidate records from (model §8
 //! E8): one table, [`CATALOGUE`], of series (material, standard, class) with their sizes, each
 //! with the published source its numbers were typed from. The sizes the utility's own
 //! inventory holds are added at diagnosis time ([`super::inventory::InventoryProfile`]).
@@ -294,7 +294,7 @@ macro_rules! series {
     };
 }
 
-/// The candidate-record catalogue: every series of the standards named in spec §8 E8's
+/// The candidate-record catalogue: every series of the standards named in model §8 E8's
 /// candidates, with its source.
 pub const CATALOGUE: [Series; 21] = [
     series!(Material::Mdpe, "ISO 4427", "SDR 11", PE_SOURCE, SDR11),

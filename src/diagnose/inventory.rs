@@ -1,4 +1,4 @@
-//! Inventory-record errors (spec §8 E8): the inventory describes another pipe than the one
+//! Inventory-record errors (model §8 E8): the inventory describes another pipe than the one
 //! measured. The candidates are whole records, not a model parameter, drawn from the standard
 //! catalogues ([`super::catalogue`]) and the utility's own sizes ([`InventoryProfile`]): every
 //! other material at its sizes near the recorded diameter, every wall class / SDR of the
@@ -30,7 +30,7 @@ pub const MM_PER_INCH: f64 = 25.4;
 pub const MAX_DIAMETER_INCHES: f64 = 80.0;
 /// Another material's size counts as "near" the recorded diameter within this factor: a
 /// relining or an unrecorded replacement keeps the nominal size or changes it by a few steps
-/// (spec §8 E8's example, a PVC 110 that is a PE 180, is a factor 1.64).
+/// (model §8 E8's example, a PVC 110 that is a PE 180, is a factor 1.64).
 pub const NEAR_DIAMETER_FACTOR: f64 = 1.7;
 /// A nominal size DN recorded in place of the outside diameter: the true outside diameter is
 /// above the recorded number by at most this factor (DN 80 → OD 98, DN 100 → OD 125).
@@ -228,7 +228,7 @@ impl InventoryProfile {
     }
 }
 
-/// The candidate records of spec §8 E8 for a segment, each a valid pipe (a candidate the
+/// The candidate records of model §8 E8 for a segment, each a valid pipe (a candidate the
 /// thin-shell model cannot take is left out), without repeats, from the catalogue
 /// ([`super::catalogue::CATALOGUE`]) and the inventory's own sizes:
 /// * every wall of the recorded material at the recorded diameter (a wrong wall class / SDR);

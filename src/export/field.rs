@@ -1,4 +1,4 @@
-//! The GeoPackage's soil-field layers (physics §7.12): `soil_field`, one line per segment with
+//! The GeoPackage's soil-field layers (model §7.12): `soil_field`, one line per segment with
 //! the soil and speed the network's field gives it (its own fit's where measured, the field's
 //! prediction elsewhere) and its leave-one-out check; `next_measurements`, the stored plan
 //! (P83), best first. Written only when the database holds a field or a plan.

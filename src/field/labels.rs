@@ -1,4 +1,4 @@
-//! Labels are evidence, not truth (physics §7.12): a geological map's unit is wrong for some
+//! Labels are evidence, not truth (model §7.12): a geological map's unit is wrong for some
 //! pipes, but units are contiguous and mistakes isolated. Each segment's class is its own label
 //! unless a strict majority of its [`LABEL_VOTERS`] nearest segments (itself included) carry
 //! another one; the segment is then reported as one whose label its neighbourhood rejects.

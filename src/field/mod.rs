@@ -1,4 +1,4 @@
-//! The soil field over the network (physics §7.12): every segment gets a speed.
+//! The soil field over the network (model §7.12): every segment gets a speed.
 //!
 //! The fitted segments observe the soil u = (ln c_P, ln c_S) through their information (P79);
 //! [`model`] pools them into a Gaussian field with class means and a spatially correlated part
@@ -295,7 +295,7 @@ pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<Stri
     (sites, obs, names)
 }
 
-/// The bounds of ℓ (physics §7.12): a typical segment length (the median) and the network's
+/// The bounds of ℓ (model §7.12): a typical segment length (the median) and the network's
 /// extent (the diagonal of the midpoints' bounding box), m.
 pub fn length_bounds(sites: &[Site]) -> (f64, f64) {
     let mut lengths: Vec<f64> = sites

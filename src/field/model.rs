@@ -1,4 +1,4 @@
-//! The Gaussian soil field of the network (physics §7.12, P78–P80) in the two coordinates the
+//! The Gaussian soil field of the network (model §7.12, P78–P80) in the two coordinates the
 //! fits determine, u = (ln c_P, ln c_S):
 //!
 //! u_s = μ_k(s) + w(x_s) + ε_s,  Cov(w(x), w(x′)) = B e^(−|x − x′|/ℓ),  ε_s ~ N(0, T),
@@ -32,7 +32,7 @@ pub const NEIGHBOURS: usize = 16;
 pub const UNSEEN_PRECISION: f64 = 1.0 / 900.0;
 
 /// The typical soil the class means are drawn towards where no fit sees them (the
-/// correlator's table soil of physics §7.12: E_m = 5e7 Pa, ν_m = 0.33, ρ_m = 1900 kg/m³):
+/// correlator's table soil of model §7.12: E_m = 5e7 Pa, ν_m = 0.33, ρ_m = 1900 kg/m³):
 /// ln c_P and ln c_S, with c_P = 197.5 m/s and c_S = 99.5 m/s (P63, P64).
 pub const TYPICAL_LN_SPEEDS: [f64; 2] = [5.285_7, 4.600_2];
 

@@ -1,4 +1,4 @@
-//! Where to measure next (physics §7.12, P83): greedy selection of unmeasured segments by the
+//! Where to measure next (model §7.12, P83): greedy selection of unmeasured segments by the
 //! expected reduction of the network's weighted relative speed variance,
 //!
 //! gain(j | P) = Σ_i w_i g_iᵀ ΔS_i g_i / ĉ_i²,   ΔS_i = c_ij (v_j)⁻¹ c_jiᵀ,

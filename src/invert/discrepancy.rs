@@ -1,4 +1,4 @@
-//! Honest errors where the model does not explain the data (spec §7.13): a model discrepancy
+//! Honest errors where the model does not explain the data (model §7.13): a model discrepancy
 //! δ(f) fitted to the residuals of each measured quantity (eq. P89, after Kennedy & O'Hagan
 //! 2001), which corrects the predicted curve and enters its errors.
 //!

@@ -1,4 +1,4 @@
-//! How honest a fit's errors are, against the truth of synthetic trials (spec §7.13): at the
+//! How honest a fit's errors are, against the truth of synthetic trials (model §7.13): at the
 //! measured frequencies, whether the true phase speed lies within 2σ of the fitted curve and
 //! how far the curve is from it beside the raw measured speed; the same for the leak-band
 //! speed and the soil speeds c_P, c_S.

@@ -1,4 +1,4 @@
-//! Leak location across a path of one or more segments (physics §11, P84–P87).
+//! Leak location across a path of one or more segments (model §11, P84–P87).
 //!
 //! * [`network`]: the sensors on the network and the path between them;
 //! * [`model`]: the predicted delay T(x) from each segment's curve over the correlation band
@@ -39,7 +39,7 @@ pub const MIN_COHERENT_WIDTH_HZ: f64 = 50.0;
 /// The lowest frequency the default band is lowered to, Hz (the fits' curves start at 10 Hz).
 pub const LOW_BAND_FLOOR_HZ: f64 = 10.0;
 /// Default relative error of a span measured along GIS geometry (GIS lengths are good to a few
-/// per cent, physics §11).
+/// per cent, model §11).
 pub const DEFAULT_SPAN_STD_FRACTION: f64 = 0.01;
 
 /// Why one correlation cannot be located. Messages name the segment, file or job.

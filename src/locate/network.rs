@@ -1,4 +1,4 @@
-//! The path between two sensors through the pipe network (physics §11): the segments' lines in
+//! The path between two sensors through the pipe network (model §11): the segments' lines in
 //! one projected coordinate system, sensors placed by chainage or snapped from map coordinates,
 //! a graph of segment end points joined within a tolerance, routing by the shortest length
 //! along the geometry, and explicit paths checked for contiguity.

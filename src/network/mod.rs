@@ -57,7 +57,7 @@ pub struct TruthRow {
     pub zone_soil_poisson: Option<f64>,
     /// True mean phase speed over the leak band 100–800 Hz, m/s (the fits' definition).
     pub leak_band_speed_m_per_s: Option<f64>,
-    /// The same pipe's leak-band speed in the table soil (physics §7.12), m/s.
+    /// The same pipe's leak-band speed in the table soil (model §7.12), m/s.
     pub table_leak_band_speed_m_per_s: Option<f64>,
     /// Whether the segment's measurements are in measurements.csv.
     pub measured: Option<bool>,

@@ -1,4 +1,4 @@
-//! The audit report's soil-field section (physics §7.12): what the field rests on, the
+//! The audit report's soil-field section (model §7.12): what the field rests on, the
 //! leave-one-out check of every measured segment (P82: its fit against what its neighbours
 //! predict, and the spread of z, which should be N(0, 1)), the worst segments, the labels the
 //! neighbourhoods reject, and a map marking the measured segments by their z.

@@ -58,7 +58,7 @@ pub enum Trust {
     /// A fit the model explains, speed within its limit (status `ok`), or no value at all:
     /// a plain solid line.
     Trusted,
-    /// A prediction for a segment without measurements (status `predicted`, physics §7.12):
+    /// A prediction for a segment without measurements (status `predicted`, model §7.12):
     /// dotted.
     Predicted,
     /// Flagged or failed: dashed over a dark casing.

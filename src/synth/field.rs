@@ -1,4 +1,4 @@
-//! The soil of a synthetic network as geology makes it (physics §7.12, P78): contiguous map
+//! The soil of a synthetic network as geology makes it (model §7.12, P78): contiguous map
 //! units, each with its own soil from soft to stiff, and inside them a soil that varies smoothly,
 //! a Gaussian field of u = (ln c_P, ln c_S) with exponential covariance, plus a small scatter
 //! per pipe (trench, backfill).
@@ -26,7 +26,7 @@ pub const FEATURES: usize = 1000;
 /// One-sigma spread of ln c_S about its unit's mean, over the unit (B₂₂ = 0.20²): soils of one
 /// map unit differ by about a factor 1.2 in c_S (1.5 in shear modulus) at one sigma. With it,
 /// knowing a unit's mean soil leaves plastic leak-band speeds about 1.1 % (median) and 6 %
-/// (p90) off, near physics §7.12's 1.6 % / 5.8 %.
+/// (p90) off, near model §7.12's 1.6 % / 5.8 %.
 pub const UNIT_SPREAD_LN_CS: f64 = 0.20;
 /// One-sigma spread of ln c_P about its unit's mean (B₁₁ = 0.15²): the compressional speed
 /// varies less, as the bulk stiffness of a wet soil does.
@@ -240,7 +240,7 @@ mod tests {
             assert!((e2 / e - 1.0).abs() < 1e-12 && (nu2 - nu).abs() < 1e-12);
             assert!((ln_speed_ratio(nu) - (cp / cs).ln()).abs() < 1e-12);
         }
-        // The reference loam of physics §3.4: 205.5 and 98.7 m/s.
+        // The reference loam of model §3.4: 205.5 and 98.7 m/s.
         let (cp, cs) = wave_speeds(5e7, 0.35, 1900.0);
         assert!((cp - 205.5).abs() < 0.1 && (cs - 98.7).abs() < 0.1);
     }
