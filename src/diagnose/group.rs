@@ -33,8 +33,10 @@ use super::stats::sum_chibar_sf;
 use crate::physics::effects::Effect;
 
 /// Family-wise false-alarm rate of the pooled test over one run: over all candidate effects and
-/// all tested groups (Bonferroni, see the module description).
-pub const GROUP_ALPHA: f64 = 0.01;
+/// all tested groups (Bonferroni, see the module description). Strict because the gains of
+/// pipe_loss on real cast-iron fits are somewhat over-dispersed against χ̄² (a clean group of 40
+/// reached p = 1e-3).
+pub const GROUP_ALPHA: f64 = 0.001;
 /// What the pooled statistic sums (the `statistic_kind` column of `groups.csv`).
 pub const STATISTIC_KIND: &str = "lr_gain_sum";
 /// A member carries the group's effect when its gain for it is its largest among the effects
@@ -374,7 +376,7 @@ mod tests {
                 "x {x}: simulated {sim}, formula {formula}"
             );
         }
-        // Under the null the test rejects at about its level: 0.01 over 4 effects and 1 group.
+        // Under the null the test rejects at about its level over 4 effects and 1 group.
         let level = GROUP_ALPHA / 4.0;
         let rejected = sums
             .iter()
