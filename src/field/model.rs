@@ -480,7 +480,7 @@ fn class_posterior(p: &Pass, nk: usize) -> Option<(DVector<f64>, DMatrix<f64>, f
     let cov = chol.inverse();
     let logdet_m: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
     // log p(û | θ) with μ integrated out under its prior:
-    // −½[s + m0ᵀP0 m0 − rrᵀ M⁻¹ rr + Σ ln det V + ln det M − ln det P0] − n ln 2π.
+    // −½[s + m0ᵀP₀ m0 − rrᵀ M⁻¹ rr + Σ ln det V + ln det M − ln det P₀] − n ln 2π.
     let quad = p.s + prec * m0.dot(&m0) - rr.dot(&mean);
     let loglik = -0.5 * (quad + p.logdet + logdet_m - 2.0 * nk as f64 * prec.ln());
     Some((mean, cov, loglik))
@@ -863,7 +863,7 @@ mod tests {
         let obs = draw(1, 14, 1000.0, &t, mu, Sym2::new(400.0, 0.0, 400.0));
         let v = Vecchia::new(&obs, 32);
         let exact = |h: &Hyper| {
-            // Dense: y ~ N(Xm0, K + N + X P0⁻¹ Xᵀ).
+            // Dense: y ~ N(Xm0, K + N + X P₀⁻¹ Xᵀ).
             let n = obs.len();
             let mut c = DMatrix::<f64>::zeros(2 * n, 2 * n);
             let prior = CLASS_PRIOR_SD * CLASS_PRIOR_SD;
