@@ -12,7 +12,11 @@ fn main() -> ExitCode {
     match cli::run(args) {
         Ok(outcome) => outcome.exit_code(),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            // The chain may quote input text: control characters are escaped.
+            eprintln!(
+                "error: {}",
+                pipewave::units::escape_controls(&format!("{e:#}"))
+            );
             ExitCode::from(cli::EXIT_CANNOT_RUN)
         }
     }

@@ -50,6 +50,24 @@ mod tests {
     }
 }
 
+/// `s` with every control character (C0, DEL, C1) written as a Rust escape (`\u{1b}`, `\0`,
+/// `\n`), so that text echoed from an input file can neither recolour a terminal, set its
+/// title, nor break a message into lines. Borrowed when there is nothing to escape.
+pub fn escape_controls(s: &str) -> std::borrow::Cow<'_, str> {
+    if !s.chars().any(char::is_control) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut out = String::with_capacity(s.len() + 8);
+    for c in s.chars() {
+        if c.is_control() {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
+}
+
 /// `x` in short form for messages: the shortest digits that read back to the same `f64`, in
 /// plain notation from 1e-4 up to 1e15 and in scientific notation outside (`1e308`, not 309
 /// digits; `2.5e-7`, not `0.00000025`). `0.0542` stays `0.0542`.
@@ -86,7 +104,16 @@ pub fn sig(x: f64, digits: usize) -> String {
 
 #[cfg(test)]
 mod sig_tests {
-    use super::{short, sig};
+    use super::{escape_controls, short, sig};
+
+    #[test]
+    fn control_characters_are_escaped_and_other_text_kept() {
+        assert_eq!(escape_controls("Müller straße 5"), "Müller straße 5");
+        assert_eq!(
+            escape_controls("a\x1b]0;t\x07b\0\n\u{9b}"),
+            "a\\u{1b}]0;t\\u{7}b\\0\\n\\u{9b}"
+        );
+    }
 
     #[test]
     fn short_numbers_for_messages() {

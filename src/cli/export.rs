@@ -53,7 +53,7 @@ pub fn open_existing(path: &std::path::Path) -> anyhow::Result<Database> {
             path.display()
         );
     }
-    Ok(Database::open(path)?)
+    Ok(Database::open_reader(path)?)
 }
 
 /// Print the warnings on stderr and one summary line on stdout.

@@ -77,8 +77,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
         for e in &report.errors {
             eprintln!("{e}");
         }
-        if !report.errors.is_empty() {
-            bail!("{} invalid rows: nothing was fitted", report.errors.len());
+        if report.problems > 0 {
+            bail!("{} invalid rows: nothing was fitted", report.problems);
         }
         let outcome = calibrate::execute(&mut database, &opts)?;
         let s = export::write(&database, ExportFormat::Csv, &args.out)?;

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 use pipewave::db::{self, Database, ImportOptions, ImportReport, ImportSource};
+use pipewave::units::escape_controls;
 
 use super::Outcome;
 
@@ -37,6 +38,10 @@ pub struct ImportArgs {
     /// Import the valid rows and report the invalid ones, instead of importing nothing.
     #[arg(long)]
     skip_invalid: bool,
+    /// EPSG code of the coordinates when the file does not name its CRS: a GeoJSON without
+    /// `crs` (otherwise WGS 84), CSV geometry without a srid column.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(i64).range(1..))]
+    srid: Option<i64>,
 }
 
 /// Read the files, import, print each bad row on stderr and a summary on stdout.
@@ -62,6 +67,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
             strict: args.strict,
             layer: args.layer.clone(),
             map: args.map.clone(),
+            srid: args.srid,
         },
     )
     .with_context(|| {
@@ -71,12 +77,19 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
         )
     })?;
     for n in &report.notes {
-        eprintln!("note: {n}");
+        eprintln!("note: {}", escape_controls(n));
     }
     for e in &report.errors {
         eprintln!("{e}");
     }
-    let n_bad = report.errors.len();
+    let n_bad = report.problems;
+    if n_bad > report.errors.len() {
+        eprintln!(
+            "... and {} more problems (the first {} are listed)",
+            n_bad - report.errors.len(),
+            report.errors.len()
+        );
+    }
     if report.rejected {
         let hint = if report.unusable_file {
             "a file as a whole is unusable, see above; --skip-invalid does not help with that"

@@ -123,7 +123,7 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
         bail!(
             "import rejected: {} problem(s) found in {}, nothing was written (fix the rows \
              above, or import with `pipewave import --skip-invalid`)",
-            report.errors.len(),
+            report.problems,
             dir.display()
         );
     }

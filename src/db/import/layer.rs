@@ -11,12 +11,13 @@
 use std::io::Cursor;
 use std::path::Path;
 
-use rusqlite::types::Value as Sql;
+use rusqlite::types::ValueRef;
 use rusqlite::{Connection, OpenFlags};
 
 use super::table::{RawRow, RawTable, Rows};
 use super::{ColumnRef, ImportSource, RowError, SourceKind};
 use crate::db::wkt::LineString;
+use crate::units::short;
 
 /// EPSG code of WGS 84 longitude/latitude, the coordinate system of RFC 7946 GeoJSON.
 pub const WGS84: i64 = 4326;
@@ -43,6 +44,9 @@ pub(super) enum Geometry {
 struct Feature {
     fid: u64,
     values: Vec<String>,
+    /// Fields (indices into `values`) whose text is not UTF-8 (read as blank): an error only
+    /// when pipewave uses the field.
+    not_utf8: Vec<usize>,
     geometry: Result<Geometry, String>,
 }
 
@@ -67,6 +71,7 @@ struct Layer {
 pub(super) fn read(
     source: &ImportSource,
     wanted: Option<&str>,
+    srid: Option<i64>,
 ) -> Result<(RawTable, Vec<RowError>), Vec<RowError>> {
     let file = source.name.as_str();
     let whole = |layer: Option<&str>, msg: String| {
@@ -79,7 +84,7 @@ pub(super) fn read(
         .map_or_else(|| file.to_string(), |s| s.to_string_lossy().into_owned());
     let layer = match &source.kind {
         SourceKind::GeoPackage(path) => read_gpkg(path, wanted),
-        SourceKind::GeoJson => read_geojson(&source.data, &stem),
+        SourceKind::GeoJson => read_geojson(&source.data, &stem, srid),
         SourceKind::Shapefile { dbf, prj } => {
             read_shapefile(&source.data, dbf.as_deref(), prj.as_deref(), &stem)
         }
@@ -100,6 +105,14 @@ pub(super) fn read(
                 ),
             ));
         }
+    }
+    if layer.features.is_empty() {
+        return Err(whole(
+            Some(&layer.name),
+            "the layer has no features (an empty FeatureCollection or table): there is nothing \
+             to import"
+                .to_string(),
+        ));
     }
     let has_geometry = layer
         .features
@@ -139,8 +152,19 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
                 .iter()
                 .map(|&i| f.values.get(i).map_or("", |v| v.trim()).to_string())
                 .collect();
+            let not_utf8 = keep
+                .iter()
+                .enumerate()
+                .filter(|(_, i)| f.not_utf8.contains(i))
+                .map(|(cell, _)| cell)
+                .collect();
             let mut errors = Vec::new();
-            let wkt = match f.geometry.and_then(line_of) {
+            let geographic = layer.srid == Some(WGS84);
+            let wkt = match f
+                .geometry
+                .and_then(line_of)
+                .and_then(|l| check_geographic(l, geographic))
+            {
                 Ok(Some(line)) => line.to_wkt(),
                 Ok(None) => String::new(),
                 Err(msg) => {
@@ -165,6 +189,7 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
                 line: f.fid,
                 cells,
                 errors,
+                not_utf8,
             }
         })
         .collect();
@@ -175,6 +200,31 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
         header,
         rows: Rows::Loaded(rows.into_iter()),
     }
+}
+
+/// A line in WGS 84 must have longitudes within ±180° and latitudes within ±90°: coordinates
+/// outside are those of a projected system (metres) in a file that does not say so, as a
+/// GeoJSON without `crs` (RFC 7946 makes it WGS 84).
+fn check_geographic(
+    line: Option<LineString>,
+    geographic: bool,
+) -> Result<Option<LineString>, String> {
+    if let (true, Some(l)) = (geographic, &line) {
+        if let Some((x, y)) = l
+            .points
+            .iter()
+            .find(|(x, y)| x.abs() > 180.0 || y.abs() > 90.0)
+        {
+            return Err(format!(
+                "the coordinates ({}, {}) are not longitude and latitude, although the layer is \
+                 in WGS 84 (EPSG:4326; a GeoJSON without crs is); if they are in a projected \
+                 system, name it with --srid N (such as --srid 27700)",
+                short(*x),
+                short(*y)
+            ));
+        }
+    }
+    Ok(line)
 }
 
 /// The one line of a geometry, or why it is not one.
@@ -311,35 +361,45 @@ fn read_gpkg(path: &Path, wanted: Option<&str>) -> Result<Layer, String> {
         ))
         .map_err(sql)?;
     let n = fields.len();
-    let features = stmt
-        .query_map([], |r| {
-            let fid: Sql = r.get(0)?;
-            let geom: Sql = r.get(1)?;
-            let values = (0..n)
-                .map(|i| r.get::<_, Sql>(i + 2).map(|v| sql_text(&v)))
-                .collect::<Result<Vec<_>, _>>()?;
-            Ok((fid, geom, values))
-        })
-        .map_err(sql)?
-        .enumerate()
-        .map(|(i, row)| {
-            let (fid, geom, values) = row.map_err(sql)?;
-            let fid = match fid {
-                Sql::Integer(k) => u64::try_from(k).unwrap_or(i as u64 + 1),
-                _ => i as u64 + 1,
-            };
-            let geometry = match geom {
-                Sql::Null => Ok(Geometry::None),
-                Sql::Blob(b) => gpkg_geometry(&b),
-                _ => Err("the geometry is not a GeoPackage geometry blob".to_string()),
-            };
-            Ok(Feature {
-                fid,
-                values,
-                geometry,
-            })
-        })
-        .collect::<Result<Vec<_>, String>>()?;
+    // Cells are read as ValueRef: text that is not UTF-8 (a Latin-1 name from a legacy GIS)
+    // is noted, never converted (rusqlite's Value conversion panics on it).
+    let mut rows = stmt.query([]).map_err(sql)?;
+    let mut features = Vec::new();
+    while let Some(r) = rows.next().map_err(sql)? {
+        let i = features.len();
+        let cell = |k: usize| r.get_ref(k).map_err(sql);
+        let fid = match cell(0)? {
+            ValueRef::Integer(k) => u64::try_from(k).unwrap_or(i as u64 + 1),
+            _ => i as u64 + 1,
+        };
+        let geometry = match cell(1)? {
+            ValueRef::Null => Ok(Geometry::None),
+            ValueRef::Blob(b) => gpkg_geometry(b),
+            _ => Err("the geometry is not a GeoPackage geometry blob".to_string()),
+        };
+        let mut values = Vec::with_capacity(n);
+        let mut not_utf8 = Vec::new();
+        for k in 0..n {
+            values.push(match cell(k + 2)? {
+                ValueRef::Null => String::new(),
+                ValueRef::Integer(v) => v.to_string(),
+                ValueRef::Real(x) => x.to_string(),
+                ValueRef::Text(t) | ValueRef::Blob(t) => match std::str::from_utf8(t) {
+                    Ok(t) => t.to_string(),
+                    Err(_) => {
+                        not_utf8.push(k);
+                        String::new()
+                    }
+                },
+            });
+        }
+        features.push(Feature {
+            fid,
+            values,
+            not_utf8,
+            geometry,
+        });
+    }
     Ok(Layer {
         name,
         fields,
@@ -348,17 +408,6 @@ fn read_gpkg(path: &Path, wanted: Option<&str>) -> Result<Layer, String> {
         srid_problem,
         features,
     })
-}
-
-/// A GeoPackage attribute as text: numbers in their shortest round-trip form.
-fn sql_text(v: &Sql) -> String {
-    match v {
-        Sql::Null => String::new(),
-        Sql::Integer(i) => i.to_string(),
-        Sql::Real(x) => x.to_string(),
-        Sql::Text(s) => s.clone(),
-        Sql::Blob(b) => String::from_utf8_lossy(b).into_owned(),
-    }
 }
 
 /// A little reader of bytes that never reads past the end.
@@ -522,7 +571,9 @@ fn wkb(r: &mut Bytes<'_>) -> Result<Geometry, String> {
 
 // --- GeoJSON -----------------------------------------------------------------------------------
 
-fn read_geojson(data: &[u8], stem: &str) -> Result<Layer, String> {
+fn read_geojson(data: &[u8], stem: &str, given_srid: Option<i64>) -> Result<Layer, String> {
+    // A byte-order mark, as Windows tools write, is not part of the JSON.
+    let data = data.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(data);
     let text = std::str::from_utf8(data).map_err(|e| {
         format!(
             "the GeoJSON is not UTF-8 text (byte {}); save it as UTF-8",
@@ -542,13 +593,20 @@ fn read_geojson(data: &[u8], stem: &str) -> Result<Layer, String> {
     };
     // RFC 7946 GeoJSON is WGS 84; GDAL still writes the 2008 `crs` member for other systems.
     let (srid, srid_problem) = match doc.get("crs") {
-        None | Some(serde_json::Value::Null) => (Some(WGS84), None),
+        None | Some(serde_json::Value::Null) => (Some(given_srid.unwrap_or(WGS84)), None),
         Some(crs) => {
             let name = crs
                 .pointer("/properties/name")
                 .and_then(|v| v.as_str())
                 .unwrap_or("");
             match crs_name_epsg(name) {
+                Some(s) if given_srid.is_some_and(|g| g != s) => {
+                    return Err(format!(
+                        "the GeoJSON names its crs '{name}' (EPSG:{s}) but --srid says {}; \
+                         --srid is for a file that does not name its CRS",
+                        given_srid.unwrap_or(s)
+                    ))
+                }
                 Some(s) => (Some(s), None),
                 None => (
                     None,
@@ -617,6 +675,7 @@ fn read_geojson(data: &[u8], stem: &str) -> Result<Layer, String> {
             Feature {
                 fid,
                 values,
+                not_utf8: Vec::new(),
                 geometry,
             }
         })
@@ -723,6 +782,7 @@ fn read_shapefile(
             Feature {
                 fid: i as u64 + 1,
                 values,
+                not_utf8: Vec::new(),
                 geometry: Ok(shape_geometry(shape)),
             }
         })

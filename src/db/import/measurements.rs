@@ -4,9 +4,11 @@ use std::f64::consts::TAU;
 
 use super::staging::{StagedMeasurement, Staging};
 use super::table::{ColumnSpec, RowCheck, Table};
-use super::{ImportOptions, ImportSource, RowError};
+use super::{ImportOptions, ImportSource, Problems, RowError};
 use crate::db::inventory::MeasurementRecord;
 use crate::db::DbError;
+use crate::invert::problem::{ATTENUATION_RANGE, K_RE_RANGE, MEASUREMENT_STD_RANGE, OMEGA_RANGE};
+use crate::units::short;
 
 /// The columns of `measurements.csv`. Exactly one of `frequency_hz` / `omega_rad_s` per row; the
 /// header needs at least one of them (checked separately).
@@ -60,7 +62,7 @@ pub const SAME_FREQUENCY_REL_TOL: f64 = 1e-9;
 #[derive(Debug)]
 pub(super) struct ParsedMeasurements {
     pub file: String,
-    pub errors: Vec<RowError>,
+    pub errors: Problems,
     pub fatal: bool,
     /// Field index of `segment_id`, for errors raised later.
     pub segment_id_column: usize,
@@ -76,10 +78,10 @@ pub(super) fn parse(
     staging: &Staging<'_>,
 ) -> Result<ParsedMeasurements, DbError> {
     let read = Table::read(source, COLUMNS, options);
-    let mut errors = read.errors;
+    let mut errors = Problems::from(read.errors);
     let mut out = ParsedMeasurements {
         file: source.name.clone(),
-        errors: Vec::new(),
+        errors: Problems::default(),
         fatal: read.fatal,
         segment_id_column: 0,
         notes: read.notes,
@@ -204,8 +206,29 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
         (true, false) => (f.map(|f| TAU * f), f),
         (false, true) => (w, w.map(|w| w / TAU)),
     };
+    // The fitter's ranges (a value it would refuse is refused here, naming its cell); ω is
+    // checked whichever way it was given, so an f whose 2πf overflows is named as such.
+    let omega = match (omega, has_f) {
+        (Some(w), true) if !OMEGA_RANGE.contains(w) => {
+            c.err(
+                "frequency_hz",
+                format!(
+                    "{} Hz is outside the range the fit accepts, {} - {} Hz (ω = 2πf {} - {} rad/s)",
+                    short(freq.unwrap_or(w / TAU)),
+                    short(OMEGA_RANGE.lo / TAU),
+                    short(OMEGA_RANGE.hi / TAU),
+                    OMEGA_RANGE.lo,
+                    short(OMEGA_RANGE.hi)
+                ),
+            );
+            None
+        }
+        (Some(w), false) => c.in_range("omega_rad_s", Some(w), OMEGA_RANGE),
+        (w, _) => w,
+    };
     let k = c.required_number("k_re_rad_per_m");
     let k = c.positive("k_re_rad_per_m", k, " rad/m");
+    let k = c.in_range("k_re_rad_per_m", k, K_RE_RANGE);
     let att = c.required_number("attenuation_np_per_m");
     let att = match att {
         Some(a) if a < 0.0 => {
@@ -213,17 +236,19 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
                 "attenuation_np_per_m",
                 format!(
                     "must be 0 or more (the decay rate is written positive), got {}",
-                    crate::units::short(a)
+                    short(a)
                 ),
             );
             None
         }
-        a => a,
+        a => c.in_range("attenuation_np_per_m", a, ATTENUATION_RANGE),
     };
     let v = c.number("k_re_std");
     let k_re_std = c.positive("k_re_std", v, " rad/m");
+    let k_re_std = c.in_range("k_re_std", k_re_std, MEASUREMENT_STD_RANGE);
     let v = c.number("attenuation_std");
     let attenuation_std = c.positive("attenuation_std", v, " Np/m");
+    let attenuation_std = c.in_range("attenuation_std", attenuation_std, MEASUREMENT_STD_RANGE);
     let measured_on = c.date("measured_on");
     let campaign = c.owned_text("campaign");
     if !c.errors.is_empty() {

@@ -6,9 +6,9 @@
 //!   and the others reported. A problem with a file as a whole (empty, no data rows, bad header)
 //!   rejects the import even then: no row of such a file can be trusted.
 //! - Re-importing identical data writes nothing.
-//! - A segment already in the database is updated when its row differs. The file's row is the
-//!   whole description of the segment: a blank cell, or an optional column the file does not
-//!   have, stores NULL.
+//! - A segment already in the database is updated when its row differs. A blank cell stores
+//!   NULL; an optional column the file does not have leaves the stored values of that column
+//!   as they are (a file without `soil_zone` says nothing about zones).
 //! - Every segment that appears in a measurements file gets exactly that file's measurements
 //!   (its old set is replaced, if different). Segments not in the file keep theirs. Nothing is
 //!   ever deleted from the inventory by an import.
@@ -33,6 +33,7 @@ pub use measurements::SAME_FREQUENCY_REL_TOL;
 
 use super::inventory;
 use super::DbError;
+use crate::units::escape_controls;
 use staging::Staging;
 
 /// One import file: its name for messages, its kind, and its bytes.
@@ -179,6 +180,60 @@ pub struct ImportOptions {
     /// `(pipewave column, the file's field)` pairs (`--map COLUMN=FIELD`), matched
     /// case-insensitively.
     pub map: Vec<(String, String)>,
+    /// EPSG code of the coordinates of a file that does not name its CRS (`--srid N`): a
+    /// GeoJSON without `crs`, CSV geometry without `srid`.
+    pub srid: Option<i64>,
+}
+
+/// At most this many problems are listed (the first, in file and line order); the others are
+/// only counted ([`ImportReport::problems`]), so a file of garbage neither floods the terminal
+/// nor holds its every message in memory.
+pub const MAX_LISTED_PROBLEMS: usize = 1000;
+
+/// The problems of one file as they are found: the first [`MAX_LISTED_PROBLEMS`] in (line,
+/// column) order, and how many there are in all. Memory stays bounded whatever the file.
+#[derive(Debug, Default)]
+pub(super) struct Problems {
+    kept: Vec<RowError>,
+    total: usize,
+}
+
+impl Problems {
+    /// Note one problem.
+    pub fn push(&mut self, e: RowError) {
+        self.total += 1;
+        self.kept.push(e);
+        if self.kept.len() >= 2 * MAX_LISTED_PROBLEMS {
+            self.trim();
+        }
+    }
+
+    /// Note several.
+    pub fn append(&mut self, v: &mut Vec<RowError>) {
+        for e in v.drain(..) {
+            self.push(e);
+        }
+    }
+
+    fn trim(&mut self) {
+        self.kept
+            .sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
+        self.kept.truncate(MAX_LISTED_PROBLEMS);
+    }
+
+    /// The first problems in order, and the count of all.
+    pub fn finish(mut self) -> (Vec<RowError>, usize) {
+        self.trim();
+        (self.kept, self.total)
+    }
+}
+
+impl From<Vec<RowError>> for Problems {
+    fn from(mut v: Vec<RowError>) -> Problems {
+        let mut p = Problems::default();
+        p.append(&mut v);
+        p
+    }
 }
 
 /// A column of an import file: 1-based position and name.
@@ -237,24 +292,28 @@ impl RowError {
 
 impl fmt::Display for RowError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Everything shown may come from the file (its name, a header, a cell): control
+        // characters are escaped.
+        let mut out = String::new();
         if let Some(layer) = &self.layer {
-            write!(f, "{}: layer {layer}: ", self.file)?;
+            out.push_str(&format!("{}: layer {layer}: ", self.file));
             if self.line > 0 {
-                write!(f, "feature {}: ", self.line)?;
+                out.push_str(&format!("feature {}: ", self.line));
             }
             if let Some(c) = &self.column {
-                write!(f, "field {}: ", c.name)?;
+                out.push_str(&format!("field {}: ", c.name));
             }
-            return f.write_str(&self.message);
+            out.push_str(&self.message);
+        } else {
+            match &self.column {
+                Some(c) => out.push_str(&format!(
+                    "{}:{}:{}: column {}: {}",
+                    self.file, self.line, c.index, c.name, self.message
+                )),
+                None => out.push_str(&format!("{}:{}: {}", self.file, self.line, self.message)),
+            }
         }
-        match &self.column {
-            Some(c) => write!(
-                f,
-                "{}:{}:{}: column {}: {}",
-                self.file, self.line, c.index, c.name, self.message
-            ),
-            None => write!(f, "{}:{}: {}", self.file, self.line, self.message),
-        }
+        f.write_str(&escape_controls(&out))
     }
 }
 
@@ -281,8 +340,11 @@ pub struct ImportReport {
     pub segments_with_changed_measurements: usize,
     /// Segments whose `inputs_hash` changed: calibrate will (re)fit them.
     pub segments_with_changed_inputs: usize,
-    /// Every invalid row, in file and line order.
+    /// The invalid rows, in file and line order: the first [`MAX_LISTED_PROBLEMS`] of each
+    /// file.
     pub errors: Vec<RowError>,
+    /// How many problems were found in all (`errors` lists the first of them).
+    pub problems: usize,
     /// Things to tell the user that reject nothing: the columns ignored, one note per file.
     pub notes: Vec<String>,
 }
@@ -317,10 +379,12 @@ pub fn import(
     let tx = Transaction::new_unchecked(conn, TransactionBehavior::Immediate)?;
     let mut report = ImportReport::default();
     let mut fatal = false;
-    let mut seg_errors = Vec::new();
-    let mut meas_errors = Vec::new();
+    let mut seg_errors = Problems::default();
+    let mut meas_errors = Problems::default();
     let mut segments_file_unusable = false;
+    let mut absent = Vec::new();
     if let Some(mut p) = segs {
+        absent = p.absent;
         report.notes.append(&mut p.notes);
         fatal |= p.fatal;
         segments_file_unusable = p.fatal;
@@ -360,20 +424,25 @@ pub fn import(
             }
         }
     }
-    seg_errors.sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
-    meas_errors.sort_by(|a, b| (a.line, &a.column).cmp(&(b.line, &b.column)));
-    report.errors = seg_errors;
-    report.errors.append(&mut meas_errors);
+    let (mut seg_list, seg_total) = seg_errors.finish();
+    let (mut meas_list, meas_total) = meas_errors.finish();
+    report.problems = seg_total + meas_total;
+    report.errors.append(&mut seg_list);
+    report.errors.append(&mut meas_list);
 
-    if fatal || (!report.errors.is_empty() && !options.skip_invalid) {
+    if fatal || (report.problems > 0 && !options.skip_invalid) {
         report.rejected = true;
         report.unusable_file = fatal;
         // Dropping the transaction rolls it back; nothing was written anyway.
         return Ok(report);
     }
 
-    staging.valid_segments(|rec| {
-        match inventory::load_segment(&tx, &rec.segment_id)? {
+    staging.valid_segments(|mut rec| {
+        let old = inventory::load_segment(&tx, &rec.segment_id)?;
+        if let Some(old) = &old {
+            segments::keep_stored(&mut rec, old, &absent);
+        }
+        match old {
             None => {
                 inventory::insert_segment(&tx, &rec)?;
                 report.segments_inserted += 1;

@@ -3,7 +3,7 @@
 use super::aliases;
 use super::staging::Staging;
 use super::table::{ColumnSpec, RowCheck, Table};
-use super::{ImportOptions, ImportSource, RowError};
+use super::{ImportOptions, ImportSource, Problems};
 use crate::db::inventory::SegmentRecord;
 use crate::db::wkt::LineString;
 use crate::db::DbError;
@@ -95,10 +95,13 @@ use crate::physics::inputs::{
 /// The file, checked; its rows are staged ([`Staging::segment`]).
 #[derive(Debug)]
 pub(super) struct ParsedSegments {
-    pub errors: Vec<RowError>,
+    pub errors: Problems,
     pub fatal: bool,
     /// Things to tell the user that reject nothing (ignored columns).
     pub notes: Vec<String>,
+    /// The optional columns the file does not have: a stored segment keeps its values of
+    /// these ([`keep_stored`]).
+    pub absent: Vec<&'static str>,
 }
 
 /// Read and check `segments.csv` a row at a time, staging every row whose id can be read (with
@@ -109,15 +112,21 @@ pub(super) fn parse(
     staging: &Staging<'_>,
 ) -> Result<ParsedSegments, DbError> {
     let read = Table::read(source, COLUMNS, options);
-    let mut errors = read.errors;
+    let mut errors = Problems::from(read.errors);
     let notes = read.notes;
     let Some(mut table) = read.table else {
         return Ok(ParsedSegments {
             errors,
             fatal: read.fatal,
             notes,
+            absent: Vec::new(),
         });
     };
+    let absent: Vec<&'static str> = COLUMNS
+        .iter()
+        .filter(|c| !c.required && !table.has(c.name))
+        .map(|c| c.name)
+        .collect();
     for raw in table.take_rows() {
         let raw = match raw {
             Ok(raw) => raw,
@@ -127,7 +136,7 @@ pub(super) fn parse(
             }
         };
         let mut c = table.check(&raw);
-        let record = check_row(&mut c);
+        let record = check_row(&mut c, options.srid);
         let ok = c.errors.is_empty();
         if let Some(id) = c.text("segment_id") {
             staging.segment(raw.line, id, record.as_ref().filter(|_| ok))?;
@@ -165,11 +174,12 @@ pub(super) fn parse(
         errors,
         fatal: false,
         notes,
+        absent,
     })
 }
 
 /// Check one row; `Some` only if every cell is valid (the caller also looks at `c.errors`).
-fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
+fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentRecord> {
     let segment_id = c.required_text("segment_id").map(str::to_string);
     let material = c.required_text("material").and_then(|t| {
         aliases::material(t)
@@ -230,7 +240,11 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         }
         s => s,
     };
-    if c.text("geometry_wkt").is_some() && c.text("srid").is_none() {
+    let srid = match (srid, default_srid) {
+        (None, Some(d)) if c.text("srid").is_none() && c.text("geometry_wkt").is_some() => Some(d),
+        (s, _) => s,
+    };
+    if c.text("geometry_wkt").is_some() && c.text("srid").is_none() && default_srid.is_none() {
         if c.has("srid") {
             c.err(
                 "srid",
@@ -289,6 +303,31 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<SegmentRecord> {
         return None;
     }
     Some(record)
+}
+
+/// Give `rec` the stored values of the optional columns the file does not have: a file without
+/// a column says nothing about it, while an empty cell clears the value. The geometry and its
+/// `srid` go together, kept when the file has no `geometry_wkt`.
+pub(super) fn keep_stored(rec: &mut SegmentRecord, old: &SegmentRecord, absent: &[&str]) {
+    for &col in absent {
+        match col {
+            "pipe_youngs_modulus_pa" => rec.pipe_youngs_modulus_pa = old.pipe_youngs_modulus_pa,
+            "pipe_poisson" => rec.pipe_poisson = old.pipe_poisson,
+            "pipe_density_kg_m3" => rec.pipe_density_kg_m3 = old.pipe_density_kg_m3,
+            "pipe_loss_factor" => rec.pipe_loss_factor = old.pipe_loss_factor,
+            "fluid_density_kg_m3" => rec.fluid_density_kg_m3 = old.fluid_density_kg_m3,
+            "fluid_bulk_modulus_pa" => rec.fluid_bulk_modulus_pa = old.fluid_bulk_modulus_pa,
+            "length_m" => rec.length_m = old.length_m,
+            "soil_type" => rec.soil_type.clone_from(&old.soil_type),
+            "install_year" => rec.install_year = old.install_year,
+            "soil_zone" => rec.soil_zone.clone_from(&old.soil_zone),
+            "geometry_wkt" => {
+                rec.geometry_wkt.clone_from(&old.geometry_wkt);
+                rec.srid = old.srid;
+            }
+            _ => {}
+        }
+    }
 }
 
 /// The column to blame for a pipe the constructor refused.

@@ -1,8 +1,10 @@
 //! Reading an import CSV into checked header + rows of trimmed text, and parsing cells, with every
 //! problem reported as a [`RowError`] naming file, line and column.
 
-use std::collections::HashMap;
+use std::cell::RefCell;
+use std::collections::{HashMap, VecDeque};
 use std::io::{Cursor, Read};
+use std::rc::Rc;
 
 use super::{ColumnRef, ImportOptions, ImportSource, RowError, SourceKind};
 use crate::physics::inputs::ValidRange;
@@ -25,6 +27,9 @@ pub(super) struct RawRow {
     pub line: u64,
     pub cells: Vec<String>,
     pub errors: Vec<RowError>,
+    /// Cells whose text is not UTF-8 in a GIS layer (read as blank): an error in the columns
+    /// pipewave uses, nothing in the others.
+    pub not_utf8: Vec<usize>,
 }
 
 /// The data rows of a file, handed out one at a time.
@@ -70,7 +75,9 @@ pub(super) struct CsvRows {
     names: Vec<String>,
     /// The first record, read ahead to tell a file without data rows.
     first: Option<Result<csv::ByteRecord, csv::Error>>,
-    records: csv::ByteRecordsIntoIter<Box<dyn Read>>,
+    records: csv::ByteRecordsIntoIter<Tracked<Box<dyn Read>>>,
+    /// The line breaks read so far, to place each record on its line.
+    lines: Rc<RefCell<LineBreaks>>,
 }
 
 impl CsvRows {
@@ -79,18 +86,20 @@ impl CsvRows {
             Some(r) => r,
             None => self.records.next()?,
         };
-        Some(
-            rec.map_err(|e| csv_error(&self.file, &e))
-                .and_then(|rec| self.row(&rec)),
-        )
+        let line = |pos: Option<&csv::Position>| {
+            pos.map_or(0, |p| self.lines.borrow_mut().line_at(p.byte()))
+        };
+        Some(match rec {
+            Ok(rec) => self.row(&rec, line(rec.position())),
+            Err(e) => Err(csv_error(&self.file, line(e.position()), &e)),
+        })
     }
 
     /// One record as a row of trimmed cells.
-    fn row(&self, rec: &csv::ByteRecord) -> Result<RawRow, RowError> {
+    fn row(&self, rec: &csv::ByteRecord, line: u64) -> Result<RawRow, RowError> {
         let file = &self.file;
         let width = self.names.len();
         let name = |i: usize| self.names.get(i).map_or("?", String::as_str).to_string();
-        let line = rec.position().map_or(0, |p| p.line());
         if rec.len() != width {
             // Point at the first missing cell, or at the row when there are extra ones.
             let col = (rec.len() < width).then(|| ColumnRef::new(rec.len(), &name(rec.len())));
@@ -124,7 +133,78 @@ impl CsvRows {
             line,
             cells,
             errors: Vec::new(),
+            not_utf8: Vec::new(),
         })
+    }
+}
+
+/// The line breaks a CSV reader has been given, so that each record can be placed on the line
+/// where it starts. The `csv` crate counts only LF bytes, and a record's position is where the
+/// reader resumed (on the previous record's terminator or a blank line before it), so with CRLF
+/// endings it reports the line before, and with CR-only endings always line 1. Here a CR, an LF
+/// and a CRLF each end one line, and a record's line is that of its first byte.
+#[derive(Debug, Default)]
+struct LineBreaks {
+    /// Runs of consecutive CR/LF bytes not yet passed by a record: (offset of the run's first
+    /// byte, line breaks in it). The last one may still be growing.
+    runs: VecDeque<(u64, u64)>,
+    /// Line breaks in the runs already passed.
+    passed: u64,
+    /// Offset of the next byte.
+    offset: u64,
+    /// The previous byte was a CR: an LF now ends the same line.
+    after_cr: bool,
+    /// The previous byte was a CR or an LF: the last run is open.
+    in_run: bool,
+}
+
+impl LineBreaks {
+    fn scan(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            if b == b'\r' || b == b'\n' {
+                if !self.in_run {
+                    self.runs.push_back((self.offset, 0));
+                    self.in_run = true;
+                }
+                let ends_line = b == b'\r' || !self.after_cr;
+                if let (true, Some(run)) = (ends_line, self.runs.back_mut()) {
+                    run.1 += 1;
+                }
+                self.after_cr = b == b'\r';
+            } else {
+                self.in_run = false;
+                self.after_cr = false;
+            }
+            self.offset += 1;
+        }
+    }
+
+    /// The 1-based line of a record the reader placed at `byte`. A record's first byte is the
+    /// first one at or after `byte` that is not a CR or an LF, so a run of breaks that starts
+    /// at or before `byte` lies before the record. Queries come in increasing order.
+    fn line_at(&mut self, byte: u64) -> u64 {
+        while let Some(&(start, n)) = self.runs.front() {
+            if start > byte {
+                break;
+            }
+            self.passed += n;
+            self.runs.pop_front();
+        }
+        1 + self.passed
+    }
+}
+
+/// A reader that shows every byte it hands out to a [`LineBreaks`].
+struct Tracked<R> {
+    inner: R,
+    breaks: Rc<RefCell<LineBreaks>>,
+}
+
+impl<R: Read> Read for Tracked<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.breaks.borrow_mut().scan(&buf[..n]);
+        Ok(n)
     }
 }
 
@@ -214,7 +294,7 @@ impl Table {
                     format!("the file cannot be read: {e}"),
                 )]),
             },
-            _ => super::layer::read(source, options.layer.as_deref()),
+            _ => super::layer::read(source, options.layer.as_deref(), options.srid),
         };
         let (raw, mut errors) = match raw {
             Ok(r) => r,
@@ -433,10 +513,21 @@ impl Table {
 
     /// A checker for one row.
     pub fn check<'t>(&'t self, row: &'t RawRow) -> RowCheck<'t> {
+        let mut errors = row.errors.clone();
+        for (&col, &i) in &self.index {
+            if row.not_utf8.contains(&i) {
+                errors.push(self.error(
+                    row.line,
+                    col,
+                    "not UTF-8 text; save the layer with the UTF-8 encoding",
+                ));
+            }
+        }
+        errors.sort_by(|a, b| a.column.cmp(&b.column));
         RowCheck {
             table: self,
             row,
-            errors: row.errors.clone(),
+            errors,
         }
     }
 }
@@ -494,14 +585,20 @@ fn read_csv(
             )])
         }
     };
+    let lines = Rc::new(RefCell::new(LineBreaks::default()));
     let rdr = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
-        .from_reader(data);
+        .from_reader(Tracked {
+            inner: data,
+            breaks: Rc::clone(&lines),
+        });
     let mut records = rdr.into_byte_records();
+    let line_of =
+        |pos: Option<&csv::Position>| pos.map_or(0, |p| lines.borrow_mut().line_at(p.byte()));
     let header = match records.next() {
         Some(Ok(h)) => h,
-        Some(Err(e)) => return Err(vec![csv_error(&file, &e)]),
+        Some(Err(e)) => return Err(vec![csv_error(&file, line_of(e.position()), &e)]),
         None => {
             return Err(vec![RowError::new(
                 &file,
@@ -511,7 +608,7 @@ fn read_csv(
             )])
         }
     };
-    let header_line = header.position().map_or(1, |p| p.line());
+    let header_line = line_of(header.position()).max(1);
     let mut names = Vec::with_capacity(header.len());
     for (i, raw) in header.iter().enumerate() {
         match std::str::from_utf8(raw) {
@@ -543,6 +640,7 @@ fn read_csv(
         names: names.clone(),
         first: Some(first),
         records,
+        lines,
     }));
     Ok((
         RawTable {
@@ -598,8 +696,7 @@ fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
-fn csv_error(file: &str, e: &csv::Error) -> RowError {
-    let line = e.position().map_or(0, |p| p.line());
+fn csv_error(file: &str, line: u64, e: &csv::Error) -> RowError {
     RowError::new(
         file,
         line,
