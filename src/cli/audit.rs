@@ -21,7 +21,7 @@ pub struct AuditArgs {
 
 /// Write the report.
 pub fn run(args: &AuditArgs) -> anyhow::Result<Outcome> {
-    let database = super::open_database(&args.db)?;
+    let database = super::open_reader(&args.db)?;
     let summary = report::audit::write(&database, &args.out)?;
     print_summary("the audit report", &args.out, &summary);
     Ok(Outcome::Done)

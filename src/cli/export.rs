@@ -72,7 +72,7 @@ pub fn report(what: &str, out: &std::path::Path, s: &ExportSummary) {
 
 /// Run the export.
 pub fn run(args: &ExportArgs) -> anyhow::Result<Outcome> {
-    let database = super::open_database(&args.db)?;
+    let database = super::open_reader(&args.db)?;
     let format = ExportFormat::from(args.format);
     let precision = match args.precision {
         PrecisionArg::People => Precision::People,

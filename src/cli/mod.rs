@@ -121,6 +121,12 @@ pub(crate) fn open_database(path: &Path) -> anyhow::Result<Database> {
     named(path, Database::open_existing(path))
 }
 
+/// Open an existing pipewave database to read it (`export`, `audit`): as [`open_database`], but
+/// read-only and immutable where the file or its folder cannot be written (a read-only mount).
+pub(crate) fn open_reader(path: &Path) -> anyhow::Result<Database> {
+    named(path, Database::open_reader(path))
+}
+
 /// Open the database at `path` for `import` and `run`, creating and migrating it if needed.
 pub(crate) fn create_database(path: &Path) -> anyhow::Result<Database> {
     named(path, Database::open(path))

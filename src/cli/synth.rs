@@ -63,7 +63,8 @@ pub struct SynthArgs {
     recordings_only: bool,
     /// Length of each recording, s.
     #[arg(long, value_name = "S", requires = "recordings",
-          default_value_t = pipewave::recordings::synth::DEFAULT_SECONDS)]
+          default_value_t = pipewave::recordings::synth::DEFAULT_SECONDS,
+          value_parser = recording_seconds)]
     recording_seconds: f64,
     /// Split the synthetic segments into N soil zones (contiguous blocks of streets), each one
     /// soil with a scatter per segment of 0.04 decade in E_m (about 10 %) and 0.01 in ν_m;
@@ -103,6 +104,14 @@ pub struct SynthArgs {
 
 /// Campaign name of the measurements `--campaign-out` writes.
 pub const LATER_CAMPAIGN: &str = "later";
+/// `--recording-seconds`: a length `wavenumbers` can analyse, and a bounded one.
+fn recording_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number of seconds"))?;
+    pipewave::recordings::synth::check_recording_seconds(v)
+}
 
 /// Generate and write the network.
 pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {

@@ -146,6 +146,35 @@ pub enum DbError {
     /// The database is damaged.
     #[error("the database file is damaged (SQLite reports corruption); restore it from a backup or re-import into a new file")]
     Corrupt(#[source] rusqlite::Error),
+    /// SQLite's check of the file found damage when a command that writes opened it.
+    #[error(
+        "the database {} is damaged (SQLite's quick_check: {report}); nothing was written to \
+         it: restore it from a backup or re-import into a new file",
+        path.display()
+    )]
+    Damaged {
+        /// The database path.
+        path: PathBuf,
+        /// The first problems quick_check reported, `; `-separated.
+        report: String,
+    },
+    /// A database of an older schema that cannot be upgraded here.
+    #[error(
+        "{} has schema version {found} and this pipewave needs version {needed}; upgrading it \
+         needs write access, which {} does not give (a read-only file system or folder?): \
+         copy the database to a writable place, or run a writing command (such as import) \
+         where it can be written",
+        path.display(),
+        path.parent().map_or_else(|| path.display(), |d| d.display())
+    )]
+    NeedsUpgrade {
+        /// The database path.
+        path: PathBuf,
+        /// Its schema version.
+        found: i64,
+        /// The version this program reads.
+        needed: i64,
+    },
     /// Another connection held the write lock for longer than [`BUSY_TIMEOUT`].
     #[error("the database is busy: another pipewave process kept it locked for more than 10 s; try again when it has finished")]
     Busy(#[source] rusqlite::Error),
@@ -265,6 +294,12 @@ impl Database {
             _ => DbError::from(e),
         };
         conn.busy_timeout(BUSY_TIMEOUT).map_err(not_a_db)?;
+        // A command that writes must not add to a damaged file (it would store results in a
+        // database whose other pages are lost): check the structure first.
+        quick_check(&conn, &path).map_err(|e| match e {
+            DbError::Sqlite(e) => not_a_db(e),
+            e => e,
+        })?;
         conn.pragma_update(None, "foreign_keys", true)
             .map_err(not_a_db)?;
         if !create && migrate::is_uninitialised(&conn).map_err(not_a_db)? {
@@ -279,6 +314,65 @@ impl Database {
         let mut db = Database { conn, path };
         migrate::migrate(&mut db.conn, &db.path)?;
         Ok(db)
+    }
+
+    /// Open an existing database to read it (export, audit). Where the file and its folder
+    /// can be written this is [`Database::open_existing`] (the schema is brought up to date,
+    /// nothing is created); where
+    /// they cannot (a read-only file system, a backup mount), the
+    /// file is opened read-only and *immutable* ([`Database::open_immutable`]), so SQLite needs
+    /// neither a lock nor its `-wal`/`-shm` files beside it.
+    pub fn open_reader(path: impl AsRef<Path>) -> Result<Database, DbError> {
+        let path = path.as_ref().to_path_buf();
+        if path.is_dir() {
+            return Err(DbError::IsDirectory { path });
+        }
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        if !path.exists() {
+            return Err(DbError::Missing { path });
+        }
+        if writable(&path) && writable(&dir) {
+            return Database::open_existing(&path);
+        }
+        Database::open_immutable(&path)
+    }
+
+    /// Open a database read-only and immutable: nothing is written, not even a lock or a
+    /// journal, so it works on a read-only file system. Only for files no process is writing.
+    /// Errors: [`DbError::NeedsUpgrade`] for an older schema (upgrading writes).
+    pub fn open_immutable(path: impl AsRef<Path>) -> Result<Database, DbError> {
+        let path = path.as_ref().to_path_buf();
+        let flags = rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY
+            | rusqlite::OpenFlags::SQLITE_OPEN_URI
+            | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
+        let uri = format!("file:{}?immutable=1", uri_path(&path));
+        let conn = Connection::open_with_flags(uri, flags).map_err(|source| DbError::Open {
+            path: path.clone(),
+            source,
+        })?;
+        let version = migrate::user_version(&conn).map_err(|e| match e.sqlite_error_code() {
+            Some(rusqlite::ErrorCode::NotADatabase) => DbError::NotADatabase { path: path.clone() },
+            _ => DbError::from(e),
+        })?;
+        let latest = migrate::latest_version();
+        if version > latest {
+            return Err(DbError::TooNew {
+                path,
+                found: version,
+                known: latest,
+            });
+        }
+        if version < latest {
+            return Err(DbError::NeedsUpgrade {
+                path,
+                found: version,
+                needed: latest,
+            });
+        }
+        Ok(Database { conn, path })
     }
 
     /// The connection, for the functions of the submodules.
@@ -299,5 +393,96 @@ impl Database {
     /// The schema version (`PRAGMA user_version`).
     pub fn schema_version(&self) -> Result<i64, DbError> {
         Ok(migrate::user_version(&self.conn)?)
+    }
+}
+
+/// `PRAGMA quick_check`: the file's b-trees and pages are sound, or [`DbError::Damaged`] with
+/// the first problems SQLite found. It reads every page once (about as long as reading the
+/// file).
+pub fn quick_check(conn: &Connection, path: &Path) -> Result<(), DbError> {
+    let damaged = |report: String| DbError::Damaged {
+        path: path.to_path_buf(),
+        report: crate::units::escape_controls(&report).into_owned(),
+    };
+    // Damage that stops the check itself (a broken schema page) is reported the same way.
+    let run = || -> rusqlite::Result<Vec<String>> {
+        conn.prepare("PRAGMA quick_check(5)")?
+            .query_map([], |r| r.get(0))?
+            .collect()
+    };
+    let found = match run() {
+        Ok(found) => found,
+        Err(e) if e.sqlite_error_code() == Some(rusqlite::ErrorCode::DatabaseCorrupt) => {
+            return Err(damaged(e.to_string()))
+        }
+        Err(e) => return Err(e.into()),
+    };
+    if found.len() == 1 && found[0] == "ok" {
+        return Ok(());
+    }
+    Err(damaged(found.join("; ")))
+}
+
+/// Can this process write `path` (a file or folder)? False on a read-only file system.
+#[cfg(unix)]
+fn writable(path: &Path) -> bool {
+    use std::os::unix::ffi::OsStrExt;
+    let Ok(c) = std::ffi::CString::new(path.as_os_str().as_bytes()) else {
+        return false;
+    };
+    // SAFETY: `c` is a valid NUL-terminated path for the duration of the call.
+    unsafe { libc::access(c.as_ptr(), libc::W_OK) == 0 }
+}
+
+#[cfg(not(unix))]
+fn writable(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.permissions().readonly())
+}
+
+/// A path for a SQLite `file:` URI: the characters URIs reserve are percent-encoded.
+fn uri_path(path: &Path) -> String {
+    let mut out = String::new();
+    for b in path.to_string_lossy().bytes() {
+        match b {
+            b'?' | b'#' | b'%' => out.push_str(&format!("%{b:02X}")),
+            _ => out.push(char::from(b)),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_immutable_reader_writes_nothing_beside_the_file_and_refuses_an_old_schema() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a #1?.sqlite");
+        drop(Database::open(&path).unwrap());
+        let before = std::fs::read(&path).unwrap();
+        let db = Database::open_immutable(&path).unwrap();
+        let n: i64 = db
+            .conn()
+            .query_row("SELECT count(*) FROM segments", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(n, 0);
+        drop(db);
+        assert_eq!(std::fs::read(&path).unwrap(), before);
+        let names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, vec!["a #1?.sqlite".to_string()]);
+
+        let conn = Connection::open(&path).unwrap();
+        conn.pragma_update(None, "user_version", 5).unwrap();
+        drop(conn);
+        let e = Database::open_immutable(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("has schema version 5 and this pipewave needs version"),
+            "{e}"
+        );
+        assert!(e.contains(&dir.path().display().to_string()), "{e}");
     }
 }

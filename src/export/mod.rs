@@ -15,7 +15,9 @@
 //!
 //! Every writer writes a temporary file beside the target and renames it over the target at the
 //! end, so a failed export never leaves a half-written file, and it refuses to replace the
-//! pipewave database itself (or any other pipewave database).
+//! pipewave database itself (or any other pipewave database). A symlink is followed (its
+//! target is written, the link kept); a character device or FIFO (`/dev/null`, a pipe to
+//! another program) is written directly, never replaced ([`resolve_out`]).
 
 pub mod crs;
 pub mod csv;
@@ -280,6 +282,10 @@ pub(crate) fn check_out_path(
 /// True when the file is a SQLite database with pipewave's `segments` and `fits` tables. Any
 /// failure to tell (not SQLite, unreadable) answers false: such a file is not a pipewave database.
 fn is_pipewave_database(path: &Path) -> bool {
+    // Only a regular file can be a database; opening a FIFO to look would wait for a writer.
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return false;
+    }
     let Ok(mut f) = std::fs::File::open(path) else {
         return false;
     };
@@ -301,18 +307,84 @@ fn is_pipewave_database(path: &Path) -> bool {
     .unwrap_or(false)
 }
 
-/// A temporary path beside `out` (same directory, so the final rename is atomic).
+/// Where an output path leads: the file it names after following its symlinks, and whether
+/// that is a stream (a character device such as `/dev/null` or `/dev/stdout`, or a FIFO) to be
+/// written directly rather than replaced.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum OutTarget {
+    /// A regular file, or a path that does not exist yet: written through a temporary file
+    /// renamed over it.
+    File(PathBuf),
+    /// A device or FIFO: opened for writing as it is, never replaced.
+    Stream(PathBuf),
+}
+
+/// Follow `out`'s symlinks (also to a target that does not exist yet, which is then created)
+/// and tell a stream from a file. A symlink is never replaced: its target is written.
+pub(crate) fn resolve_out(out: &Path) -> OutTarget {
+    let mut path = out.to_path_buf();
+    // A loop of links ends here and is left to the write to report.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => match std::fs::read_link(&path) {
+                Ok(t) => {
+                    path = match path.parent() {
+                        Some(dir) if t.is_relative() => dir.join(t),
+                        _ => t,
+                    }
+                }
+                Err(_) => break,
+            },
+            Ok(m) if is_stream(&m.file_type()) => return OutTarget::Stream(path),
+            _ => break,
+        }
+    }
+    OutTarget::File(path)
+}
+
+#[cfg(unix)]
+fn is_stream(t: &std::fs::FileType) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    t.is_char_device() || t.is_fifo() || t.is_block_device() || t.is_socket()
+}
+
+#[cfg(not(unix))]
+fn is_stream(t: &std::fs::FileType) -> bool {
+    !t.is_file() && !t.is_dir() && !t.is_symlink()
+}
+
+/// A temporary path for the contents of `out`: beside the file it names (same directory, so
+/// the final rename is atomic), or in the system's temporary directory for a stream.
 pub(crate) fn temp_path(out: &Path) -> PathBuf {
-    let name = out
+    let (dir, target) = match resolve_out(out) {
+        OutTarget::File(p) => (None, p),
+        OutTarget::Stream(p) => (Some(std::env::temp_dir()), p),
+    };
+    let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "export".into());
-    out.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+    let tmp = format!(".{name}.tmp-{}", std::process::id());
+    match dir {
+        Some(d) => d.join(tmp),
+        None => target.with_file_name(tmp),
+    }
 }
 
-/// Move the finished temporary file over `out`; on failure remove the temporary file.
+/// Move the finished temporary file over the file `out` names, or copy it into the stream `out`
+/// names; on failure remove the temporary file.
 pub(crate) fn commit_temp(tmp: &Path, out: &Path) -> Result<(), ExportError> {
-    std::fs::rename(tmp, out).map_err(|source| {
+    let result = match resolve_out(out) {
+        OutTarget::File(target) => std::fs::rename(tmp, target),
+        OutTarget::Stream(target) => std::fs::File::open(tmp)
+            .and_then(|mut from| {
+                let mut to = std::fs::OpenOptions::new().write(true).open(target)?;
+                std::io::copy(&mut from, &mut to)?;
+                std::io::Write::flush(&mut to)
+            })
+            .and_then(|()| std::fs::remove_file(tmp)),
+    };
+    result.map_err(|source| {
         let _ = std::fs::remove_file(tmp);
         ExportError::Write {
             path: out.to_path_buf(),

@@ -46,6 +46,8 @@ pub const WELCH_SEGMENT_S: f64 = 1.0;
 /// Length of the segments of the delay estimate, s: long, so delays up to half of it (2 s) are
 /// unambiguous and the cross-correlation keeps its coherence at large delays.
 pub const DELAY_SEGMENT_S: f64 = 4.0;
+/// The shortest recording the analysis can use, s: one and a half delay segments.
+pub const MIN_RECORDING_S: f64 = 1.5 * DELAY_SEGMENT_S;
 /// Highest analysed frequency as a fraction of the sample rate (below the anti-alias filter).
 pub const MAX_FREQUENCY_FRACTION: f64 = 0.45;
 /// A bin is used only when the standard error of its phase is below this, rad: a 2π slip of
@@ -380,7 +382,7 @@ pub fn analyse_audio(
     }
     let nfft_delay = (DELAY_SEGMENT_S * fs).round() as usize;
     let nfft = (WELCH_SEGMENT_S * fs).round() as usize;
-    let needed_s = 1.5 * DELAY_SEGMENT_S;
+    let needed_s = MIN_RECORDING_S;
     if audio.duration_s() < needed_s || nfft < 16 {
         return Err(pos_err(format!(
             "the recordings are {} s long at {} Hz; at least {} s are needed",

@@ -154,13 +154,15 @@ pub fn hydrant_test(
 ) -> Result<HydrantRecording, SynthRecordingError> {
     let fs = spec.sample_rate as f64;
     if spec.positions_m.is_empty()
-        || spec.seconds.is_nan()
+        || !spec.seconds.is_finite()
         || spec.seconds <= 0.0
+        || spec.seconds > MAX_RECORDING_S
         || spec.sample_rate < 100
     {
-        return Err(SynthRecordingError::Spec(
-            "a recording needs sensor positions, a positive length and a sample rate of 100 Hz or more".into(),
-        ));
+        return Err(SynthRecordingError::Spec(format!(
+            "a recording needs sensor positions, a length of 0 - {MAX_RECORDING_S} s and a \
+                 sample rate of 100 Hz or more"
+        )));
     }
     let hi = SOURCE_HI_HZ
         .min(RING_FRACTION * sys.pipe.ring_frequency_hz())
@@ -382,6 +384,27 @@ pub fn sensor_range_m(material: crate::physics::Material) -> (f64, f64) {
 
 /// Default length of the synthetic recordings, s.
 pub const DEFAULT_SECONDS: f64 = 15.0;
+/// The longest synthetic recording, s: ten minutes, longer than any hydrant test, and about
+/// 5 M samples a channel at [`DEFAULT_SAMPLE_RATE`] (the spectra of the whole record are held
+/// in memory while it is made).
+pub const MAX_RECORDING_S: f64 = 600.0;
+
+/// A recording length for `synth --recording-seconds`: a finite number of seconds from what
+/// `wavenumbers` needs ([`super::estimate::MIN_RECORDING_S`]) to [`MAX_RECORDING_S`].
+pub fn check_recording_seconds(seconds: f64) -> Result<f64, String> {
+    let lo = super::estimate::MIN_RECORDING_S;
+    if seconds.is_finite() && (lo..=MAX_RECORDING_S).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "{} s is outside {} - {} s (wavenumbers needs at least {} s of recording)",
+            crate::units::short(seconds),
+            crate::units::short(lo),
+            crate::units::short(MAX_RECORDING_S),
+            crate::units::short(lo)
+        ))
+    }
+}
 /// Default sample rate of the synthetic recordings, Hz.
 pub const DEFAULT_SAMPLE_RATE: u32 = 8000;
 /// Default sensor noise, fraction of the source channel's RMS.

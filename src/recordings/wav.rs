@@ -18,6 +18,20 @@ use super::{short, RecordingError};
 /// stage saturates does so on every loud burst.
 pub const CLIP_RUN_SAMPLES: usize = 4;
 
+/// Recordings of one segment may differ in length by this much (s) and are then cut to the
+/// shortest: recorders started together stop within a fraction of a second of each other. A
+/// larger difference means the files were not recorded together, and cutting them would
+/// analyse different moments as one.
+pub const LENGTH_TOLERANCE_S: f64 = 0.5;
+
+/// Frames to reserve for a file whose header claims `header_frames` of `bytes_per_frame`
+/// bytes each: never more than the file's `file_bytes` can hold, so a header that overstates
+/// the length (4 GB claimed by a file of a few kB) cannot make the reservation exhaust memory.
+pub fn reserve_frames(header_frames: u64, file_bytes: u64, bytes_per_frame: u64) -> usize {
+    let fits = file_bytes / bytes_per_frame.max(1);
+    usize::try_from(header_frames.min(fits)).unwrap_or(0)
+}
+
 /// The channels of one segment, one per sensor in layout order, scaled to full scale = 1.
 #[derive(Debug, Clone)]
 pub struct SegmentAudio {
@@ -83,8 +97,16 @@ pub fn read_segment(
         };
         let mut reader = WavReader::open(&sensor.path)
             .map_err(|e| wav_err(sensor.line, format!("not a readable WAV file ({e})")))?;
+        let file_bytes = std::fs::metadata(&sensor.path).map_or(0, |m| m.len());
         let spec = reader.spec();
         let n_ch = spec.channels as usize;
+        if spec.sample_rate == 0 {
+            return Err(wav_err(
+                sensor.line,
+                "its header gives a sample rate of 0 Hz; the file is damaged or not a recording"
+                    .into(),
+            ));
+        }
         for &i in &files[&first] {
             let s = &seg.sensors[i];
             if s.channel as usize >= n_ch {
@@ -123,11 +145,18 @@ pub fn read_segment(
             .iter()
             .map(|&i| (i, seg.sensors[i].channel as usize))
             .collect();
-        let frames = reader.duration() as usize;
+        // The header's length is only a claim: the reservation is bounded by what the file
+        // can hold, and reading stops where the samples do.
+        let frames = reserve_frames(
+            u64::from(reader.duration()),
+            file_bytes,
+            u64::from(spec.bits_per_sample.div_ceil(8)) * n_ch as u64,
+        );
         for &(i, _) in &wanted {
             channels[i] = Vec::with_capacity(frames);
         }
-        // Clipping: a run of full-scale samples, per channel.
+        let mut not_finite: Option<(usize, usize)> = None; // (frame, channel)
+                                                           // Clipping: a run of full-scale samples, per channel.
         let mut run = vec![0usize; wanted.len()];
         let mut clipped: Vec<Option<(usize, usize)>> = vec![None; wanted.len()]; // (first frame, runs)
         let bits = spec.bits_per_sample;
@@ -172,7 +201,26 @@ pub fn read_segment(
                 }
                 for s in reader.samples::<f32>() {
                     let x = s.map_err(read_err)? as f64;
+                    if !x.is_finite()
+                        && not_finite.is_none()
+                        && wanted.iter().any(|w| w.1 == pos % n_ch)
+                    {
+                        not_finite = Some((frame, pos % n_ch));
+                    }
                     consume!(x, x.abs() >= 1.0);
+                }
+                if let Some((at, ch)) = not_finite {
+                    {
+                        return Err(wav_err(
+                            sensor.line,
+                            format!(
+                                "channel {ch} holds samples that are not numbers (NaN or \
+                                 infinite), the first at {} s; the recorder or a conversion \
+                                 wrote them",
+                                short(at as f64 / spec.sample_rate as f64)
+                            ),
+                        ));
+                    }
                 }
             }
             SampleFormat::Int => {
@@ -209,6 +257,27 @@ pub fn read_segment(
     }
     let sample_rate = rate.map(|r| r.0).unwrap_or(0);
     let n = channels.iter().map(Vec::len).min().unwrap_or(0);
+    let longest = channels.iter().map(Vec::len).max().unwrap_or(0);
+    if longest - n > (LENGTH_TOLERANCE_S * f64::from(sample_rate)) as usize {
+        let at = |len: usize| channels.iter().position(|c| c.len() == len).unwrap_or(0);
+        let (short_i, long_i) = (at(n), at(longest));
+        let fs = f64::from(sample_rate);
+        return Err(RecordingError::Wav {
+            segment_id: seg.segment_id.clone(),
+            wav: seg.sensors[short_i].path.clone(),
+            layout: layout_path.to_path_buf(),
+            line: seg.sensors[short_i].line,
+            message: format!(
+                "the recordings of one segment differ in length: this one is {} s, {} (line {}) \
+                 is {} s; the channels must be recorded together (start and stop at once), or \
+                 cut to the common part before the analysis",
+                short(n as f64 / fs),
+                seg.sensors[long_i].file,
+                seg.sensors[long_i].line,
+                short(longest as f64 / fs)
+            ),
+        });
+    }
     for c in &mut channels {
         c.truncate(n);
     }
@@ -216,4 +285,21 @@ pub fn read_segment(
         sample_rate,
         channels,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reservation_never_exceeds_what_the_file_holds() {
+        // An 8-bit mono file of 1000 bytes whose header claims 4 GB of samples.
+        assert_eq!(reserve_frames(4_000_000_000, 1000, 1), 1000);
+        // 16-bit stereo: 4 bytes a frame.
+        assert_eq!(reserve_frames(u64::from(u32::MAX), 4000, 4), 1000);
+        // A truthful header is taken as it is.
+        assert_eq!(reserve_frames(100, 1_000_000, 2), 100);
+        // A header without a frame size cannot divide by zero.
+        assert_eq!(reserve_frames(7, 10, 0), 7);
+    }
 }

@@ -594,7 +594,8 @@ fn read_csv(
             breaks: Rc::clone(&lines),
         });
     let mut records = rdr.into_byte_records();
-    let line_of = |pos: Option<&csv::Position>| pos.map_or(0, |p| lines.borrow_mut().line_at(p.byte()));
+    let line_of =
+        |pos: Option<&csv::Position>| pos.map_or(0, |p| lines.borrow_mut().line_at(p.byte()));
     let header = match records.next() {
         Some(Ok(h)) => h,
         Some(Err(e)) => return Err(vec![csv_error(&file, line_of(e.position()), &e)]),
