@@ -13,7 +13,10 @@ fn main() -> ExitCode {
         Ok(outcome) => outcome.exit_code(),
         Err(e) => {
             // The chain may quote input text: control characters are escaped.
-            eprintln!("error: {}", pipewave::units::escape_controls(&format!("{e:#}")));
+            eprintln!(
+                "error: {}",
+                pipewave::units::escape_controls(&format!("{e:#}"))
+            );
             ExitCode::from(cli::EXIT_CANNOT_RUN)
         }
     }

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use clap::Args;
-use pipewave::db::{self, Database, ImportOptions, ImportReport, ImportSource};
+use pipewave::db::{self, ImportOptions, ImportReport, ImportSource};
 use pipewave::units::escape_controls;
 
 use super::Outcome;
