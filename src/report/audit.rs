@@ -341,7 +341,13 @@ impl Tally {
             self.drawn.push(Drawn {
                 speed: speed_with_std(r),
                 status: r.status(),
-                trust: Trust::of_status(r.status()),
+                // A segment without a fit of its own but with the soil field's speed is drawn
+                // as a prediction (model §7.12), whatever its fit status says.
+                trust: if r.speed_source == crate::export::record::SPEED_PREDICTED {
+                    Trust::Predicted
+                } else {
+                    Trust::of_status(r.status())
+                },
             });
         }
         let flags = r.flags.clone().unwrap_or_default();
