@@ -54,38 +54,3 @@ fn no_segment_of_a_stress_network_is_left_without_a_fit() {
     // pass without exercising it.
     assert!(grazing >= 1, "no fit reached a soil wave speed");
 }
-
-/// The one failure of the 10,000-segment stress run before the `unstable_root` flag: a thick
-/// HDPE pipe (OD 250 mm) with its wall thinned to 0.69 of nominal, whose optimum lay where the
-/// model's root jumps between branches for the slightest change of E_m or ξ, so that no
-/// finite-difference Jacobian existed there (fit algorithm 8 answered there, χ² 33.73, flagged
-/// `unstable_root`; `invert::fit`'s unit test keeps that point). Since version 9 (the grazing
-/// probe, the step off a cliff) the answer, χ² 33.60, lies next to the jump, where the
-/// Jacobian exists and the intervals come from the curvature. It also guards the rule that a fast-path answer stands only when no
-/// better optimum lacked a reference root: without it this segment's answer is the contact
-/// probe's optimum at ξ = 0, χ² 1532.
-#[test]
-fn an_optimum_next_to_a_root_jump_gets_an_answer_with_a_jacobian() {
-    let options = SynthOptions::hiding(Effect::WallThinning, 2500, 13).expect("a range");
-    let net = generate(&options);
-    let s = net.iter().find(|s| s.id == "WM10951").expect("the segment");
-    let r = fit_segment(
-        &s.segment_data(),
-        &FitSettings::default(),
-        pipewave::batch::segment_seed(11, &s.id),
-    );
-    assert_eq!(r.status, FitStatus::Flagged, "{:?}", r.message);
-    assert!(
-        r.misfit < 33.7,
-        "χ² {} (33.73 at the jump, 1532 at ξ = 0)",
-        r.misfit
-    );
-    assert!(
-        r.flags.iter().all(|f| f.code.as_str() != "unstable_root"),
-        "{:?}",
-        r.flags
-    );
-    for e in &r.estimates {
-        assert!(e.interval.hi > e.interval.lo, "{e:?}");
-    }
-}
