@@ -4,7 +4,8 @@
 //! `fits.curve_source`, the model-only curve kept beside the corrected one, the export
 //! column, and `run --diagnose`.
 
-use std::process::Command;
+mod cli_run;
+use cli_run::run_ok;
 
 use pipewave::invert::honesty::{check_measured, summarize, trials, TrialCheck};
 use pipewave::invert::{fit_segment, CurveSource, FitSettings, FitStatus};
@@ -111,20 +112,6 @@ fn the_published_cases_lie_within_their_curves() {
     let m = check_measured(&fit, &data);
     assert!(4 * m.within() >= 3 * m.points.len(), "{m:?}");
     assert_eq!(m.band_consistent, Some(true), "{m:?}");
-}
-
-fn run_ok(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_pipewave"))
-        .args(args)
-        .output()
-        .expect("run pipewave");
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 #[test]

@@ -4,9 +4,11 @@
 //! (beyond the solver's tolerance), on synthetic segments with and without the effect hidden,
 //! including plastic pipes in stiff soil hiding a large pipe loss factor.
 
+mod cli_run;
+use cli_run::run_ok;
+
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 use pipewave::network::NetworkTables;
 use pipewave::physics::effects::Effect;
@@ -14,20 +16,6 @@ use pipewave::synth::{default_hidden_range, generate, SynthOptions, SynthSegment
 
 /// A segment's misfit may rise by at most this after an effect is switched on.
 const MISFIT_RISE_TOLERANCE: f64 = 0.01;
-
-fn run_ok(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_pipewave"))
-        .args(args)
-        .output()
-        .expect("run pipewave");
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 /// Soil Young's modulus from which a soil is "stiff" for a plastic pipe, Pa.
 const STIFF_SOIL_PA: f64 = 1e8;
