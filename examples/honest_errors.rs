@@ -14,9 +14,10 @@
 //! Run: `cargo run --release --example honest_errors -- [N] [BASE]` (default N = 60, BASE = 0).
 
 use pipewave::invert::honesty::{check_measured, summarize, trials, Summary, TrialCheck};
-use pipewave::invert::{fit_segment, FitSettings, FitStatus};
+use pipewave::invert::{fit_segment, FitSettings};
 use pipewave::network::published::{lu2022, muggleton2004};
 use pipewave::physics::effects::Effect;
+use pipewave::types::FitStatus;
 
 fn row(name: &str, s: &Summary) {
     println!(

@@ -63,15 +63,15 @@ fn main() {
     });
     let failed: Vec<_> = results
         .iter()
-        .filter(|r| r.1 == pipewave::invert::FitStatus::Failed)
+        .filter(|r| r.1 == pipewave::types::FitStatus::Failed)
         .collect();
-    let by_status = |st: pipewave::invert::FitStatus| results.iter().filter(|r| r.1 == st).count();
+    let by_status = |st: pipewave::types::FitStatus| results.iter().filter(|r| r.1 == st).count();
     println!(
         "{} segments, {} failed ({} ok, {} flagged; {} with a root near grazing), {:.1} s on {} jobs ({:?})",
         results.len(),
         failed.len(),
-        by_status(pipewave::invert::FitStatus::Ok),
-        by_status(pipewave::invert::FitStatus::Flagged),
+        by_status(pipewave::types::FitStatus::Ok),
+        by_status(pipewave::types::FitStatus::Flagged),
         results.iter().filter(|r| r.4).count(),
         t.elapsed().as_secs_f64(),
         jobs,

@@ -122,7 +122,7 @@ pub fn fit_it(sys: &System, pipe: Pipe) {
         let meas = pipewave::synth::measure(sys, &freqs, &mut rng).expect("solves");
         let data = pipewave::synth::segment_data(Material::Hdpe, pipe, 1930.0, &meas);
         let r = pipewave::invert::fit_segment(&data, &pipewave::invert::FitSettings::default(), s);
-        if r.status == pipewave::invert::FitStatus::Failed {
+        if r.status == pipewave::types::FitStatus::Failed {
             failed += 1;
             println!("seed {s}: {:?}", r.message);
         } else {

@@ -475,7 +475,7 @@ pub fn timed_fit(seg: &BenchSegment, settings: &crate::invert::FitSettings) -> T
         ms: t.elapsed().as_secs_f64() * 1e3,
         evaluations: r.evaluations,
         misfit: r.misfit,
-        failed: r.status == crate::invert::FitStatus::Failed,
+        failed: r.status == crate::types::FitStatus::Failed,
     }
 }
 

@@ -18,5 +18,6 @@ pub mod seed;
 pub mod special;
 pub mod stats;
 pub mod synth;
+pub mod types;
 pub mod units;
 pub mod zones;

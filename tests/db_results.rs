@@ -69,7 +69,7 @@ fn fit(database: &Database, id: &str, run: i64, settings: &str) -> FitRow {
     f.leak_band_speed_std_m_per_s = Some(6.0);
     f.notes = "soil_via_cp".into();
     f.note_reasons = "soil_via_cp: E_m and nu_m known only through c_P = 212 ± 9 m/s".into();
-    f.algorithm_version = Some(pipewave::invert::FIT_ALGORITHM_VERSION);
+    f.algorithm_version = Some(pipewave::types::FIT_ALGORITHM_VERSION);
     f.evaluations = Some(4200);
     f.seed = Some(u64::MAX - 5);
     f.inputs_hash = seg.inputs_hash;

@@ -288,12 +288,12 @@ fn the_checks_of_src_comments_catch_what_they_are_for() {
 
 #[test]
 fn fit_algorithm_versions_history_lives_in_the_changelog() {
-    let fit = read(&root().join("src/invert/fit.rs"));
+    let fit = read(&root().join("src/types.rs"));
     let lines: Vec<&str> = fit.lines().collect();
     let at = lines
         .iter()
         .position(|l| l.starts_with("pub const FIT_ALGORITHM_VERSION"))
-        .expect("FIT_ALGORITHM_VERSION in src/invert/fit.rs");
+        .expect("FIT_ALGORITHM_VERSION in src/types.rs");
     let doc = lines[..at]
         .iter()
         .rev()

@@ -8,6 +8,7 @@ use pipewave::invert::*;
 use pipewave::physics::curves::{band_mean, curve, LEAK_BAND_HZ, STANDARD_GRID_HZ};
 use pipewave::physics::{ContactMode, Fluid, Model, Soil, System};
 use pipewave::synth::{generate, pipe_of, SynthOptions};
+use pipewave::types::FitStatus;
 use pipewave::units::hz_to_omega;
 use rayon::prelude::*;
 

@@ -5,6 +5,7 @@
 use pipewave::invert::problem::Problem;
 use pipewave::invert::*;
 use pipewave::physics::{ContactMode, Model};
+use pipewave::types::FitStatus;
 
 /// The case as the sample network carries it (the embedded `tests/data/published` files).
 fn paper_data() -> SegmentData {

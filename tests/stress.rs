@@ -4,9 +4,10 @@
 //! them (default settings, seeds from the ids). The larger run is
 //! `cargo run --release --example stress_failures -- 10000 11 2`.
 
-use pipewave::invert::{fit_segment, FitSettings, FitStatus};
+use pipewave::invert::{fit_segment, FitSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::synth::{generate, SynthOptions};
+use pipewave::types::FitStatus;
 use rayon::prelude::*;
 
 #[test]

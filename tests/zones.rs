@@ -134,7 +134,7 @@ fn a_planted_outlier_is_flagged_and_not_averaged_in() {
         .zip(&r.fits)
         .find(|(s, f)| {
             s.material.is_plastic()
-                && f.status == pipewave::invert::FitStatus::Ok
+                && f.status == pipewave::types::FitStatus::Ok
                 && s.zone_soil
                     .is_some_and(|(e, _)| (e / target.truth.0).log10().abs() >= 0.6)
         })

@@ -306,7 +306,7 @@ impl CalibrateSummary {
                 s,
                 "; {} refitted because the fitting algorithm changed (now version {})",
                 self.algorithm_refits,
-                crate::invert::FIT_ALGORITHM_VERSION
+                crate::types::FIT_ALGORITHM_VERSION
             );
         }
         if self.interrupted {

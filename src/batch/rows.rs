@@ -2,9 +2,10 @@
 //! into the checked inputs of a fit, a fit result into its `fits` row and its curve.
 
 use crate::db::{CurvePoint, FitRow, FitStatus, SegmentRecord};
-use crate::invert::{self, FitResult, FitSettings, Measurement, Param, FIT_ALGORITHM_VERSION};
+use crate::invert::{self, FitResult, FitSettings, Measurement, Param};
 use crate::physics::effects::{effects_text, Effect};
 use crate::physics::InputError;
+use crate::types::FIT_ALGORITHM_VERSION;
 
 /// The checked inputs of a fit from a stored segment.
 pub fn segment_data(rec: &SegmentRecord) -> Result<invert::SegmentData, InputError> {

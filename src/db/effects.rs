@@ -89,10 +89,10 @@ impl FitState {
     }
 
     /// Its latest fit exists and was made by another version of the fitting algorithm
-    /// ([`crate::invert::FIT_ALGORITHM_VERSION`]).
+    /// ([`crate::types::FIT_ALGORITHM_VERSION`]).
     pub fn made_by_other_algorithm(&self) -> bool {
         self.fit_inputs_hash.is_some()
-            && self.fit_algorithm_version != Some(crate::invert::FIT_ALGORITHM_VERSION)
+            && self.fit_algorithm_version != Some(crate::types::FIT_ALGORITHM_VERSION)
     }
 }
 

@@ -11,7 +11,7 @@ use rusqlite::{params, Connection, OptionalExtension, Row, TransactionBehavior};
 use super::DbError;
 use crate::physics::{ContactMode, Model};
 
-pub use crate::invert::FitStatus;
+pub use crate::types::FitStatus;
 
 /// State of a calibrate run (`runs.status`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -203,7 +203,7 @@ pub struct FitRow {
     pub notes: String,
     /// One line per note.
     pub note_reasons: String,
-    /// The fitting algorithm's version (`invert::FIT_ALGORITHM_VERSION`; None: before it was
+    /// The fitting algorithm's version (`types::FIT_ALGORITHM_VERSION`; None: before it was
     /// recorded).
     pub algorithm_version: Option<i64>,
     /// Forward-model evaluations.

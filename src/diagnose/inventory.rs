@@ -14,9 +14,10 @@
 
 use rayon::prelude::*;
 
-use crate::invert::fit::{fit_segment, FitResult, FitSettings, FitStatus};
+use crate::invert::fit::{fit_segment, FitResult, FitSettings};
 use crate::invert::problem::SegmentData;
 use crate::physics::{InputError, Material, MaterialProps, Pipe};
+use crate::types::FitStatus;
 
 /// Standard dimension ratios OD/wall of plastic pressure pipe (ISO 4065 series, the SDRs of
 /// EN 1452 and EN 12201).

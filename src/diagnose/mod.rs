@@ -29,11 +29,12 @@ pub mod units;
 
 use num_complex::Complex64;
 
-use crate::invert::fit::{fit_segment, FitResult, FitSettings, FitStatus};
+use crate::invert::fit::{fit_segment, FitResult, FitSettings};
 use crate::invert::problem::{predict, Measurement, Param, Problem, SegmentData};
 use crate::optimize::{FiniteDifference, LevenbergMarquardt};
 use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Model};
+use crate::types::FitStatus;
 
 /// Assumed relative noise on Re k when a segment has no stated standard deviations (typical
 /// of two-sensor field estimates; it only matters for such segments and is reported).

@@ -9,7 +9,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::report::svg::Trust;
+use crate::types::Trust;
 
 /// The field the style colours by (a property of [`super::PROPERTIES`]).
 pub const STYLE_FIELD: &str = "leak_band_speed_m_per_s";

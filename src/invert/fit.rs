@@ -2,9 +2,6 @@
 //! built once: what the data determine (model §7.10), the predicted curve with its errors, and
 //! the findings (flags and notes).
 
-use std::fmt;
-use std::str::FromStr;
-
 use num_complex::Complex64;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -27,6 +24,7 @@ use crate::physics::curves::{band_mean, curve, LEAK_BAND_HZ, STANDARD_GRID_HZ};
 use crate::physics::effects::Effect;
 use crate::physics::solver::{solve_from_guess_tol, Root, Tolerance};
 use crate::physics::{ContactMode, Model, System};
+use crate::types::FitStatus;
 use crate::units::{db_to_np, hz_to_omega, sig};
 
 /// Settings of a fit.
@@ -108,11 +106,6 @@ pub const SEPARATION_SIGMAS: f64 = 3.0;
 /// … and by more than this fraction of its search range.
 pub const SEPARATION_RANGE_FRACTION: f64 = 0.05;
 
-/// Version of the fitting algorithm, stored with every fit (`fits.algorithm_version`). A fit
-/// made by another version is stale: `calibrate` refits it on its own. Bump it whenever a
-/// change can move a stored fit; CHANGELOG.md says what each version changed.
-pub const FIT_ALGORITHM_VERSION: i64 = 20;
-
 /// Relative step (of each coordinate's search range) of the finite differences that give the
 /// predicted curve's sensitivity to the fitted parameters (P65).
 pub const CURVE_FD_STEP_FRACTION: f64 = 1e-3;
@@ -133,47 +126,6 @@ pub struct Estimate {
     pub coordinate_std: f64,
     /// 95 % interval in physical units (P66 construction, clipped to the search box).
     pub interval: Interval,
-}
-
-/// Outcome status of a fit (`fits.status`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum FitStatus {
-    /// The prediction can be trusted: the model explains the data, the optimum is unique where
-    /// it matters and the leak-band speed is determined.
-    Ok,
-    /// A fit with at least one flag: something for the user to act on.
-    Flagged,
-    /// No fit could be produced (see `message`).
-    Failed,
-}
-
-impl FitStatus {
-    /// Name used in the database.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            FitStatus::Ok => "ok",
-            FitStatus::Flagged => "flagged",
-            FitStatus::Failed => "failed",
-        }
-    }
-}
-
-impl fmt::Display for FitStatus {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for FitStatus {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            "ok" => Ok(FitStatus::Ok),
-            "flagged" => Ok(FitStatus::Flagged),
-            "failed" => Ok(FitStatus::Failed),
-            _ => Err(format!("unknown fit status '{s}'")),
-        }
-    }
 }
 
 /// One point of the predicted curve, with its errors (P65).

@@ -13,11 +13,11 @@ use rayon::prelude::*;
 
 use super::fit::{fit_segment, leak_band_speed_of, CurveSource, FitResult, FitSettings};
 use super::uncertainty::WithError;
-use super::FitStatus;
 use crate::physics::curves::curve;
 use crate::physics::effects::Effect;
 use crate::physics::{Material, System};
 use crate::synth::{default_hidden_range, MATERIAL_MIX};
+use crate::types::FitStatus;
 
 /// Coverage factor of the checks: "within 2σ".
 pub const COVERAGE_SIGMAS: f64 = 2.0;

@@ -24,7 +24,7 @@ pub mod uncertainty;
 
 pub use fit::{
     fit_extended, fit_segment, fit_with_effects, BaseOptimum, CurveSource, Estimate, FitResult,
-    FitSettings, FitStatus, PredictedPoint, FIT_ALGORITHM_VERSION,
+    FitSettings, PredictedPoint,
 };
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};

@@ -175,7 +175,7 @@ fn z_map(db: &Database, rows: &[FieldSegmentRow]) -> Result<String, ExportError>
             line,
             value: *v,
             label: v.filter(|_| tooltips).map(|z| format!("z = {z:.2}")),
-            trust: svg::Trust::Trusted,
+            trust: crate::types::Trust::Trusted,
         })
         .collect();
     let style = MapStyle {

@@ -3,6 +3,7 @@
 use std::fmt::Write as _;
 
 use crate::db::wkt::LineString;
+use crate::types::Trust;
 
 /// Escape text for HTML and XML content and attribute values.
 pub fn escape(s: &str) -> String {
@@ -51,30 +52,7 @@ pub const CASING_WIDTH_PX: f64 = 6.5;
 /// Colour of that casing.
 pub const CASING_COLOUR: &str = "#111111";
 
-/// How far a segment's value can be trusted, which sets how its line is drawn (the colour says
-/// the value): the audit's maps and the exports' QGIS style draw the same three kinds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Trust {
-    /// A fit the model explains, speed within its limit (status `ok`), or no value at all:
-    /// a plain solid line.
-    Trusted,
-    /// A prediction for a segment without measurements (status `predicted`, model §7.12):
-    /// dotted.
-    Predicted,
-    /// Flagged or failed: dashed over a dark casing.
-    Distrusted,
-}
-
 impl Trust {
-    /// The kind of a segment from its exported status.
-    pub fn of_status(status: &str) -> Trust {
-        match status {
-            "flagged" | "failed" => Trust::Distrusted,
-            "predicted" => Trust::Predicted,
-            _ => Trust::Trusted,
-        }
-    }
-
     /// SVG stroke attributes of its line (colour `c`).
     fn stroke(self, c: &str) -> String {
         match self {

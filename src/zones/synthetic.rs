@@ -6,8 +6,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::invert::{fit_segment, FitResult, FitSettings, FitStatus, Param};
+use crate::invert::{fit_segment, FitResult, FitSettings, Param};
 use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
+use crate::types::FitStatus;
 
 use super::bound::{member_fisher, zone_bound, ZoneBound};
 use super::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
