@@ -4,9 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, InputError, Model, Pipe, Soil, System};
+use crate::spreadsheet::{self, spreadsheet_safe};
 use crate::units::np_to_db;
 
 /// The input columns, in the interface's order.

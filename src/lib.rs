@@ -16,6 +16,7 @@ pub mod recordings;
 pub mod report;
 pub mod seed;
 pub mod special;
+pub mod spreadsheet;
 pub mod stats;
 pub mod synth;
 pub mod types;

@@ -363,7 +363,7 @@ proptest! {
             .records()
             .map(|rec| {
                 let rec = rec.unwrap();
-                pipewave::export::spreadsheet::unneutralise(&rec[0]).to_string()
+                pipewave::spreadsheet::unneutralise(&rec[0]).to_string()
             })
             .collect();
         prop_assert_eq!(&back, &ids);

@@ -5,9 +5,9 @@ use std::path::Path;
 
 use super::group::GroupTest;
 use super::{effect_value, Diagnosis, Residuals};
-use crate::export::spreadsheet::{self, spreadsheet_safe};
 use crate::physics::effects::Effect;
 use crate::report::svg::escape as esc;
+use crate::spreadsheet::{self, spreadsheet_safe};
 use crate::units::sig;
 
 /// Columns of `diagnosis.csv`: the interface's, then details.
@@ -343,7 +343,7 @@ pub fn evidence(d: &Diagnosis) -> String {
 
 /// Write `diagnosis.csv`. `ids[i]` and `groups[i]` belong to `diags[i]`. Safe to open in a
 /// spreadsheet: text quoted, a formula-like id or group prefixed with `'`
-/// ([`spreadsheet`](crate::export::spreadsheet)).
+/// ([`spreadsheet`](crate::spreadsheet)).
 pub fn write_csv(
     path: &Path,
     ids: &[String],

@@ -3,15 +3,15 @@
 //! leak-band speed and its error), no geometry. Numbers as [`Precision`] says: rounded for
 //! people by default, or in Rust's shortest round-trip form (read back bit for bit) with
 //! `Precision::Full`; missing values are empty cells. Text cells are made safe to open in
-//! a spreadsheet ([`spreadsheet`](super::spreadsheet)): quoted, with a leading `'` when they begin
+//! a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
 //! like a formula.
 
 use std::path::Path;
 
 use super::numbers::{columns, Cell, Precision};
 use super::record::Records;
-use super::spreadsheet::{spreadsheet_safe, writer};
 use super::{write_streamed, ExportError, SegmentExport, Tally};
+use crate::spreadsheet::{spreadsheet_safe, writer};
 
 /// Write the header row.
 fn header<W: std::io::Write>(w: &mut csv::Writer<W>) -> Result<(), csv::Error> {

@@ -8,7 +8,8 @@
 //!   to their errors for people, or every digit).
 //! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
 //! - [`gpkg`], [`geojson`], [`csv`]: the writers.
-//! - [`spreadsheet`]: the rule every CSV writer follows so a cell never opens as a formula.
+//! - [`spreadsheet`](crate::spreadsheet): the rule every CSV writer follows so a cell never
+//!   opens as a formula.
 //!
 //! Every writer streams: it writes each record as it is read, so an export of 100,000 segments
 //! holds one page of records, not the network.
@@ -26,7 +27,6 @@ pub mod geojson;
 pub mod gpkg;
 pub mod numbers;
 pub mod record;
-pub mod spreadsheet;
 pub mod style;
 pub mod zones;
 

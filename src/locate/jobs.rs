@@ -12,7 +12,7 @@ use super::network::SensorSpec;
 use super::{DelayInput, Job, Located};
 use crate::export::crs::{Reprojector, WGS84};
 use crate::export::gpkg;
-use crate::export::spreadsheet::{self, spreadsheet_safe};
+use crate::spreadsheet::{self, spreadsheet_safe};
 
 /// Columns every jobs file has.
 pub const REQUIRED_COLUMNS: [&str; 5] = [

@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 pub use estimate::{analyse_segment, BandEstimate, EstimateOptions, SegmentWavenumbers};
 pub use layout::{read_layout, Layout, SegmentLayout, Sensor};
 
-use crate::export::spreadsheet::{self, spreadsheet_safe};
+use crate::spreadsheet::{self, spreadsheet_safe};
 use crate::units::sig;
 
 /// Columns of the written measurements (docs/interface.md `measurements.csv`; `import` accepts no

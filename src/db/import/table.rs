@@ -118,7 +118,7 @@ impl CsvRows {
             match std::str::from_utf8(raw) {
                 // Our own CSV output neutralises formula-like text with a `'`:
                 // read it back as written.
-                Ok(s) => cells.push(crate::export::spreadsheet::unneutralise(s.trim()).to_string()),
+                Ok(s) => cells.push(crate::spreadsheet::unneutralise(s.trim()).to_string()),
                 Err(_) => {
                     return Err(RowError::new(
                         file,

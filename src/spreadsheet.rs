@@ -31,7 +31,7 @@ pub const TEXT_PREFIX: char = '\'';
 /// column is written as it is.
 ///
 /// ```
-/// use pipewave::export::spreadsheet::spreadsheet_safe;
+/// use pipewave::spreadsheet::spreadsheet_safe;
 /// assert_eq!(spreadsheet_safe("=HYPERLINK(\"http://x\")"), "'=HYPERLINK(\"http://x\")");
 /// assert_eq!(spreadsheet_safe("HYD-1003"), "HYD-1003");
 /// ```
@@ -55,7 +55,7 @@ pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
 /// (`'=1` is read as `=1`), exactly as a spreadsheet reads it.
 ///
 /// ```
-/// use pipewave::export::spreadsheet::{spreadsheet_safe, unneutralise};
+/// use pipewave::spreadsheet::{spreadsheet_safe, unneutralise};
 /// assert_eq!(unneutralise(&spreadsheet_safe("+1")), "+1");
 /// assert_eq!(unneutralise("'quoted'"), "'quoted'");
 /// ```
