@@ -11,6 +11,7 @@
 //! Schema changes are append-only SQL files in `migrations/`, embedded in the binary and applied
 //! in order in one exclusive transaction, tracked by `PRAGMA user_version` ([`migrate`]).
 
+pub mod crs;
 pub mod effects;
 pub mod field;
 pub mod hash;

@@ -9,10 +9,10 @@ use std::path::Path;
 
 use serde_json::{json, Map, Number, Value as Json};
 
-use super::crs::{CrsError, Reprojector, WGS84};
 use super::numbers::{columns, Cell, Precision};
 use super::record::Records;
 use super::{write_streamed, ExportError, SegmentExport, Tally};
+use crate::db::crs::{CrsError, Reprojector, WGS84};
 
 /// Decimals of the written longitudes and latitudes: 1e-7 degree is about 1 cm, as RFC 7946
 /// §11.2 suggests (more precision than that is noise).

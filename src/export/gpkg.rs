@@ -18,11 +18,11 @@ use std::path::Path;
 
 use rusqlite::{params, params_from_iter, Connection};
 
-use super::crs::{self, ToCommonCrs};
 use super::record::{Records, Value};
 use super::style;
 use super::zones::ZonePoints;
 use super::{finish_temp, temp_path, ExportError, Tally};
+use crate::db::crs::{self, ToCommonCrs};
 use crate::db::wkt::LineString;
 
 /// The feature table.

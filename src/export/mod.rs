@@ -6,7 +6,7 @@
 //!   ([`record::PROPERTIES`]).
 //! - [`numbers`]: the order of the columns and how the CSV and GeoJSON print numbers (rounded
 //!   to their errors for people, or every digit).
-//! - [`crs`]: coordinate reference systems (EPSG definitions and reprojection).
+//! - [`crs`](crate::db::crs): coordinate reference systems (EPSG definitions and reprojection).
 //! - [`gpkg`], [`geojson`], [`csv`]: the writers.
 //! - [`spreadsheet`](crate::spreadsheet): the rule every CSV writer follows so a cell never
 //!   opens as a formula.
@@ -20,7 +20,6 @@
 //! target is written, the link kept); a character device or FIFO (`/dev/null`, a pipe to
 //! another program) is written directly, never replaced ([`resolve_out`]).
 
-pub mod crs;
 pub mod csv;
 pub mod field;
 pub mod geojson;

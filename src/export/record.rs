@@ -11,7 +11,8 @@ use crate::db::wkt::LineString;
 use crate::db::{self, pages, CurvePoint, Database, FitRow, SegmentRecord};
 use crate::physics::curves::{band_mean, LEAK_BAND_HZ};
 
-use super::{crs, ExportError};
+use super::ExportError;
+use crate::db::crs;
 
 /// The standard export frequencies, Hz. All are on
 /// [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ), so the values are stored

@@ -178,7 +178,7 @@ fn midpoint_and_length(points: &[(f64, f64)]) -> Option<([f64; 2], f64)> {
 /// latitude by a local equirectangular projection (adequate over a network's extent).
 fn site_geometry(wkt: Option<&str>, srid: Option<i64>) -> Option<([f64; 2], f64)> {
     let line = LineString::parse_wkt(wkt?).ok()?;
-    let geographic = srid.is_some_and(crate::export::crs::is_geographic);
+    let geographic = srid.is_some_and(crate::db::crs::is_geographic);
     if !geographic {
         return midpoint_and_length(&line.points);
     }

@@ -10,7 +10,7 @@ use serde_json::{json, Value as Json};
 use super::gcc::RecordingPair;
 use super::network::SensorSpec;
 use super::{DelayInput, Job, Located};
-use crate::export::crs::{Reprojector, WGS84};
+use crate::db::crs::{Reprojector, WGS84};
 use crate::export::gpkg;
 use crate::spreadsheet::{self, spreadsheet_safe};
 

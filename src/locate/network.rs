@@ -9,9 +9,9 @@ use petgraph::graph::{NodeIndex, UnGraph};
 use petgraph::visit::EdgeRef;
 
 use super::LocateError;
+use crate::db::crs::{self, ToCommonCrs};
 use crate::db::wkt::LineString;
 use crate::db::SegmentRecord;
-use crate::export::crs::{self, ToCommonCrs};
 
 /// Default distance within which two segment end points are the same junction, m.
 pub const DEFAULT_JOIN_TOLERANCE_M: f64 = 1.0;

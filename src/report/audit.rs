@@ -29,6 +29,7 @@ use std::path::Path;
 use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
 use super::svg::{self, escape, ColourScale, MapCanvas, MapLine, MapStyle};
 use super::{quantile, sorted_finite};
+use crate::db::crs;
 use crate::db::wkt::LineString;
 use crate::db::zones::ZoneFitRow;
 use crate::db::{self, Database, FitStatus, RunRow};
@@ -36,7 +37,7 @@ use crate::export::gpkg::CommonGeometry;
 use crate::export::numbers;
 use crate::export::record::UNFITTED;
 use crate::export::{
-    check_out_path, crs, write_file_atomically, ExportError, ExportSummary, Records, SegmentExport,
+    check_out_path, write_file_atomically, ExportError, ExportSummary, Records, SegmentExport,
     PAGE_SIZE,
 };
 use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};

@@ -186,7 +186,7 @@ fn z_map(db: &Database, rows: &[FieldSegmentRow]) -> Result<String, ExportError>
         width: 720.0,
         metres_per_unit: None,
     };
-    let geographic = srid.is_some_and(crate::export::crs::is_geographic);
+    let geographic = srid.is_some_and(crate::db::crs::is_geographic);
     Ok(svg::map(&map_lines, geographic, &style))
 }
 
