@@ -7,39 +7,11 @@ use num_complex::Complex64;
 
 use crate::optimize::{Bounds, LeastSquares, Objective, OptimizeError};
 use crate::physics::effects::Effect;
-use crate::physics::inputs::{ValidRange, MAX_SOIL_POISSON};
+use crate::physics::inputs::{
+    ValidRange, ATTENUATION_RANGE, K_RE_RANGE, MAX_SOIL_POISSON, MEASUREMENT_STD_RANGE, OMEGA_RANGE,
+};
 use crate::physics::solver::{refine_near, solve_curve, Continuation, Tolerance};
 use crate::physics::{ContactMode, Fluid, InputError, Material, Model, Pipe, Soil, System};
-
-/// Angular frequencies the fit accepts, rad/s: from far below any pipe resonance to well above
-/// the leak-noise band; the importer checks ω = 2πf against it too.
-pub const OMEGA_RANGE: ValidRange = ValidRange {
-    name: "angular frequency (rad/s)",
-    lo: 1e-6,
-    hi: 1e7,
-    text: "1e-6 - 1e7",
-};
-/// Measured Re k the fit accepts, rad/m (> 0).
-pub const K_RE_RANGE: ValidRange = ValidRange {
-    name: "k_re (rad/m)",
-    lo: 1e-9,
-    hi: 1e4,
-    text: "1e-9 - 1e4",
-};
-/// Measured attenuation the fit accepts, Np/m (>= 0).
-pub const ATTENUATION_RANGE: ValidRange = ValidRange {
-    name: "attenuation (Np/m)",
-    lo: 0.0,
-    hi: 1e3,
-    text: "0 - 1e3",
-};
-/// A measurement's standard deviation (of Re k or of the attenuation) the fit accepts (> 0).
-pub const MEASUREMENT_STD_RANGE: ValidRange = ValidRange {
-    name: "standard deviation",
-    lo: 1e-300,
-    hi: 1e6,
-    text: "1e-300 - 1e6",
-};
 
 /// One measured wavenumber (P5: k = k_re − i·att).
 #[derive(Debug, Clone, Copy, PartialEq)]

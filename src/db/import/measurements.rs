@@ -7,7 +7,7 @@ use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, Problems, RowError};
 use crate::db::inventory::MeasurementRecord;
 use crate::db::DbError;
-use crate::invert::problem::{ATTENUATION_RANGE, K_RE_RANGE, MEASUREMENT_STD_RANGE, OMEGA_RANGE};
+use crate::physics::inputs::{ATTENUATION_RANGE, K_RE_RANGE, MEASUREMENT_STD_RANGE, OMEGA_RANGE};
 use crate::units::short;
 
 /// The columns of `measurements.csv`. Exactly one of `frequency_hz` / `omega_rad_s` per row; the
