@@ -14,6 +14,7 @@ pub mod optimize;
 pub mod physics;
 pub mod recordings;
 pub mod report;
+pub mod rows;
 pub mod seed;
 pub mod special;
 pub mod spreadsheet;

@@ -20,10 +20,7 @@
 //! outcome is returned as a [`CalibrateSummary`].
 
 pub mod progress;
-pub mod rows;
 pub mod throughput;
-
-pub use rows::{curve_points, fit_row, segment_data};
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;
@@ -32,7 +29,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::db::hash::{fnv1a64, Canonical};
+use crate::db::hash::fnv1a64;
 use crate::db::{
     self, CurvePoint, DbError, FitRow, FitState, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
@@ -40,6 +37,7 @@ use crate::db::{
 use crate::invert::{fit_with_effects, FitSettings, Method, Param};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, Model};
+use crate::rows::{self, curve_points, fit_row, segment_data, settings_hash};
 use crate::seed::splitmix64;
 
 pub use db::Connection;
@@ -58,10 +56,6 @@ pub const IN_FLIGHT_PER_JOB: usize = 2;
 
 /// How often a run started with `wait_for_lock` asks again for the run lock.
 pub const LOCK_POLL: Duration = Duration::from_millis(250);
-
-/// Version tag of the settings hash: change it (and only then) when the meaning of the hashed
-/// settings changes, so every segment is refitted once.
-const SETTINGS_HASH_TAG: &str = "pipewave-settings-v1";
 
 /// What a calibrate run is asked to do (checked values: the CLI parses the arguments into this).
 #[derive(Debug, Clone, PartialEq)]
@@ -141,24 +135,6 @@ pub fn default_jobs() -> usize {
     std::thread::available_parallelism()
         .map(|n| n.get())
         .unwrap_or(1)
-}
-
-/// FNV-1a 64 of the canonical text of the fit settings, 16 hex digits.
-pub fn settings_hash(
-    method: Method,
-    model: Model,
-    contact_mode: ContactMode,
-    effects: &[Effect],
-) -> String {
-    let mut sorted = effects.to_vec();
-    sorted.sort();
-    sorted.dedup();
-    Canonical::new(SETTINGS_HASH_TAG)
-        .text("method", Some(method.as_str()))
-        .text("model", Some(model.as_str()))
-        .text("contact_mode", Some(contact_mode.as_str()))
-        .text("effects", Some(&effects_text(&sorted)))
-        .hash_hex()
 }
 
 /// The seed of one segment's fit: `splitmix64(run_seed ^ fnv1a64(segment_id))`.

@@ -13,11 +13,11 @@ use super::inventory::{InventoryPipe, InventoryProfile};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
 use super::units::{convert_measurements, UnitMixUp};
 use super::{diagnose_segment, extended_fit, DiagnoseSettings, Diagnosis};
-use crate::batch::{curve_points, fit_row, segment_data, settings_hash};
 use crate::db::{self, DbError, NewRun, RunCounts, RunStatus, SegmentRecord};
 use crate::invert::{fit_segment, FitSettings, Method};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, Model};
+use crate::rows::{curve_points, fit_row, segment_data, settings_hash};
 use crate::types::FitStatus;
 
 /// Options of a diagnosis run.

@@ -430,7 +430,7 @@ fn site_result(
             "not in the inventory when the field was updated".into(),
         );
     };
-    let data = match crate::batch::rows::segment_data(rec) {
+    let data = match crate::rows::segment_data(rec) {
         Ok(d) => d,
         Err(e) => return none(row, format!("no speed: the pipe's data are unusable ({e})")),
     };

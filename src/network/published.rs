@@ -51,7 +51,7 @@ impl PublishedCase {
     /// What a fit is given about this case: water, the pipe from the material and the row's
     /// overrides (a = (D_o − h)/2, eq. P6), the soil density and the measurements.
     pub fn segment_data(&self) -> Result<crate::invert::SegmentData, crate::physics::InputError> {
-        crate::batch::rows::segment_data(&self.segment)
+        crate::rows::segment_data(&self.segment)
     }
 }
 

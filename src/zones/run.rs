@@ -7,12 +7,12 @@ use std::time::Instant;
 
 use rusqlite::Connection;
 
-use crate::batch::segment_data;
 use crate::db::zones::{insert_zone_fit, latest_zone_fit, ZoneFitRow, ZoneMemberRow};
 use crate::db::{latest_fits, load_zoned_segments, DbError, FitRow, FitStatus, SegmentRecord};
 use crate::invert::problem::{parameter_space, Param};
 use crate::invert::Method;
 use crate::physics::effects::parse_effects;
+use crate::rows::segment_data;
 
 use super::flags::{OutlierEvidence, ZoneFlag, POOR_FIT_CHI2_PER_DOF};
 use super::model::{estimate_zone, ZoneEstimate, MIN_MEMBERS};

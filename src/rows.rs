@@ -1,11 +1,36 @@
 //! Row conversion between the inventory, the inversion and the result tables: a stored segment
-//! into the checked inputs of a fit, a fit result into its `fits` row and its curve.
+//! into the checked inputs of a fit, a fit result into its `fits` row and its curve, and the hash
+//! of the settings a fit is stored under.
 
+use crate::db::hash::Canonical;
 use crate::db::{CurvePoint, FitRow, FitStatus, SegmentRecord};
-use crate::invert::{self, FitResult, FitSettings, Measurement, Param};
+use crate::invert::{self, FitResult, FitSettings, Measurement, Method, Param};
 use crate::physics::effects::{effects_text, Effect};
 use crate::physics::InputError;
+use crate::physics::{ContactMode, Model};
 use crate::types::FIT_ALGORITHM_VERSION;
+
+/// Version tag of the settings hash: change it (and only then) when the meaning of the hashed
+/// settings changes, so every segment is refitted once.
+const SETTINGS_HASH_TAG: &str = "pipewave-settings-v1";
+
+/// FNV-1a 64 of the canonical text of the fit settings, 16 hex digits.
+pub fn settings_hash(
+    method: Method,
+    model: Model,
+    contact_mode: ContactMode,
+    effects: &[Effect],
+) -> String {
+    let mut sorted = effects.to_vec();
+    sorted.sort();
+    sorted.dedup();
+    Canonical::new(SETTINGS_HASH_TAG)
+        .text("method", Some(method.as_str()))
+        .text("model", Some(model.as_str()))
+        .text("contact_mode", Some(contact_mode.as_str()))
+        .text("effects", Some(&effects_text(&sorted)))
+        .hash_hex()
+}
 
 /// The checked inputs of a fit from a stored segment.
 pub fn segment_data(rec: &SegmentRecord) -> Result<invert::SegmentData, InputError> {
