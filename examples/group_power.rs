@@ -35,7 +35,7 @@ use pipewave::diagnose::trial::effect_trial;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
-use pipewave::synth::normal;
+use pipewave::stats::normal;
 use pipewave::synth::MATERIAL_MIX;
 use rand::Rng;
 use rand::SeedableRng;

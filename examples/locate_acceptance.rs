@@ -24,7 +24,8 @@ use pipewave::locate::synth::{
 };
 use pipewave::locate::{DelayInput, LocateOptions, Located, Locator, DEFAULT_BAND_HZ};
 use pipewave::recordings::synth::{headroom_gain, write_wav, TruthCurve, WavFormat};
-use pipewave::synth::{generate, normal, SynthOptions};
+use pipewave::stats::normal;
+use pipewave::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

@@ -1,6 +1,8 @@
-//! Statistical tails used by the fit's misfit test and the diagnosis (from `statrs`), and the
-//! Birge ratio that widens errors where the model does not explain the data.
+//! Statistical tails used by the fit's misfit test and the diagnosis (from `statrs`), the
+//! Birge ratio that widens errors where the model does not explain the data, sample quantiles,
+//! and the standard normal deviate the synthetic data draw.
 
+use rand::Rng;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// Upper-tail probability P(χ²_k > x); NaN for a non-finite x or k ≤ 0.
@@ -19,6 +21,33 @@ pub fn birge_ratio(chi2_min: f64, n_measured: usize, n_fitted: usize) -> f64 {
         return 1.0;
     }
     (chi2_min / (n_measured - n_fitted) as f64).sqrt().max(1.0)
+}
+
+/// Linear-interpolated quantile `q` in [0, 1] of sorted finite values (type 7, as R's default
+/// and numpy's `linear`). `None` for an empty slice.
+pub fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let pos = q.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
+    let i = pos.floor() as usize;
+    let frac = pos - i as f64;
+    let next = sorted.get(i + 1).copied().unwrap_or(sorted[i]);
+    Some(sorted[i] + frac * (next - sorted[i]))
+}
+
+/// The finite values, sorted.
+pub fn sorted_finite(values: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+/// Standard normal deviate by Box–Muller.
+pub fn normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    let u1: f64 = rng.gen_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.gen();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 #[cfg(test)]
@@ -45,5 +74,20 @@ mod tests {
         assert!((chi2_upper_tail(9.342, 10.0) - 0.5).abs() < 1e-3);
         assert!(chi2_upper_tail(f64::NAN, 3.0).is_nan());
         assert_eq!(chi2_upper_tail(-1.0, 3.0), 1.0);
+    }
+
+    #[test]
+    fn quantiles_interpolate_linearly() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(quantile(&v, 0.5), Some(3.0));
+        assert_eq!(quantile(&v, 0.9), Some(4.6));
+        assert_eq!(quantile(&v, 0.0), Some(1.0));
+        assert_eq!(quantile(&v, 1.0), Some(5.0));
+        assert_eq!(quantile(&[7.0], 0.9), Some(7.0));
+        assert_eq!(quantile(&[], 0.5), None);
+        assert_eq!(
+            sorted_finite([3.0, f64::NAN, 1.0].into_iter()),
+            vec![1.0, 3.0]
+        );
     }
 }

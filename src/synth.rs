@@ -14,6 +14,7 @@ use crate::invert::fit::leak_band_speed_of;
 use crate::physics::effects::Effect;
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
+use crate::stats::normal;
 use crate::units::hz_to_omega;
 
 /// Relative noise (one sigma) on Re k of a synthetic measurement (1 %).
@@ -382,13 +383,6 @@ pub fn default_hidden_range(effect: Effect) -> Option<(f64, f64)> {
         Effect::ViscoelasticWall => Some((0.03, 0.15)),
         Effect::FullModel | Effect::InventoryError | Effect::MeasurementUnits => None,
     }
-}
-
-/// Standard normal deviate by Box–Muller.
-pub fn normal<R: Rng + ?Sized>(rng: &mut R) -> f64 {
-    let u1: f64 = rng.gen_range(f64::MIN_POSITIVE..1.0);
-    let u2: f64 = rng.gen();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 fn pick_material<R: Rng + ?Sized>(rng: &mut R) -> Material {

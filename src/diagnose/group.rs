@@ -351,7 +351,7 @@ mod tests {
     ) -> Vec<f64> {
         (0..n)
             .map(|i| {
-                let z = crate::synth::normal(rng) + if i < n_aff { delta } else { 0.0 };
+                let z = crate::stats::normal(rng) + if i < n_aff { delta } else { 0.0 };
                 z.max(0.0).powi(2)
             })
             .collect()

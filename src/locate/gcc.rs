@@ -382,7 +382,7 @@ mod tests {
         let fs = 8000.0;
         let n = 8000 * 20;
         let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let x: Vec<f64> = (0..n).map(|_| crate::synth::normal(&mut rng)).collect();
+        let x: Vec<f64> = (0..n).map(|_| crate::stats::normal(&mut rng)).collect();
         let mut planner = RealFftPlanner::<f64>::new();
         let fwd = planner.plan_fft_forward(n);
         let inv = planner.plan_fft_inverse(n);
@@ -399,7 +399,7 @@ mod tests {
         inv.process(&mut spec, &mut y).unwrap();
         let noisy = |v: &[f64], rng: &mut ChaCha8Rng| -> Vec<f64> {
             v.iter()
-                .map(|a| a + 0.5 * crate::synth::normal(rng))
+                .map(|a| a + 0.5 * crate::stats::normal(rng))
                 .collect()
         };
         let rec = Recording {

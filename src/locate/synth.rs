@@ -24,7 +24,8 @@ use crate::recordings::synth::{
     headroom_gain, source_amplitude, system_of, truth_curve, write_wav, TruthCurve, WavFormat,
     RING_FRACTION, SOURCE_HI_HZ,
 };
-use crate::synth::{normal, SynthOptions, SynthSegment};
+use crate::stats::normal;
+use crate::synth::{SynthOptions, SynthSegment};
 use crate::units::np_to_db;
 
 /// Default length of a synthetic leak recording, s.

@@ -39,9 +39,9 @@ impl Spread {
     }
 }
 
-/// Quantile `p` of sorted values (type 7, [`crate::report::quantile`]); NaN when empty.
+/// Quantile `p` of sorted values (type 7, [`crate::stats::quantile`]); NaN when empty.
 pub fn quantile(sorted: &[f64], p: f64) -> f64 {
-    crate::report::quantile(sorted, p).unwrap_or(f64::NAN)
+    crate::stats::quantile(sorted, p).unwrap_or(f64::NAN)
 }
 
 /// How the defective segments of one kind were caught.

@@ -26,7 +26,8 @@ use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource, 
 use crate::network::recovery::{compare, RecoveryReport};
 use crate::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
 use crate::physics::Material;
-use crate::synth::{generate, normal, SynthOptions};
+use crate::stats::normal;
+use crate::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

@@ -18,7 +18,7 @@ use realfft::RealFftPlanner;
 use super::estimate::MAX_FREQUENCY_FRACTION;
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::System;
-use crate::synth::normal;
+use crate::stats::normal;
 use crate::units::hz_to_omega;
 
 /// Lowest source frequency, Hz (the taper rises from here to twice this).

@@ -28,7 +28,6 @@ use std::path::Path;
 
 use super::charts::{self, ChartError, SoilSpeeds, SpeedPoint, WithStd};
 use super::svg::{self, escape, ColourScale, MapCanvas, MapLine, MapStyle};
-use super::{quantile, sorted_finite};
 use crate::db::crs;
 use crate::db::wkt::LineString;
 use crate::db::zones::ZoneFitRow;
@@ -42,6 +41,7 @@ use crate::export::{
 };
 use crate::invert::flags::{SPEED_DETERMINED_RSTD, SPEED_RSTD_MAX};
 use crate::invert::FlagCode;
+use crate::stats::{quantile, sorted_finite};
 use crate::types::Trust;
 use crate::units::{np_to_db, sig};
 use crate::zones::ZoneFlag;

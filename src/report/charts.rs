@@ -7,7 +7,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::quantile;
+use crate::stats::quantile;
 use crate::units::sig;
 
 /// A chart that could not be drawn (plotters' message).
@@ -98,7 +98,7 @@ pub fn log_histogram(
     markers: &[(&str, f64)],
 ) -> Result<Chart, ChartError> {
     const BINS: usize = 40;
-    let logs: Vec<f64> = super::sorted_finite(
+    let logs: Vec<f64> = crate::stats::sorted_finite(
         values
             .iter()
             .filter(|v| v.is_finite() && **v > 0.0)
@@ -403,7 +403,7 @@ pub fn soil_speeds(groups: &[SoilSpeeds]) -> Result<Chart, ChartError> {
         .map(|p| p.value)
         .filter(|v| v.is_finite())
         .collect();
-    let sorted = super::sorted_finite(all.iter().copied());
+    let sorted = crate::stats::sorted_finite(all.iter().copied());
     // The axis spans the values (1st–99th percentiles), not the error bars; what lies beyond
     // is drawn at the edge with a triangle and counted.
     let lo = quantile(&sorted, 0.01).unwrap_or(0.0);

@@ -79,8 +79,8 @@ impl ColourScale {
     /// Classes spanning the 2nd–98th percentiles of `sorted` values (so one outlier does not
     /// squeeze every other segment into one colour). `None` without values.
     pub fn from_sorted(sorted: &[f64]) -> Option<ColourScale> {
-        let lo = super::quantile(sorted, 0.02)?;
-        let hi = super::quantile(sorted, 0.98)?;
+        let lo = crate::stats::quantile(sorted, 0.02)?;
+        let hi = crate::stats::quantile(sorted, 0.98)?;
         let (lo, hi) = if hi - lo > 1e-9 * hi.abs().max(1.0) {
             (lo, hi)
         } else {
@@ -171,7 +171,7 @@ pub fn map(lines: &[MapLine<'_>], geographic: bool, style: &MapStyle<'_>) -> Str
             ];
         }
     }
-    let values = super::sorted_finite(lines.iter().filter_map(|l| l.value));
+    let values = crate::stats::sorted_finite(lines.iter().filter_map(|l| l.value));
     let mut canvas = MapCanvas::new(bbox, lines.len(), &values, geographic, style);
     for l in lines {
         canvas.add(l);

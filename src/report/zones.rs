@@ -23,7 +23,7 @@ fn fixed(v: Option<f64>) -> String {
 fn median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     v.sort_by(f64::total_cmp);
-    super::quantile(&v, 0.5)
+    crate::stats::quantile(&v, 0.5)
 }
 
 /// The `<section id="zones">` of the audit report, from each zone's estimate and its members'

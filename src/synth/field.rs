@@ -17,7 +17,8 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{normal, SoilClass, SOILS};
+use super::{SoilClass, SOILS};
+use crate::stats::normal;
 
 /// Random Fourier features per standard field: the realised field's marginal is a sum of this
 /// many cosines, Gaussian to well within what a network of a few hundred pipes can resolve.

@@ -160,7 +160,7 @@ pub fn sample_quantile_distribution(
         .map(|_| {
             let mut e: Vec<f64> = sd_ln
                 .iter()
-                .map(|&s| (s * crate::synth::normal(&mut rng)).exp_m1().abs())
+                .map(|&s| (s * crate::stats::normal(&mut rng)).exp_m1().abs())
                 .collect();
             e.sort_by(f64::total_cmp);
             e[idx]
