@@ -12,11 +12,11 @@ use std::path::PathBuf;
 use pipewave::diagnose::report::{candidates_chi2, residual_runs, write_csv, write_html, GroupRow};
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, Diagnosis};
 use pipewave::invert::{fit_segment, FitSettings, Measurement, SegmentData};
-use pipewave::network::published::{
+use pipewave::physics::effects::Effect;
+use pipewave::synth::network::published::{
     lu2022, muggleton2004, MUGGLETON2004_CSV, MUGGLETON_BAND_END_HZ, MUGGLETON_BAND_START_HZ,
     MUGGLETON_BAND_WIDTH_HZ,
 };
-use pipewave::physics::effects::Effect;
 use pipewave::units::{db_to_np, hz_to_omega, sig};
 
 fn show(name: &str, d: &Diagnosis) {

@@ -27,10 +27,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use pipewave::invert::fit::leak_band_speed_of;
-use pipewave::network::recovery::quantile;
-use pipewave::network::NetworkTables;
 use pipewave::physics::{Fluid, Soil, System};
 use pipewave::synth::field::moduli;
+use pipewave::synth::network::recovery::quantile;
+use pipewave::synth::network::NetworkTables;
 use pipewave::synth::{generate, geology, pipe_of, SynthOptions, SynthSegment, TABLE_CONTACT};
 
 /// Correlation lengths of the grid, m.

@@ -15,8 +15,8 @@
 
 use pipewave::invert::honesty::{check_measured, summarize, trials, Summary, TrialCheck};
 use pipewave::invert::{fit_segment, FitSettings};
-use pipewave::network::published::{lu2022, muggleton2004};
 use pipewave::physics::effects::Effect;
+use pipewave::synth::network::published::{lu2022, muggleton2004};
 use pipewave::types::FitStatus;
 
 fn row(name: &str, s: &Summary) {

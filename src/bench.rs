@@ -201,10 +201,10 @@ pub struct FitFigure {
 /// The paper's cast-iron case (Table 2, inferred DN125 geometry): 4 frequencies, no stds, as
 /// in the sample network (`network::published::lu2022`).
 pub fn paper_case_data() -> crate::invert::SegmentData {
-    crate::network::published::lu2022()
+    crate::synth::network::published::lu2022()
         .and_then(|c| {
             c.segment_data()
-                .map_err(|e| crate::network::published::PublishedDataError {
+                .map_err(|e| crate::synth::network::published::PublishedDataError {
                     file: "seed_cast_iron_table2.csv",
                     line: 0,
                     message: e.to_string(),
@@ -499,7 +499,7 @@ impl Distribution {
     pub fn of(v: &[f64]) -> Self {
         let mut s: Vec<f64> = v.to_vec();
         s.sort_by(f64::total_cmp);
-        let q = |p: f64| crate::network::recovery::quantile(&s, p);
+        let q = |p: f64| crate::synth::network::recovery::quantile(&s, p);
         Distribution {
             median: q(0.5),
             p90: q(0.9),

@@ -9,7 +9,6 @@ pub mod field;
 pub mod forward;
 pub mod invert;
 pub mod locate;
-pub mod network;
 pub mod optimize;
 pub mod physics;
 pub mod recordings;

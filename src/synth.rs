@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub mod field;
+pub mod network;
 
 use crate::invert::fit::leak_band_speed_of;
 use crate::physics::effects::Effect;

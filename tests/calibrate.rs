@@ -676,7 +676,7 @@ fn synth_writes_a_network_that_imports_cleanly() {
         ),
         4
     );
-    let truth = pipewave::network::read_truth(&net.join("truth.csv")).unwrap();
+    let truth = pipewave::synth::network::read_truth(&net.join("truth.csv")).unwrap();
     assert_eq!(truth.len(), 14);
     assert!(truth.iter().filter(|t| t.defect.is_some()).count() >= 2);
     assert!(truth[12].soil_youngs_modulus_pa.is_none());

@@ -9,9 +9,9 @@ use cli_run::run_ok;
 
 use pipewave::invert::honesty::{check_measured, summarize, trials, TrialCheck};
 use pipewave::invert::{fit_segment, CurveSource, FitSettings};
-use pipewave::network::published::{lu2022, muggleton2004};
-use pipewave::network::NetworkTables;
 use pipewave::physics::effects::Effect;
+use pipewave::synth::network::published::{lu2022, muggleton2004};
+use pipewave::synth::network::NetworkTables;
 use pipewave::types::FitStatus;
 
 /// Trials per hidden effect (the acceptance figures of docs/honest-errors.md use 60).

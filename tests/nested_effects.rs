@@ -10,8 +10,8 @@ use cli_run::run_ok;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use pipewave::network::NetworkTables;
 use pipewave::physics::effects::Effect;
+use pipewave::synth::network::NetworkTables;
 use pipewave::synth::{default_hidden_range, generate, SynthOptions, SynthSegment};
 
 /// A segment's misfit may rise by at most this after an effect is switched on.

@@ -9,7 +9,7 @@ use pipewave::types::FitStatus;
 
 /// The case as the sample network carries it (the embedded `tests/data/published` files).
 fn paper_data() -> SegmentData {
-    pipewave::network::published::lu2022()
+    pipewave::synth::network::published::lu2022()
         .unwrap()
         .segment_data()
         .unwrap()
@@ -160,7 +160,7 @@ fn paper_estimate_is_not_the_optimum() {
 /// than hide. Issue 6 (diagnose) looks for the missing effect.
 #[test]
 fn mdpe_measurements_fit() {
-    let d = pipewave::network::published::muggleton2004()
+    let d = pipewave::synth::network::published::muggleton2004()
         .unwrap()
         .segment_data()
         .unwrap();

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use pipewave::db::{self, Database};
-use pipewave::network::{read_truth, recovery};
+use pipewave::synth::network::{read_truth, recovery};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_pipewave"))

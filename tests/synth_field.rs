@@ -7,8 +7,8 @@ use std::path::Path;
 use std::process::Command;
 
 use pipewave::invert::fit::leak_band_speed_of;
-use pipewave::network::{read_truth, NetworkTables, MEASUREMENTS_CSV, TRUTH_CSV};
 use pipewave::physics::{Fluid, Soil, System};
+use pipewave::synth::network::{read_truth, NetworkTables, MEASUREMENTS_CSV, TRUTH_CSV};
 use pipewave::synth::{
     generate, geology, pipe_of, SynthOptions, SynthSegment, TABLE_CONTACT, TABLE_SOIL_MODULUS,
     TABLE_SOIL_POISSON,

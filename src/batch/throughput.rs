@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use super::{calibrate, BatchError, CalibrateOptions, CalibrateSummary};
 use crate::db::{self, Database, DbError, ImportOptions, ImportSource};
-use crate::network::NetworkTables;
+use crate::synth::network::NetworkTables;
 use crate::synth::{generate, SynthOptions};
 
 /// Seed of the benchmark network (fixed so figures are comparable between builds).

@@ -12,7 +12,7 @@ use clap::Args;
 use pipewave::batch::throughput::{calibrate_throughput, Throughput};
 use pipewave::batch::CalibrateOptions;
 use pipewave::db;
-use pipewave::network::{read_truth, recovery, TRUTH_CSV};
+use pipewave::synth::network::{read_truth, recovery, TRUTH_CSV};
 
 use super::calibrate::{self, RunArgs};
 use super::run::{import_dir, DEFAULT_DB};

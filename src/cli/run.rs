@@ -11,7 +11,7 @@ use clap::Args;
 use pipewave::batch::CalibrateOptions;
 use pipewave::db::{self, Database, ImportOptions, ImportSource};
 use pipewave::export::{self, ExportFormat};
-use pipewave::network::{MEASUREMENTS_CSV, SEGMENTS_CSV};
+use pipewave::synth::network::{MEASUREMENTS_CSV, SEGMENTS_CSV};
 
 use super::calibrate::{self, RunArgs};
 use super::Outcome;

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::Args;
-use pipewave::network::{published, NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV, TRUTH_CSV};
+use pipewave::synth::network::{
+    published, NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV, TRUTH_CSV,
+};
 use pipewave::synth::{generate, SynthOptions, NOISE_ATTENUATION, NOISE_K_RE};
 
 use super::Outcome;

@@ -208,7 +208,7 @@ pub struct Summary {
 }
 
 fn median(v: Vec<f64>) -> f64 {
-    crate::network::recovery::Spread::of(&v).median
+    crate::synth::network::recovery::Spread::of(&v).median
 }
 
 /// Summarise `checks`.

@@ -440,7 +440,7 @@ pub fn calibrated_database(
     opts: &SynthOptions,
     jobs: usize,
 ) -> Result<crate::db::Database, String> {
-    use crate::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
+    use crate::synth::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
     NetworkTables::from_synth(network, opts.srid)
         .write_dir(dir)
         .map_err(|e| e.to_string())?;

@@ -2,7 +2,7 @@
 //! recordings of the metal pipes ([`super::synth::record_network_segments`]) → their WAV files
 //! and layout → `pipewave wavenumbers` ([`super::analyse_segment`], [`write_measurements`]) →
 //! `import` and `calibrate` → the fitted soil's compressional speed c_P against the truth
-//! ([`crate::network::recovery::compare`]).
+//! ([`crate::synth::network::recovery::compare`]).
 //!
 //! The recordings are those of `synth --recordings`: the seed layout with sensors at
 //! [`super::synth::sensor_range_m`] (20–80 m on metals), sensor noise
@@ -23,10 +23,10 @@ use super::synth::{record_network_segments, write_recordings, TruthCurve, LAYOUT
 use super::{analyse_segment, read_layout, write_measurements, BandEstimate, EstimateOptions};
 use crate::batch::{calibrate, CalibrateOptions};
 use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource, SegmentRecord};
-use crate::network::recovery::{compare, RecoveryReport};
-use crate::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
 use crate::physics::Material;
 use crate::stats::normal;
+use crate::synth::network::recovery::{compare, RecoveryReport};
+use crate::synth::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
 use crate::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -76,7 +76,7 @@ pub fn optimum(r: &FitResult) -> Vec<f64> {
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
-    crate::network::recovery::quantile(&v, 0.5)
+    crate::synth::network::recovery::quantile(&v, 0.5)
 }
 
 /// The zoned network of `zones × per_zone` segments that [`run`] and [`network_bounds`] use:

@@ -17,13 +17,14 @@ use crate::physics::Material;
 use crate::units::db_to_np;
 
 /// The paper's Table 2, as in `tests/data/published/seed_cast_iron_table2.csv`.
-pub const LU2022_CSV: &str = include_str!("../../tests/data/published/seed_cast_iron_table2.csv");
+pub const LU2022_CSV: &str =
+    include_str!("../../../tests/data/published/seed_cast_iron_table2.csv");
 /// The Muggleton et al. (2004) series, as in
 /// `tests/data/published/muggleton2004_buried_mdpe.csv`.
 pub const MUGGLETON2004_CSV: &str =
-    include_str!("../../tests/data/published/muggleton2004_buried_mdpe.csv");
+    include_str!("../../../tests/data/published/muggleton2004_buried_mdpe.csv");
 /// The README describing both files.
-pub const README_MD: &str = include_str!("../../tests/data/published/README.md");
+pub const README_MD: &str = include_str!("../../../tests/data/published/README.md");
 
 /// Segment id of the cast-iron main of Lu et al. (2022).
 pub const LU2022_ID: &str = "LU2022-CI-DN125";
