@@ -9,10 +9,10 @@
 //! `cargo run --release --example zones_acceptance -- --bound-only FROM TO [ZONES PER_ZONE]`:
 //! only the efficient-estimator line, for the networks of seeds FROM..=TO (not fitted).
 
-use pipewave::zones::bound::{pooled_error_quantile, sample_quantile_distribution};
-use pipewave::zones::synthetic::{
+use pipewave::synth::zones::{
     estimate, network_bounds, run, zone_bound_at_truth, ZoneCheck, ZonedRun,
 };
+use pipewave::zones::bound::{pooled_error_quantile, sample_quantile_distribution};
 use pipewave::zones::{TAU_E_DECADES, TAU_NU};
 
 fn quantile(v: &[f64], p: f64) -> f64 {
@@ -203,7 +203,7 @@ fn bound_only(args: &[u64]) {
 }
 
 /// Members of the zones whose E_m is off by more than 20 % (set ZONES_DEBUG=1).
-pub fn debug(r: &pipewave::zones::synthetic::ZonedRun) {
+pub fn debug(r: &pipewave::synth::zones::ZonedRun) {
     use pipewave::invert::uncertainty::soil_speeds;
     for z in r.zones.iter().filter(|z| z.modulus_error() > 0.2) {
         println!("zone {}:", z.zone);
@@ -216,7 +216,7 @@ pub fn debug(r: &pipewave::zones::synthetic::ZonedRun) {
                 contact_mode: f.contact_mode,
                 effects: f.effects.clone(),
             };
-            let x = pipewave::zones::synthetic::optimum(f);
+            let x = pipewave::synth::zones::optimum(f);
             let rstd = [
                 f.p_wave_speed.map(|w| w.relative()),
                 f.s_wave_speed.map(|w| w.relative()),

@@ -6,7 +6,7 @@
 
 use std::sync::OnceLock;
 
-use pipewave::zones::synthetic::{estimate, run, ZoneCheck, ZonedRun};
+use pipewave::synth::zones::{estimate, run, ZoneCheck, ZonedRun};
 use pipewave::zones::OUTLIER_CHI2;
 
 /// A seed never used while developing the zone estimate.
@@ -335,9 +335,9 @@ fn calibrate_estimates_stores_and_exports_zones() {
 #[test]
 fn member_fisher_information_is_the_curvature_of_the_misfit_profiled_over_xi() {
     use pipewave::invert::{FitSettings, Measurement, Method, Problem};
+    use pipewave::synth::zones::default_setup;
     use pipewave::synth::{generate, SynthOptions};
     use pipewave::zones::bound::member_fisher;
-    use pipewave::zones::synthetic::default_setup;
 
     let network = generate(&SynthOptions {
         segments: 40,

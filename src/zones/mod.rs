@@ -15,7 +15,6 @@ pub mod flags;
 pub mod member;
 pub mod model;
 pub mod run;
-pub mod synthetic;
 
 pub use flags::{segment_flag, OutlierEvidence, ZoneFlag};
 pub use member::{member_from_fit, FitSetup};

@@ -10,8 +10,8 @@ use crate::invert::{fit_segment, FitResult, FitSettings, Param};
 use crate::synth::{generate, Defect, SynthOptions, SynthSegment};
 use crate::types::FitStatus;
 
-use super::bound::{member_fisher, zone_bound, ZoneBound};
-use super::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
+use crate::zones::bound::{member_fisher, zone_bound, ZoneBound};
+use crate::zones::{estimate_member_zones, members_by_zone, FitSetup, FittedSegment, ZoneEstimate};
 
 /// One zone's estimate against its truth.
 #[derive(Debug, Clone)]
@@ -54,7 +54,7 @@ pub struct ZonedRun {
     pub fit_seconds: f64,
     /// Wall-clock time of the zone estimation (members' models and zones), s.
     pub zone_seconds: f64,
-    /// Of which the members' misfit models ([`super::member_from_fit`]), s.
+    /// Of which the members' misfit models ([`crate::zones::member_from_fit`]), s.
     pub member_seconds: f64,
 }
 
@@ -197,7 +197,7 @@ pub fn estimate(
     }
 }
 
-/// The Cramér–Rao bound of a zone ([`super::bound`]) for its members' pipes, frequency plans and
+/// The Cramér–Rao bound of a zone ([`crate::zones::bound`]) for its members' pipes, frequency plans and
 /// noise, at their true soils and ξ, with the zone's scatter `tau` (τ_E decades, τ_ν) of P67.
 /// Members whose information cannot be evaluated at their truth (or that carry a hidden effect
 /// the fit does not model) are left out and counted in the second value.
