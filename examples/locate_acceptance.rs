@@ -23,8 +23,8 @@ use pipewave::locate::synth::{
     true_curve, true_delay, LeakSpec, DEFAULT_LEAK_NOISE_FRACTION, DEFAULT_LEAK_SAMPLE_RATE,
 };
 use pipewave::locate::{DelayInput, LocateOptions, Located, Locator, DEFAULT_BAND_HZ};
-use pipewave::recordings::synth::{headroom_gain, write_wav, TruthCurve, WavFormat};
 use pipewave::stats::normal;
+use pipewave::synth::recordings::{headroom_gain, write_wav, TruthCurve, WavFormat};
 use pipewave::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

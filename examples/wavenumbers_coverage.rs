@@ -12,9 +12,9 @@
 
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Soil, System};
 use pipewave::recordings::estimate::analyse_audio;
-use pipewave::recordings::synth::{hydrant_test, seed_layout, sensor_range_m, RecordingSpec};
 use pipewave::recordings::wav::SegmentAudio;
 use pipewave::recordings::{EstimateOptions, SegmentLayout};
+use pipewave::synth::recordings::{hydrant_test, seed_layout, sensor_range_m, RecordingSpec};
 use rand::{Rng, SeedableRng};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -11,10 +11,10 @@
 use std::time::Instant;
 
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Soil, System};
-use pipewave::recordings::synth::{
+use pipewave::recordings::{analyse_segment, read_layout, EstimateOptions};
+use pipewave::synth::recordings::{
     headroom_gain, hydrant_test, write_wav, RecordingSpec, WavFormat,
 };
-use pipewave::recordings::{analyse_segment, read_layout, EstimateOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     if cfg!(debug_assertions) {

@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 
 pub mod field;
 pub mod network;
+pub mod recordings;
 pub mod zones;
 
 use crate::invert::fit::leak_band_speed_of;

@@ -14,8 +14,8 @@ use pipewave::locate::synth::{
 };
 use pipewave::locate::{DelayInput, LocateOptions, Locator, DEFAULT_BAND_HZ};
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
-use pipewave::recordings::synth::{headroom_gain, write_wav, WavFormat};
 use pipewave::stats::normal;
+use pipewave::synth::recordings::{headroom_gain, write_wav, WavFormat};
 use pipewave::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -438,7 +438,7 @@ fn geojson_with_a_bom_imports_and_an_empty_collection_says_so() {
 mod wav {
     use super::*;
     use pipewave::physics::{ContactMode, Fluid, Material, Model, Soil, System};
-    use pipewave::recordings::synth::{hydrant_test, write_wav, RecordingSpec, WavFormat};
+    use pipewave::synth::recordings::{hydrant_test, write_wav, RecordingSpec, WavFormat};
 
     /// Three channels of a 10 s hydrant test on a ductile-iron pipe, sensors at 0, -25, +40 m.
     pub fn recording() -> Vec<Vec<f64>> {
@@ -465,7 +465,7 @@ mod wav {
     }
 
     pub fn write(dir: &Path, name: &str, channels: &[&[f64]], format: WavFormat) {
-        let gain = pipewave::recordings::synth::headroom_gain(
+        let gain = pipewave::synth::recordings::headroom_gain(
             &channels.iter().map(|c| c.to_vec()).collect::<Vec<_>>(),
         );
         write_wav(&dir.join(name), 8000, channels, format, gain).unwrap();
@@ -518,7 +518,7 @@ fn a_wav_header_overstating_its_length_fails_only_its_own_segment() {
         dir.path(),
         "good.wav",
         &ch,
-        pipewave::recordings::synth::WavFormat::Pcm16,
+        pipewave::synth::recordings::WavFormat::Pcm16,
     );
     // 8-bit mono files whose headers claim 4 GB of samples, holding 4000.
     let liar = wav::bytes(8000, 8, false, 0xFFFF_FFF0, &[128u8; 4000]);
@@ -565,7 +565,7 @@ fn a_wav_at_rate_0_nan_samples_and_files_of_different_lengths_are_named() {
         dir.path(),
         "good.wav",
         &ch,
-        pipewave::recordings::synth::WavFormat::Float32,
+        pipewave::synth::recordings::WavFormat::Float32,
     );
     let (out, _) = wav::run(dir.path(), wav::GOOD);
     assert_code(&out, 1);
@@ -577,7 +577,7 @@ fn a_wav_at_rate_0_nan_samples_and_files_of_different_lengths_are_named() {
     assert!(err.contains("the first at 2.50 s"), "{err}");
 
     // One file 10 s long, the two others 8 s.
-    let f = pipewave::recordings::synth::WavFormat::Pcm16;
+    let f = pipewave::synth::recordings::WavFormat::Pcm16;
     wav::write(dir.path(), "a.wav", &[&rec[0][..]], f);
     wav::write(dir.path(), "b.wav", &[&rec[1][..64_000]], f);
     wav::write(dir.path(), "c.wav", &[&rec[2][..64_000]], f);

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Soil, System};
-use pipewave::recordings::synth::{
+use pipewave::synth::recordings::{
     hydrant_test, seed_layout, sensor_range_m, write_wav, HydrantRecording, RecordingSpec,
     TruthCurve, WavFormat,
 };
@@ -87,7 +87,7 @@ fn wav(dir: &Path, name: &str, rec: &HydrantRecording, format: WavFormat, gain: 
 }
 
 fn gain(rec: &HydrantRecording) -> f64 {
-    pipewave::recordings::synth::headroom_gain(&rec.channels)
+    pipewave::synth::recordings::headroom_gain(&rec.channels)
 }
 
 /// A measurements row read back.

@@ -65,7 +65,7 @@ pub struct SynthArgs {
     recordings_only: bool,
     /// Length of each recording, s.
     #[arg(long, value_name = "S", requires = "recordings",
-          default_value_t = pipewave::recordings::synth::DEFAULT_SECONDS,
+          default_value_t = pipewave::synth::recordings::DEFAULT_SECONDS,
           value_parser = recording_seconds)]
     recording_seconds: f64,
     /// Split the synthetic segments into N soil zones (contiguous blocks of streets), each one
@@ -112,7 +112,7 @@ fn recording_seconds(s: &str) -> Result<f64, String> {
         .trim()
         .parse()
         .map_err(|_| format!("'{s}' is not a number of seconds"))?;
-    pipewave::recordings::synth::check_recording_seconds(v)
+    pipewave::synth::recordings::check_recording_seconds(v)
 }
 
 /// Generate and write the network.
@@ -232,7 +232,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
     }
     if let Some(ids) = &args.recordings {
         let ids: Vec<String> = ids.split(',').map(|s| s.trim().to_string()).collect();
-        let rec = pipewave::recordings::synth::record_network_segments(
+        let rec = pipewave::synth::recordings::record_network_segments(
             &synthetic,
             &opts,
             &ids,
@@ -240,7 +240,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         )
         .map_err(anyhow::Error::msg)?;
         let dir = args.out.join("recordings");
-        pipewave::recordings::synth::write_recordings(&dir, &rec)
+        pipewave::synth::recordings::write_recordings(&dir, &rec)
             .with_context(|| format!("cannot write the recordings in {}", dir.display()))?;
         println!(
             "synth: wrote recordings of {} segments to {}",

@@ -20,11 +20,11 @@ use super::network::{NetSegment, Network, SensorAt, SensorPath};
 use crate::db::results::CurvePoint;
 use crate::db::wkt::LineString;
 use crate::recordings::estimate::MAX_FREQUENCY_FRACTION;
-use crate::recordings::synth::{
+use crate::stats::normal;
+use crate::synth::recordings::{
     headroom_gain, source_amplitude, system_of, truth_curve, write_wav, TruthCurve, WavFormat,
     RING_FRACTION, SOURCE_HI_HZ,
 };
-use crate::stats::normal;
 use crate::synth::{SynthOptions, SynthSegment};
 use crate::units::np_to_db;
 

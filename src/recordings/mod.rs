@@ -11,7 +11,8 @@
 //! * [`estimate`]: transfer functions (eq. P73, the three-channel estimator P77), the phase
 //!   unwrapped from low frequency, Re k1 and the attenuation per band (P74) with standard errors
 //!   from the coherence (P75–P76), combined over bins, sensor pairs and the two sides;
-//! * [`synth`]: synthetic recordings from the forward model, with their truth;
+//! * [`synth::recordings`](crate::synth::recordings): synthetic recordings from the forward
+//!   model, with their truth;
 //! * [`recovery`]: the whole chain on a synthetic network (recordings → wavenumbers → calibrate),
 //!   judged by the fitted c_P against the truth.
 
@@ -19,7 +20,6 @@ pub mod estimate;
 pub mod layout;
 pub mod recovery;
 pub mod spectra;
-pub mod synth;
 pub mod wav;
 
 use std::path::{Path, PathBuf};

@@ -1,12 +1,12 @@
 //! The whole field chain on a synthetic network, judged against its truth: hydrant-test
-//! recordings of the metal pipes ([`super::synth::record_network_segments`]) → their WAV files
+//! recordings of the metal pipes ([`crate::synth::recordings::record_network_segments`]) → their WAV files
 //! and layout → `pipewave wavenumbers` ([`super::analyse_segment`], [`write_measurements`]) →
 //! `import` and `calibrate` → the fitted soil's compressional speed c_P against the truth
 //! ([`crate::synth::network::recovery::compare`]).
 //!
 //! The recordings are those of `synth --recordings`: the seed layout with sensors at
-//! [`super::synth::sensor_range_m`] (20–80 m on metals), sensor noise
-//! [`super::synth::DEFAULT_NOISE_FRACTION`] of the source channel, 8 kHz.
+//! [`crate::synth::recordings::sensor_range_m`] (20–80 m on metals), sensor noise
+//! [`crate::synth::recordings::DEFAULT_NOISE_FRACTION`] of the source channel, 8 kHz.
 //!
 //! With [`Feed::Recordings`] the fit sees only what a user would give it: the inventory
 //! (`segments.csv`) and the measurements written by the wavenumbers step; the truth is read
@@ -19,7 +19,6 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use super::synth::{record_network_segments, write_recordings, TruthCurve, LAYOUT_CSV};
 use super::{analyse_segment, read_layout, write_measurements, BandEstimate, EstimateOptions};
 use crate::batch::{calibrate, CalibrateOptions};
 use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource, SegmentRecord};
@@ -27,6 +26,7 @@ use crate::physics::Material;
 use crate::stats::normal;
 use crate::synth::network::recovery::{compare, RecoveryReport};
 use crate::synth::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
+use crate::synth::recordings::{record_network_segments, write_recordings, TruthCurve, LAYOUT_CSV};
 use crate::synth::{generate, SynthOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

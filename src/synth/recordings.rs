@@ -15,9 +15,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use realfft::RealFftPlanner;
 
-use super::estimate::MAX_FREQUENCY_FRACTION;
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::System;
+use crate::recordings::estimate::MAX_FREQUENCY_FRACTION;
 use crate::stats::normal;
 use crate::units::hz_to_omega;
 
@@ -330,7 +330,7 @@ pub fn write_recordings(dir: &Path, segments: &[RecordedSegment]) -> std::io::Re
     std::fs::create_dir_all(dir)?;
     let io = |e: &dyn std::fmt::Display| std::io::Error::other(e.to_string());
     let mut layout = csv::Writer::from_path(dir.join(LAYOUT_CSV))?;
-    layout.write_record(super::layout::LAYOUT_COLUMNS)?;
+    layout.write_record(crate::recordings::layout::LAYOUT_COLUMNS)?;
     let mut truth = csv::Writer::from_path(dir.join(TRUTH_WAVENUMBERS_CSV))?;
     truth.write_record([
         "segment_id",
@@ -390,9 +390,9 @@ pub const DEFAULT_SECONDS: f64 = 15.0;
 pub const MAX_RECORDING_S: f64 = 600.0;
 
 /// A recording length for `synth --recording-seconds`: a finite number of seconds from what
-/// `wavenumbers` needs ([`super::estimate::MIN_RECORDING_S`]) to [`MAX_RECORDING_S`].
+/// `wavenumbers` needs ([`crate::recordings::estimate::MIN_RECORDING_S`]) to [`MAX_RECORDING_S`].
 pub fn check_recording_seconds(seconds: f64) -> Result<f64, String> {
-    let lo = super::estimate::MIN_RECORDING_S;
+    let lo = crate::recordings::estimate::MIN_RECORDING_S;
     if seconds.is_finite() && (lo..=MAX_RECORDING_S).contains(&seconds) {
         Ok(seconds)
     } else {
