@@ -1,7 +1,7 @@
 //! Issue 15's last acceptance item on a synthetic network: hydrant-test recordings of its metal
 //! pipes (CI, DI, ST; the seed layout with sensors 20–80 m from the source, sensor noise 30 % of
 //! the source channel, 8 kHz) → `wavenumbers` → `import` + `calibrate` → the fitted soil's
-//! compressional speed c_P against the truth ([`pipewave::recordings::recovery`]). The fit sees
+//! compressional speed c_P against the truth ([`pipewave::synth::recordings::recovery`]). The fit sees
 //! only the inventory and the measurements.
 //!
 //!     cargo run --release --example wavenumbers_calibration -- [SEED] [METAL_PIPES] [SECONDS] [JOBS] [FEED] [-v]
@@ -15,7 +15,7 @@
 //! Seed 20261122 was used to find and fix the attenuation bias of the bin weights (README);
 //! the figures quoted in the README are from seed 151122, run once after the fix.
 
-use pipewave::recordings::recovery::{run_chain, ChainSpec, Feed};
+use pipewave::synth::recordings::recovery::{run_chain, ChainSpec, Feed};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

@@ -685,7 +685,7 @@ const CHAIN_SEED: u64 = 0x150c_2026;
 /// the inventory and the measurements the recordings produced.
 #[test]
 fn recorded_metal_pipes_calibrate_and_give_c_p_within_its_errors() {
-    use pipewave::recordings::recovery::{run_chain, ChainSpec, Feed};
+    use pipewave::synth::recordings::recovery::{run_chain, ChainSpec, Feed};
     let tmp = tempfile::tempdir().unwrap();
     let spec = ChainSpec {
         seed: CHAIN_SEED,

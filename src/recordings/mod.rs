@@ -13,12 +13,12 @@
 //!   from the coherence (P75–P76), combined over bins, sensor pairs and the two sides;
 //! * [`synth::recordings`](crate::synth::recordings): synthetic recordings from the forward
 //!   model, with their truth;
-//! * [`recovery`]: the whole chain on a synthetic network (recordings → wavenumbers → calibrate),
-//!   judged by the fitted c_P against the truth.
+//! * [`synth::recordings::recovery`](crate::synth::recordings::recovery): the whole chain on a
+//!   synthetic network (recordings → wavenumbers → calibrate), judged by the fitted c_P against
+//!   the truth.
 
 pub mod estimate;
 pub mod layout;
-pub mod recovery;
 pub mod spectra;
 pub mod wav;
 

@@ -8,6 +8,8 @@
 //! stationary sample), plus its own independent white noise whose RMS is a fraction of the
 //! source channel's.
 
+pub mod recovery;
+
 use std::path::Path;
 
 use num_complex::Complex64;

@@ -1,6 +1,7 @@
 //! The whole field chain on a synthetic network, judged against its truth: hydrant-test
-//! recordings of the metal pipes ([`crate::synth::recordings::record_network_segments`]) → their WAV files
-//! and layout → `pipewave wavenumbers` ([`super::analyse_segment`], [`write_measurements`]) →
+//! recordings of the metal pipes ([`super::record_network_segments`]) → their WAV files
+//! and layout → `pipewave wavenumbers` ([`crate::recordings::analyse_segment`],
+//! [`write_measurements`]) →
 //! `import` and `calibrate` → the fitted soil's compressional speed c_P against the truth
 //! ([`crate::synth::network::recovery::compare`]).
 //!
@@ -19,10 +20,12 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use super::{analyse_segment, read_layout, write_measurements, BandEstimate, EstimateOptions};
 use crate::batch::{calibrate, CalibrateOptions};
 use crate::db::{self, Database, FitRow, FitStatus, ImportOptions, ImportSource, SegmentRecord};
 use crate::physics::Material;
+use crate::recordings::{
+    analyse_segment, read_layout, write_measurements, BandEstimate, EstimateOptions,
+};
 use crate::stats::normal;
 use crate::synth::network::recovery::{compare, RecoveryReport};
 use crate::synth::network::{NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV};
