@@ -13,10 +13,10 @@
 //! (default 0) offsets every trial's seed: tune on one base, report on another.
 
 use pipewave::diagnose::group::{member_scores, pooled_score_test};
-use pipewave::diagnose::trial::{effect_trial, record_error_trial, RecordError};
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::{effect_trial, record_error_trial, RecordError};
 use pipewave::synth::{default_hidden_range, MATERIAL_MIX};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

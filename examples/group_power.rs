@@ -31,11 +31,11 @@
 
 use pipewave::diagnose::group::{member_scores, pooled_test};
 use pipewave::diagnose::stats::sum_chibar_sf;
-use pipewave::diagnose::trial::effect_trial;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::stats::normal;
+use pipewave::synth::trial::effect_trial;
 use pipewave::synth::MATERIAL_MIX;
 use rand::Rng;
 use rand::SeedableRng;

@@ -7,11 +7,11 @@
 
 use std::time::Instant;
 
-use pipewave::diagnose::trial::effect_trial;
 use pipewave::invert::{fit_extended, fit_segment, FitSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::synth::default_hidden_range;
+use pipewave::synth::trial::effect_trial;
 use pipewave::types::FitStatus;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -18,11 +18,11 @@ use pipewave::diagnose::inventory::{
     candidates, InventoryPipe, InventoryProfile, RecordCandidate, RecordChange,
 };
 use pipewave::diagnose::stats::chi2_isf;
-use pipewave::diagnose::trial::trial;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, ALPHA};
 use pipewave::invert::fit_segment;
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::trial;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;

@@ -11,6 +11,7 @@ use rand_chacha::ChaCha8Rng;
 pub mod field;
 pub mod network;
 pub mod recordings;
+pub mod trial;
 pub mod zones;
 
 use crate::invert::fit::leak_band_speed_of;

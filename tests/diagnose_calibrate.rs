@@ -6,9 +6,9 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::{Command, Output};
 
-use pipewave::diagnose::trial::{trial, Trial};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::{trial, Trial};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

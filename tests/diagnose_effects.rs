@@ -2,11 +2,11 @@
 //! the viscoelastic wall's exponent (model §8 E7) and wrong inventory records (§8 E8).
 
 use pipewave::diagnose::inventory::{fit_best_record_among, InventoryPipe, InventoryProfile};
-use pipewave::diagnose::trial::{effect_trial, record_error_trial, RecordError};
 use pipewave::diagnose::{diagnose_segment, prepare, DiagnoseSettings};
 use pipewave::invert::{fit_segment, FitSettings, Param};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::{effect_trial, record_error_trial, RecordError};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;

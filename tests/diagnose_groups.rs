@@ -5,10 +5,10 @@
 //! `cargo run --release --example diagnose_acceptance -- groups`.
 
 use pipewave::diagnose::group::{member_scores, pooled_score_test, GroupTest};
-use pipewave::diagnose::trial::effect_trial;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, Diagnosis};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::effect_trial;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;

@@ -9,11 +9,11 @@ use std::process::{Command, Output};
 
 use pipewave::diagnose::inventory::{InventoryPipe, InventoryProfile};
 use pipewave::diagnose::report::candidates_chi2;
-use pipewave::diagnose::trial::{effect_trial, trial};
 use pipewave::diagnose::units::{UnitMixUp, DB_PER_NEPER};
 use pipewave::diagnose::{diagnose_segment, prepare, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
+use pipewave::synth::trial::{effect_trial, trial};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;

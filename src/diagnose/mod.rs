@@ -24,7 +24,6 @@ pub mod inventory;
 pub mod report;
 pub mod run;
 pub mod stats;
-pub mod trial;
 pub mod units;
 
 use num_complex::Complex64;

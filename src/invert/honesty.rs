@@ -4,7 +4,7 @@
 //! speed and the soil speeds c_P, c_S.
 //!
 //! A trial is a pipe of the synthetic network's catalogue in a random soil of its classes,
-//! with an effect the fit does not model hidden in the data ([`crate::diagnose::trial`]), fitted
+//! with an effect the fit does not model hidden in the data ([`crate::synth::trial`]), fitted
 //! with the default settings, as a first nightly run fits it.
 
 use rand::{Rng, SeedableRng};
@@ -173,7 +173,7 @@ pub fn trials(
                     };
                     Some((e, v))
                 });
-                let Some(t) = crate::diagnose::trial::effect_trial(&mut rng, m, hidden) else {
+                let Some(t) = crate::synth::trial::effect_trial(&mut rng, m, hidden) else {
                     continue;
                 };
                 let fit = fit_segment(&t.data, settings, base + i);

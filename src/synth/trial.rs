@@ -9,7 +9,7 @@ use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 use crate::synth::{band_hz, measure, segment_data, sizes, PipeSize, SOILS};
 
-use super::inventory::MM_PER_INCH;
+use crate::diagnose::inventory::MM_PER_INCH;
 
 /// A kind of inventory error (model §8 E8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,7 +116,7 @@ pub fn record_error_trial<R: Rng + ?Sized>(rng: &mut R, kind: RecordError) -> Op
                 Material::DuctileIron
             };
             let s = sizes(m)[rng.gen_range(0..sizes(m).len())];
-            let walls: Vec<f64> = super::catalogue::sizes_of(m)
+            let walls: Vec<f64> = crate::diagnose::catalogue::sizes_of(m)
                 .filter(|(_, z)| {
                     (z.od_mm - s.od_mm).abs() < 0.5 && (z.wall_mm - s.wall_mm).abs() > 0.05
                 })
