@@ -13,9 +13,9 @@
 //!
 //! Run: `cargo run --release --example honest_errors -- [N] [BASE]` (default N = 60, BASE = 0).
 
-use pipewave::invert::honesty::{check_measured, summarize, trials, Summary, TrialCheck};
 use pipewave::invert::{fit_segment, FitSettings};
 use pipewave::physics::effects::Effect;
+use pipewave::synth::honesty::{check_measured, summarize, trials, Summary, TrialCheck};
 use pipewave::synth::network::published::{lu2022, muggleton2004};
 use pipewave::types::FitStatus;
 

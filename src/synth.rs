@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub mod field;
+pub mod honesty;
 pub mod network;
 pub mod recordings;
 pub mod trial;

@@ -7,9 +7,9 @@
 mod cli_run;
 use cli_run::run_ok;
 
-use pipewave::invert::honesty::{check_measured, summarize, trials, TrialCheck};
 use pipewave::invert::{fit_segment, CurveSource, FitSettings};
 use pipewave::physics::effects::Effect;
+use pipewave::synth::honesty::{check_measured, summarize, trials, TrialCheck};
 use pipewave::synth::network::published::{lu2022, muggleton2004};
 use pipewave::synth::network::NetworkTables;
 use pipewave::types::FitStatus;

@@ -17,7 +17,6 @@
 pub mod discrepancy;
 pub mod fit;
 pub mod flags;
-pub mod honesty;
 pub mod probes;
 pub mod problem;
 pub mod uncertainty;

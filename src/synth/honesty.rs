@@ -11,8 +11,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::fit::{fit_segment, leak_band_speed_of, CurveSource, FitResult, FitSettings};
-use super::uncertainty::WithError;
+use crate::invert::fit::{fit_segment, leak_band_speed_of, CurveSource, FitResult, FitSettings};
+use crate::invert::uncertainty::WithError;
 use crate::physics::curves::curve;
 use crate::physics::effects::Effect;
 use crate::physics::{Material, System};
@@ -95,7 +95,7 @@ pub fn curve_at(fit: &FitResult, f_hz: f64) -> Option<WithError> {
 /// Judge `fit` of the data measured on `truth`.
 pub fn check(
     fit: FitResult,
-    data: &super::SegmentData,
+    data: &crate::invert::SegmentData,
     truth: &System,
     hidden: Option<(Effect, f64)>,
     material: Material,
@@ -273,7 +273,7 @@ impl MeasuredCheck {
 }
 
 /// Judge `fit` against the data it was fitted to.
-pub fn check_measured(fit: &FitResult, data: &super::SegmentData) -> MeasuredCheck {
+pub fn check_measured(fit: &FitResult, data: &crate::invert::SegmentData) -> MeasuredCheck {
     let band = crate::physics::curves::LEAK_BAND_HZ;
     let mut points = Vec::new();
     let (mut in_band, mut var_in_band) = (Vec::new(), 0.0);
@@ -286,11 +286,10 @@ pub fn check_measured(fit: &FitResult, data: &super::SegmentData) -> MeasuredChe
         points.push((f, c, at));
         if (band.0..=band.1).contains(&f) {
             in_band.push(c);
-            let rel = m
-                .k_re_std
-                .map_or(super::discrepancy::ASSUMED_RELATIVE_SPEED_STD, |s| {
-                    s / m.k_re
-                });
+            let rel = m.k_re_std.map_or(
+                crate::invert::discrepancy::ASSUMED_RELATIVE_SPEED_STD,
+                |s| s / m.k_re,
+            );
             var_in_band += (c * rel).powi(2);
         }
     }
