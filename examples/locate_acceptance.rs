@@ -18,12 +18,12 @@ use std::time::Instant;
 
 use pipewave::locate::gcc::RecordingPair;
 use pipewave::locate::model::Weighting;
-use pipewave::locate::synth::{
+use pipewave::locate::{DelayInput, LocateOptions, Located, Locator, DEFAULT_BAND_HZ};
+use pipewave::stats::normal;
+use pipewave::synth::locate::{
     calibrated_database, case_job, draw_case, leak_recording, network_of, segment_truth,
     true_curve, true_delay, LeakSpec, DEFAULT_LEAK_NOISE_FRACTION, DEFAULT_LEAK_SAMPLE_RATE,
 };
-use pipewave::locate::{DelayInput, LocateOptions, Located, Locator, DEFAULT_BAND_HZ};
-use pipewave::stats::normal;
 use pipewave::synth::recordings::{headroom_gain, write_wav, TruthCurve, WavFormat};
 use pipewave::synth::{generate, SynthOptions};
 use rand::SeedableRng;

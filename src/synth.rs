@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 
 pub mod field;
 pub mod honesty;
+pub mod locate;
 pub mod network;
 pub mod recordings;
 pub mod trial;

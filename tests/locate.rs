@@ -8,13 +8,13 @@ use std::process::{Command, Output};
 
 use pipewave::db::Database;
 use pipewave::locate::gcc::RecordingPair;
-use pipewave::locate::synth::{
-    calibrated_database, case_job, draw_case, leak_recording, network_of, segment_truth,
-    true_delay, LeakCase, LeakSpec,
-};
 use pipewave::locate::{DelayInput, LocateOptions, Locator, DEFAULT_BAND_HZ};
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 use pipewave::stats::normal;
+use pipewave::synth::locate::{
+    calibrated_database, case_job, draw_case, leak_recording, network_of, segment_truth,
+    true_delay, LeakCase, LeakSpec,
+};
 use pipewave::synth::recordings::{headroom_gain, write_wav, WavFormat};
 use pipewave::synth::{generate, SynthOptions};
 use rand::SeedableRng;

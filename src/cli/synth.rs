@@ -79,7 +79,7 @@ pub struct SynthArgs {
     leaks: Option<u32>,
     /// Length of each leak recording, s.
     #[arg(long, value_name = "S", requires = "leaks",
-          default_value_t = pipewave::locate::synth::DEFAULT_LEAK_SECONDS)]
+          default_value_t = pipewave::synth::locate::DEFAULT_LEAK_SECONDS)]
     leak_seconds: f64,
     /// Geological units: split the map into N contiguous units (a Voronoi partition), from
     /// soft to stiff ground, each with a soil that varies smoothly inside it (a Gaussian field
@@ -217,7 +217,7 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
     let synthetic = generate(&opts);
     if let Some(n) = args.leaks {
         let dir = args.out.join("leaks");
-        let written = pipewave::locate::synth::write_leaks(
+        let written = pipewave::synth::locate::write_leaks(
             &dir,
             &synthetic,
             &opts,

@@ -4,7 +4,8 @@
 //! * [`model`]: the predicted delay T(x) from each segment's curve over the correlation band
 //!   (P85), its inversion and the error budget (P86), and the table-speed position (P45);
 //! * [`gcc`]: the delay from two recordings (generalised cross-correlation, P87);
-//! * [`synth`]: synthetic leak recordings from the segments' true soil and contact;
+//! * [`synth::locate`](crate::synth::locate): synthetic leak recordings from the segments' true
+//!   soil and contact;
 //! * [`jobs`]: the batch file, and the CSV, GeoJSON and GeoPackage outputs.
 //!
 //! [`Locator`] ties them to a database: it reads the network once and each segment's curve
@@ -14,7 +15,6 @@ pub mod gcc;
 pub mod jobs;
 pub mod model;
 pub mod network;
-pub mod synth;
 
 use std::collections::HashMap;
 use std::path::PathBuf;

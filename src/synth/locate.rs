@@ -14,11 +14,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use realfft::RealFftPlanner;
 
-use super::gcc::Recording;
-use super::model::SpeedCurve;
-use super::network::{NetSegment, Network, SensorAt, SensorPath};
 use crate::db::results::CurvePoint;
 use crate::db::wkt::LineString;
+use crate::locate::gcc::Recording;
+use crate::locate::model::SpeedCurve;
+use crate::locate::network::{NetSegment, Network, SensorAt, SensorPath};
 use crate::recordings::estimate::MAX_FREQUENCY_FRACTION;
 use crate::stats::normal;
 use crate::synth::recordings::{
@@ -171,7 +171,7 @@ pub fn network_of(segments: &[SynthSegment], opts: &SynthOptions) -> Network {
             })
             .collect(),
         Some(opts.srid as i64),
-        super::network::DEFAULT_JOIN_TOLERANCE_M,
+        crate::locate::network::DEFAULT_JOIN_TOLERANCE_M,
     )
 }
 
@@ -371,13 +371,13 @@ pub fn case_job(
     net: &Network,
     case: &LeakCase,
     id: String,
-    delay: super::DelayInput,
-) -> super::Job {
-    let on = |s: SensorAt| super::network::SensorSpec::OnSegment {
+    delay: crate::locate::DelayInput,
+) -> crate::locate::Job {
+    let on = |s: SensorAt| crate::locate::network::SensorSpec::OnSegment {
         segment_id: net.segments[s.segment].id.clone(),
         chainage_m: s.chainage_m,
     };
-    super::Job {
+    crate::locate::Job {
         id,
         source: std::path::PathBuf::from(LEAK_JOBS_CSV),
         line: 2,
@@ -403,7 +403,7 @@ pub fn true_delay(
     band_hz: (f64, f64),
     path_attenuation: bool,
 ) -> Option<f64> {
-    use super::model::{band_grid, DelayModel, ModelPiece, MODEL_GRID_POINTS};
+    use crate::locate::model::{band_grid, DelayModel, ModelPiece, MODEL_GRID_POINTS};
     let curves: Vec<SpeedCurve> = case
         .segments
         .iter()
