@@ -1,7 +1,9 @@
 //! Benchmarks printed by `pipewave bench` (speed is measured here, never asserted in tests).
 //!
 //! Each figure is the median over several timed batches, single-threaded, in whatever profile
-//! the binary was built with (use `--release`).
+//! the binary was built with (use `--release`). [`throughput`] times a whole calibrate run.
+
+pub mod throughput;
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -20,7 +20,6 @@
 //! outcome is returned as a [`CalibrateSummary`].
 
 pub mod progress;
-pub mod throughput;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::fmt::Write as _;

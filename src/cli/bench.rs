@@ -9,8 +9,8 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use pipewave::batch::throughput::{calibrate_throughput, Throughput};
 use pipewave::batch::CalibrateOptions;
+use pipewave::bench::throughput::{calibrate_throughput, Throughput};
 use pipewave::db;
 use pipewave::synth::network::{read_truth, recovery, TRUTH_CSV};
 
@@ -39,7 +39,7 @@ pub struct BenchArgs {
     #[arg(long, value_name = "N", default_value_t = 200)]
     network: usize,
     /// Seed of that network and of --verify's (pass new values for fresh seeds).
-    #[arg(long, value_name = "S", default_value_t = pipewave::batch::throughput::BENCH_NETWORK_SEED)]
+    #[arg(long, value_name = "S", default_value_t = pipewave::bench::throughput::BENCH_NETWORK_SEED)]
     network_seed: u64,
     /// Material mix of that network: default (the synthetic network's) or plastic-heavy.
     #[arg(long, value_name = "MIX", default_value = "default")]

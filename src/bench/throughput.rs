@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
-use super::{calibrate, BatchError, CalibrateOptions, CalibrateSummary};
+use crate::batch::{calibrate, BatchError, CalibrateOptions, CalibrateSummary};
 use crate::db::{self, Database, DbError, ImportOptions, ImportSource};
 use crate::synth::network::NetworkTables;
 use crate::synth::{generate, SynthOptions};
