@@ -1,10 +1,10 @@
 //! When does the default DE reach its final basin? For each segment of a realistic network and
 //! each restart: the evaluation at which the best first came within 0.01 and 1 of the final
 //! DE best, and where the LM polish from the best at that point would end.
-use pipewave::bench::{bench_network, MaterialMix};
 use pipewave::invert::{Method, Problem};
 use pipewave::optimize::{Control, DeMethod, DifferentialEvolution, Progress};
 use pipewave::physics::{ContactMode, Model};
+use pipewave::synth::bench::{bench_network, MaterialMix};
 use rand::SeedableRng;
 
 fn main() {

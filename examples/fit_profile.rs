@@ -3,8 +3,9 @@
 //!
 //! Usage: fit_profile [SEGMENTS] [SEED] [default|plastic-heavy]
 
-use pipewave::bench::{bench_network, timed_fit, Distribution, MaterialMix};
+use pipewave::bench::{timed_fit, Distribution};
 use pipewave::invert::FitSettings;
+use pipewave::synth::bench::{bench_network, MaterialMix};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

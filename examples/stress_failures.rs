@@ -4,8 +4,9 @@
 //!
 //! Usage: stress_failures [SEGMENTS] [SEED] [JOBS] [v0_1]
 
-use pipewave::bench::{Algorithm, BenchSegment};
+use pipewave::bench::Algorithm;
 use pipewave::physics::effects::Effect;
+use pipewave::synth::bench::BenchSegment;
 use pipewave::synth::{generate, SynthOptions};
 use rayon::prelude::*;
 

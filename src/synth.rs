@@ -8,6 +8,7 @@ use num_complex::Complex64;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+pub mod bench;
 pub mod field;
 pub mod honesty;
 pub mod locate;

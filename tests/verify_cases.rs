@@ -3,7 +3,8 @@
 //! Each runs through `bench::verify` itself (the same exhaustive search, seeds and pass mark
 //! as the command): the test never sees a stored answer.
 
-use pipewave::bench::{bench_network, verify, MaterialMix, VerifyRow, VERIFY_DCHI2_MAX};
+use pipewave::bench::{verify, VerifyRow, VERIFY_DCHI2_MAX};
+use pipewave::synth::bench::{bench_network, MaterialMix};
 
 /// `bench --verify` on segment `id` of the 200-segment network of `seed` (default mix).
 fn verify_one(seed: u64, id: &str) -> VerifyRow {

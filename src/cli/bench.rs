@@ -43,7 +43,7 @@ pub struct BenchArgs {
     network_seed: u64,
     /// Material mix of that network: default (the synthetic network's) or plastic-heavy.
     #[arg(long, value_name = "MIX", default_value = "default")]
-    materials: pipewave::bench::MaterialMix,
+    materials: pipewave::synth::bench::MaterialMix,
     /// Compare the default fit with an exhaustive search on N segments of a realistic network
     /// and print the worst case.
     #[arg(long, value_name = "N")]
@@ -151,20 +151,23 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
         );
     }
     if let Some(n) = args.verify {
-        let net = pipewave::bench::bench_network(n, args.network_seed, args.materials);
+        let net = pipewave::synth::bench::bench_network(n, args.network_seed, args.materials);
         let rows = pipewave::bench::verify(&net, opts.worker_count());
         pipewave::bench::print_verify(&rows);
     }
     if args.calibrate.is_none() && args.recovery.is_none() && args.verify.is_none() {
         if args.network > 0 {
-            let net =
-                pipewave::bench::bench_network(args.network, args.network_seed, args.materials);
+            let net = pipewave::synth::bench::bench_network(
+                args.network,
+                args.network_seed,
+                args.materials,
+            );
             let (cur, old) = pipewave::bench::network_figures(&net);
             let label = format!(
                 "{} mix, seed {}",
                 match args.materials {
-                    pipewave::bench::MaterialMix::Default => "default",
-                    pipewave::bench::MaterialMix::PlasticHeavy => "plastic-heavy",
+                    pipewave::synth::bench::MaterialMix::Default => "default",
+                    pipewave::synth::bench::MaterialMix::PlasticHeavy => "plastic-heavy",
                 },
                 args.network_seed
             );

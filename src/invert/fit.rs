@@ -1671,7 +1671,7 @@ mod tests {
     /// far above the limit, and the fit is the first search's, evaluation for evaluation.
     #[test]
     fn a_high_misfit_is_searched_again_only_below_the_chi2_per_dof_limit() {
-        use crate::bench::{bench_network, MaterialMix};
+        use crate::synth::bench::{bench_network, MaterialMix};
         let seg = bench_network(200, 849214, MaterialMix::Default)
             .into_iter()
             .find(|s| s.id == "WM10098")

@@ -855,8 +855,8 @@ pub(super) fn off_cliff(pieces: &Pieces<'_, '_>, x: &[f64], rooted: bool) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{bench_network, MaterialMix};
     use crate::invert::FitSettings;
+    use crate::synth::bench::{bench_network, MaterialMix};
 
     /// The problem of the default fit.
     fn default_fit_problem(data: &crate::invert::SegmentData) -> Problem<'_> {

@@ -733,8 +733,8 @@ impl Problem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{bench_network, MaterialMix};
     use crate::invert::FitSettings;
+    use crate::synth::bench::{bench_network, MaterialMix};
 
     /// A search value (the DE's, roots to [`Tolerance::SEARCH`]) is the value to far below
     /// the DE's spread test (1e-2 in χ², 1e-3 relative): on 40 segments of each material mix
