@@ -1,28 +1,19 @@
 //! `pipewave calibrate`, `run` and `synth`, run as a user would: the real binary on temporary
 //! databases, with small synthetic networks (6-12 segments) made by `pipewave synth`.
 
+mod cli_run;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use cli_run::run_ok;
 use pipewave::db::{self, Database};
 use rusqlite::types::Value;
 use rusqlite::Connection;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_pipewave"))
-}
-
-fn run_ok(args: &[&str]) -> Output {
-    let out = bin().args(args).output().expect("run pipewave");
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed ({:?}):\nstdout: {}\nstderr: {}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 fn stdout(o: &Output) -> String {
@@ -67,7 +58,7 @@ fn import(db: &Path, net: &Path) {
     ]);
 }
 
-fn calibrate(db: &Path, extra: &[&str]) -> Output {
+fn calibrate(db: &Path, extra: &[&str]) -> String {
     let mut args = vec!["calibrate", "--db", s(db)];
     args.extend_from_slice(extra);
     run_ok(&args)
@@ -171,7 +162,7 @@ fn only_stale_segments_are_refitted() {
     let db = tmp.path().join("a.sqlite");
     import(&db, &net);
 
-    let first = stdout(&calibrate(&db, &["--jobs", "2"]));
+    let first = calibrate(&db, &["--jobs", "2"]);
     assert!(first.starts_with("calibrate: 8 fitted ("), "{first}");
     assert!(first.contains("0 failed), 0 up to date"), "{first}");
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 8);
@@ -185,7 +176,7 @@ fn only_stale_segments_are_refitted() {
     );
 
     // Nothing changed: nothing is refitted (but the run is recorded).
-    let second = stdout(&calibrate(&db, &[]));
+    let second = calibrate(&db, &[]);
     assert!(second.starts_with("calibrate: 0 fitted"), "{second}");
     assert!(second.contains("8 up to date"), "{second}");
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 8);
@@ -205,7 +196,7 @@ fn only_stale_segments_are_refitted() {
     lines[i] = cells.join(",");
     std::fs::write(&path, lines.join("\n") + "\n").unwrap();
     import(&db, &net);
-    let third = stdout(&calibrate(&db, &[]));
+    let third = calibrate(&db, &[]);
     assert!(third.starts_with("calibrate: 1 fitted"), "{third}");
     assert!(third.contains("7 up to date"), "{third}");
     let per = fits_per_segment(&db);
@@ -214,19 +205,19 @@ fn only_stale_segments_are_refitted() {
     }
 
     // --segment limits the run; with --force it refits a current segment.
-    let named = stdout(&calibrate(&db, &["--segment", "WM10001"]));
+    let named = calibrate(&db, &["--segment", "WM10001"]);
     assert!(named.starts_with("calibrate: 0 fitted"), "{named}");
     assert!(named.contains("1 up to date"), "{named}");
-    let named = stdout(&calibrate(&db, &["--segment", "WM10001", "--force"]));
+    let named = calibrate(&db, &["--segment", "WM10001", "--force"]);
     assert!(named.starts_with("calibrate: 1 fitted"), "{named}");
 
     // --force refits everything.
-    let forced = stdout(&calibrate(&db, &["--force"]));
+    let forced = calibrate(&db, &["--force"]);
     assert!(forced.starts_with("calibrate: 8 fitted"), "{forced}");
     assert_eq!(count(&db, "SELECT count(*) FROM fits"), 8 + 1 + 1 + 8);
 
     // Other settings make every fit stale; the same settings again refit nothing.
-    let seed_model = stdout(&calibrate(&db, &["--model", "seed"]));
+    let seed_model = calibrate(&db, &["--model", "seed"]);
     assert!(
         seed_model.starts_with("calibrate: 8 fitted"),
         "{seed_model}"
@@ -235,11 +226,11 @@ fn only_stale_segments_are_refitted() {
         count(&db, "SELECT count(*) FROM latest_fits WHERE model = 'seed'"),
         8
     );
-    let again = stdout(&calibrate(&db, &["--model", "seed", "--seed", "99"]));
+    let again = calibrate(&db, &["--model", "seed", "--seed", "99"]);
     assert!(again.starts_with("calibrate: 0 fitted"), "{again}");
 
     // Effects: their names and parameters are stored in their columns, the others stay NULL.
-    let effects = stdout(&calibrate(
+    let effects = calibrate(
         &db,
         &[
             "--segment",
@@ -247,7 +238,7 @@ fn only_stale_segments_are_refitted() {
             "--effects",
             "pipe_loss,soil_damping",
         ],
-    ));
+    );
     assert!(effects.starts_with("calibrate: 1 fitted"), "{effects}");
     assert_eq!(
         count(
@@ -458,7 +449,7 @@ fn ctrl_c_stops_the_run_marks_it_interrupted_and_keeps_its_fits() {
     );
     assert_eq!(count(&db, "SELECT count(*) FROM run_lock"), 0);
     // The next run fits the rest.
-    let rest = stdout(&calibrate(&db, &[]));
+    let rest = calibrate(&db, &[]);
     assert!(
         rest.starts_with(&format!("calibrate: {} fitted", 10 - stored)),
         "{rest}"
@@ -617,8 +608,7 @@ fn run_does_everything_once_and_nothing_the_second_time() {
         13
     );
 
-    let second = run_ok(&["run", s(&net)]);
-    let out = stdout(&second);
+    let out = run_ok(&["run", s(&net)]);
     assert!(
         out.contains("segments 0 new, 0 updated, 6 unchanged"),
         "{out}"
@@ -644,13 +634,13 @@ fn synth_writes_a_network_that_imports_cleanly() {
         "--defects",
         "0.5",
     ];
-    let out = stdout(&run_ok(&args));
+    let out = run_ok(&args);
     assert!(
         out.starts_with("synth: wrote 14 segments (12 synthetic, "),
         "{out}"
     );
     let db = tmp.path().join("a.sqlite");
-    let imported = stdout(&run_ok(&[
+    let imported = run_ok(&[
         "import",
         "--db",
         s(&db),
@@ -658,7 +648,7 @@ fn synth_writes_a_network_that_imports_cleanly() {
         s(&net.join("segments.csv")),
         "--measurements",
         s(&net.join("measurements.csv")),
-    ]));
+    ]);
     assert!(imported.contains("segments 14 new"), "{imported}");
     assert_eq!(
         count(

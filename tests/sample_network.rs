@@ -5,32 +5,17 @@
 //! release build, 35 s when they are shared (measured; see sample_network/README.md), well under
 //! the 2 minutes above which it would leave the default suite.
 
+mod cli_run;
 mod report_check;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
+use cli_run::run_ok;
 use pipewave::db::{self, Database};
 use pipewave::synth::network::{read_truth, recovery};
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pipewave"))
-}
-
 fn sample() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_network")
-}
-
-fn run_ok(args: &[&str]) -> Output {
-    let out = bin().args(args).output().expect("run pipewave");
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed ({:?}):\n{}\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 /// The network's files (without a database or outputs that a local run may have left).
@@ -86,7 +71,7 @@ fn sample_network_is_exactly_what_its_readme_command_makes() {
 fn sample_network_imports_cleanly() {
     let tmp = tempfile::tempdir().unwrap();
     let db = tmp.path().join("a.sqlite");
-    let out = run_ok(&[
+    let text = run_ok(&[
         "import",
         "--db",
         db.to_str().unwrap(),
@@ -95,7 +80,6 @@ fn sample_network_imports_cleanly() {
         "--measurements",
         sample().join("measurements.csv").to_str().unwrap(),
     ]);
-    let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("segments 202 new"), "{text}");
     let database = Database::open(&db).unwrap();
     let segs = db::load_segments(database.conn(), None).unwrap();
@@ -117,8 +101,7 @@ fn sample_network_recovery() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("net");
     copy_sample(&dir);
-    let out = run_ok(&["bench", "--recovery", dir.to_str().unwrap()]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = run_ok(&["bench", "--recovery", dir.to_str().unwrap()]);
     assert!(text.contains("calibrate: 202 fitted"), "{text}");
     assert!(
         text.contains("recovery: 200 synthetic segments, 200 fitted"),
