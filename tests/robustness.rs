@@ -58,6 +58,11 @@ impl Scratch {
         pipewave(&args)
     }
 
+    /// `pipewave import --db DB --segments SEGMENTS --measurements MEASUREMENTS`.
+    fn import(&self, segments: &str, measurements: &str) -> Output {
+        self.import_segments(segments, &["--measurements", measurements])
+    }
+
     fn conn(&self) -> Connection {
         Connection::open(&self.db).unwrap()
     }
@@ -225,15 +230,7 @@ fn measurements_the_fit_would_refuse_are_refused_at_import() {
           A,500,1,0.01,,1e308\n\
           A,600,1,0.01,,\n",
     );
-    let out = pipewave(&[
-        "import",
-        "--db",
-        s.db(),
-        "--segments",
-        &segs,
-        "--measurements",
-        &meas,
-    ]);
+    let out = s.import(&segs, &meas);
     assert_code(&out, 2);
     let err = text(&out.stderr);
     for (line, col) in [
@@ -622,24 +619,20 @@ fn synth_recording_seconds_must_be_a_length_wavenumbers_can_use() {
 
 // --- 5. export and audit --out on special files ------------------------------------------------
 
+/// A new database with the repository's `segments` and `measurements` files imported.
+fn imported_from(segments: &str, measurements: &str) -> Scratch {
+    let s = Scratch::new();
+    let (f, m) = (manifest(segments), manifest(measurements));
+    assert_code(&s.import(f.to_str().unwrap(), m.to_str().unwrap()), 0);
+    s
+}
+
 /// A database with the four fixture segments imported.
 fn imported() -> Scratch {
-    let s = Scratch::new();
-    let f = manifest("tests/data/import/segments.csv");
-    let m = manifest("tests/data/import/measurements.csv");
-    assert_code(
-        &pipewave(&[
-            "import",
-            "--db",
-            s.db(),
-            "--segments",
-            f.to_str().unwrap(),
-            "--measurements",
-            m.to_str().unwrap(),
-        ]),
-        0,
-    );
-    s
+    imported_from(
+        "tests/data/import/segments.csv",
+        "tests/data/import/measurements.csv",
+    )
 }
 
 #[test]
@@ -863,22 +856,10 @@ fn calibrate_and_signal(s: &Scratch, signal: i32, fits: i64) -> std::process::Ex
 }
 
 fn sample_network() -> Scratch {
-    let s = Scratch::new();
-    let seg = manifest("sample_network/segments.csv");
-    let meas = manifest("sample_network/measurements.csv");
-    assert_code(
-        &pipewave(&[
-            "import",
-            "--db",
-            s.db(),
-            "--segments",
-            seg.to_str().unwrap(),
-            "--measurements",
-            meas.to_str().unwrap(),
-        ]),
-        0,
-    );
-    s
+    imported_from(
+        "sample_network/segments.csv",
+        "sample_network/measurements.csv",
+    )
 }
 
 #[test]
