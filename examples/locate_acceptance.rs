@@ -12,7 +12,7 @@
 //!
 //! Run: `cargo run --release --example locate_acceptance -- [--cases 200] [--recordings 40]
 //! [--seed 11] [--segments 160] [--measured 0.15] [--units 3] [--plastic-band LO,HI]
-//! [--verbose]`
+//! [--independent-speeds] [--verbose]`
 //!
 //! On spans with a plastic segment it also splits the error: the position from the same noisy
 //! delay with the TRUE curves (the delay's share), the position from the noise-free delay with
@@ -130,6 +130,7 @@ fn main() {
     let plain = !std::env::args().any(|a| a == "--phat-given");
     let options = LocateOptions {
         span_std_fraction: 0.0,
+        joint_speeds: !std::env::args().any(|a| a == "--independent-speeds"),
         given_weighting: if plain {
             Weighting::Plain
         } else {

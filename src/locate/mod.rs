@@ -81,6 +81,9 @@ pub struct LocateOptions {
     pub snap_tolerance_m: f64,
     /// Relative error of the span's length.
     pub span_std_fraction: f64,
+    /// Combine the predicted segments' speed errors with their joint posterior through the soil
+    /// field (false: treat every segment's speed error as independent).
+    pub joint_speeds: bool,
 }
 
 impl Default for LocateOptions {
@@ -91,6 +94,7 @@ impl Default for LocateOptions {
             given_weighting: Weighting::Plain,
             snap_tolerance_m: network::DEFAULT_SNAP_TOLERANCE_M,
             span_std_fraction: DEFAULT_SPAN_STD_FRACTION,
+            joint_speeds: true,
         }
     }
 }
@@ -270,7 +274,7 @@ impl<'c> Locator<'c> {
         let predicted: Vec<usize> = (0..segs.len())
             .filter(|&c| sources[c] == CurveSource::Prediction)
             .collect();
-        if predicted.len() < 2 {
+        if predicted.len() < 2 || !self.options.joint_speeds {
             return Ok(None);
         }
         if self.joint.is_none() {
@@ -521,8 +525,8 @@ impl<'c> Locator<'c> {
                             .count()
                             > 1
                         {
-                            "speed errors treated as independent per segment (the soil field's \
-                             joint posterior could not be rebuilt for the predicted segments)"
+                            "speed errors treated as independent per segment (no joint posterior \
+                             of the predicted segments from the soil field)"
                         } else {
                             "speed errors independent per segment (each fitted speed's error is \
                              its own fit's)"
