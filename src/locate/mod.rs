@@ -497,7 +497,8 @@ impl<'c> Locator<'c> {
         let mut notes = Vec::new();
         if let Some(s) = pos.at_sensor {
             notes.push(format!(
-                "the delay is just beyond the span (within its error): leak put at sensor {s}"
+                "the delay is just beyond the span (within its error and the speeds'): leak put \
+                 at sensor {s}"
             ));
         }
         let correlation = self.speed_correlation(&segs, &sources)?;

@@ -452,8 +452,8 @@ pub struct Position {
     pub dt_dx: f64,
     /// The terms of the budget.
     pub terms: Vec<Term>,
-    /// Set when the delay lies just beyond what the span allows (within its error), so the leak
-    /// is put at that sensor.
+    /// Set when the delay lies just beyond what the span allows (within its error and the
+    /// speeds' and span's errors of that end), so the leak is put at that sensor.
     pub at_sensor: Option<u8>,
 }
 
@@ -519,10 +519,23 @@ pub fn solve(
 ) -> Result<Position, OutsideSpan> {
     let d = model.span_m();
     let (t0, t1) = (model.delay(0.0), model.delay(d));
-    // T decreases from sensor 1 to sensor 2; a delay outside by more than three of its own
-    // errors is not a leak between the sensors.
-    let slack = 3.0 * tau_std;
-    if tau > t0 + slack || tau < t1 - slack {
+    // T decreases from sensor 1 to sensor 2; a delay outside by more than three errors of the
+    // difference τ − T(end) is not a leak between the sensors. T(end)'s error is that of the
+    // speeds (each segment's term at that end, as P86 adds them) and of the span.
+    let end_std = |x: f64, t: f64| -> f64 {
+        let mut v = 0.0;
+        for &c in speed_terms {
+            v += (model.delay_with(x, Some(c), 0.0) - t).powi(2);
+        }
+        if span_std_m > 0.0 {
+            v += (model.delay_with(x, None, span_std_m) - t).powi(2);
+        }
+        v
+    };
+    let outside = |t_end: f64, x_end: f64| {
+        3.0 * (tau_std * tau_std + end_std(x_end, t_end)).sqrt() < (tau - t_end).abs()
+    };
+    if (tau > t0 && outside(t0, 0.0)) || (tau < t1 && outside(t1, d)) {
         return Err(OutsideSpan {
             t_at_sensor1: t0,
             t_at_sensor2: t1,
