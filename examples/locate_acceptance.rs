@@ -143,6 +143,7 @@ fn main() {
     let mut given = Vec::new();
     let mut failed = Vec::new();
     let mut split: Vec<Split> = Vec::new();
+    let mut joint_ratio: Vec<f64> = Vec::new();
     for c in 0..cases {
         let Some(case) = draw_case(&net, &mut rng, 4, 400.0, &|_| true) else {
             break;
@@ -166,6 +167,21 @@ fn main() {
                     case.segments.iter().any(|&s| plastic(s)),
                     ms,
                 );
+                if l.notes
+                    .iter()
+                    .any(|n| n.contains("correlated through the soil field"))
+                {
+                    let indep = l
+                        .budget
+                        .iter()
+                        .filter(|t| t.segment_id.is_some())
+                        .map(|t| t.shift_m * t.shift_m)
+                        .sum::<f64>()
+                        .sqrt();
+                    if indep > 0.0 {
+                        joint_ratio.push(l.speeds_std_m / indep);
+                    }
+                }
                 if o.plastic {
                     let exact = DelayInput::Given {
                         delay_s: tau_true,
@@ -254,6 +270,16 @@ fn main() {
         mp / mt
     );
     report_split(&split);
+    {
+        let n = joint_ratio.len();
+        let below = joint_ratio.iter().filter(|r| **r < 0.99).count();
+        let above = joint_ratio.iter().filter(|r| **r > 1.01).count();
+        println!(
+            "  joint speed errors: {n} cases with correlated predicted neighbours; speeds' σ_x \
+             joint/independent median {:.3} (below 0.99 on {below}, above 1.01 on {above})",
+            median(&mut joint_ratio)
+        );
+    }
     let mut ms: Vec<f64> = given.iter().map(|o| o.ms).collect();
     let max = ms.iter().copied().fold(0.0, f64::max);
     println!(
