@@ -406,7 +406,7 @@ mod tests {
         .cholesky()
         .unwrap();
         // The formula does not depend on the data: take it once.
-        let formula = joint_posterior(&field_of(members(&vec![[5.4, 4.7]; 8])), &targets);
+        let formula = joint_posterior(&field_of(members(&[[5.4, 4.7]; 8])), &targets);
         let draws = 4000;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let mut errs: Vec<[f64; 4]> = Vec::with_capacity(draws);
@@ -470,7 +470,7 @@ mod tests {
     /// variances (the independent answer); far apart, they share much less.
     #[test]
     fn close_neighbours_add_their_errors() {
-        let field = field_of(members(&vec![[5.4, 4.7]; 8]));
+        let field = field_of(members(&[[5.4, 4.7]; 8]));
         let ratio = |a: [f64; 2], b: [f64; 2]| {
             let p = joint_posterior(
                 &field,

@@ -194,6 +194,10 @@ pub struct Located {
     pub notes: Vec<String>,
 }
 
+/// The correlation of a path's speed errors by curve, and the correlated pairs (curve a, curve
+/// b, ρ).
+pub type SpeedCorrelation = (DMatrix<f64>, Vec<(usize, usize, f64)>);
+
 /// Locates correlations on one database's network.
 pub struct Locator<'c> {
     conn: &'c Connection,
@@ -269,7 +273,7 @@ impl<'c> Locator<'c> {
         &mut self,
         segs: &[usize],
         sources: &[CurveSource],
-    ) -> Result<Option<(DMatrix<f64>, Vec<(usize, usize, f64)>)>, LocateError> {
+    ) -> Result<Option<SpeedCorrelation>, LocateError> {
         let db = |e: crate::db::DbError| LocateError::Db(e.to_string());
         let predicted: Vec<usize> = (0..segs.len())
             .filter(|&c| sources[c] == CurveSource::Prediction)
