@@ -1,7 +1,8 @@
 //! Acceptance of `pipewave locate` (model §11) on a fresh synthetic network:
 //!
 //! 1. Position from a given delay: paths of 1–4 segments, spans 40–400 m, mixed materials;
-//!    speeds from the segments' own fits; the delay from the TRUE soils through the P85 model
+//!    speeds from the segments' own fits (15 % of segments measured, by default) or the soil
+//!    field's predictions (three geological units, by default); the delay from the TRUE soils through the P85 model
 //!    plus noise σ_τ = 0.1 ms. Coverage of the 95 % interval, its median width, and on spans
 //!    with a plastic segment the median error against the table-speed (Korteweg, P45) error.
 //! 2. Position from recordings: 60 s at 8 kHz, sensor noise 30 %, made from the true soils;
@@ -10,7 +11,13 @@
 //!    excluded).
 //!
 //! Run: `cargo run --release --example locate_acceptance -- [--cases 200] [--recordings 40]
-//! [--seed 11] [--segments 160] [--plastic-band LO,HI] [--verbose]`
+//! [--seed 11] [--segments 160] [--measured 0.15] [--units 3] [--plastic-band LO,HI]
+//! [--independent-speeds] [--verbose]`
+//!
+//! On spans with a plastic segment it also splits the error: the position from the same noisy
+//! delay with the TRUE curves (the delay's share), the position from the noise-free delay with
+//! the stored curves (the speeds' share), and the stored and table speeds' errors on the plastic
+//! segments of those paths.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -82,6 +89,8 @@ fn main() {
     let n_rec: usize = arg("--recordings", 40);
     let seed: u64 = arg("--seed", 11);
     let segments: usize = arg("--segments", 160);
+    let measured: f64 = arg("--measured", 0.15);
+    let units: usize = arg("--units", 3);
     let verbose = std::env::args().any(|a| a == "--verbose");
     let plastic_band: Option<(f64, f64)> = {
         let t: String = arg("--plastic-band", String::new());
@@ -93,14 +102,18 @@ fn main() {
         segments,
         seed,
         defect_fraction: 0.0,
+        measured_fraction: measured,
+        units,
         ..SynthOptions::default()
     };
     let network = generate(&opts);
     let t0 = Instant::now();
     let database = calibrated_database(dir.path(), &network, &opts, 2).expect("network");
     eprintln!(
-        "network: {} segments, seed {seed}, imported and calibrated in {:.1} s",
+        "network: {} segments, seed {seed}, {:.0} % measured, {units} units, imported and \
+         calibrated in {:.1} s",
         network.len(),
+        100.0 * measured,
         t0.elapsed().as_secs_f64()
     );
     let net = network_of(&network, &opts);
@@ -118,6 +131,7 @@ fn main() {
     let plain = !std::env::args().any(|a| a == "--phat-given");
     let options = LocateOptions {
         span_std_fraction: 0.0,
+        joint_speeds: !std::env::args().any(|a| a == "--independent-speeds"),
         given_weighting: if plain {
             Weighting::Plain
         } else {
@@ -129,13 +143,15 @@ fn main() {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
     let mut given = Vec::new();
     let mut failed = Vec::new();
+    let mut split: Vec<Split> = Vec::new();
+    let mut joint_ratio: Vec<f64> = Vec::new();
     for c in 0..cases {
         let Some(case) = draw_case(&net, &mut rng, 4, 400.0, &|_| true) else {
             break;
         };
         fill(&mut truths, &case.segments);
-        let tau = true_delay(&case, &truths, DEFAULT_BAND_HZ, plain).expect("true delay")
-            + SIGMA_TAU_S * normal(&mut rng);
+        let tau_true = true_delay(&case, &truths, DEFAULT_BAND_HZ, plain).expect("true delay");
+        let tau = tau_true + SIGMA_TAU_S * normal(&mut rng);
         let delay = DelayInput::Given {
             delay_s: tau,
             std_s: SIGMA_TAU_S,
@@ -152,6 +168,56 @@ fn main() {
                     case.segments.iter().any(|&s| plastic(s)),
                     ms,
                 );
+                if l.notes
+                    .iter()
+                    .any(|n| n.contains("correlated through the soil field"))
+                {
+                    let indep = l
+                        .budget
+                        .iter()
+                        .filter(|t| t.segment_id.is_some())
+                        .map(|t| t.shift_m * t.shift_m)
+                        .sum::<f64>()
+                        .sqrt();
+                    if indep > 0.0 {
+                        joint_ratio.push(l.speeds_std_m / indep);
+                    }
+                }
+                if o.plastic {
+                    let exact = DelayInput::Given {
+                        delay_s: tau_true,
+                        std_s: SIGMA_TAU_S,
+                    };
+                    let speeds_only = locator
+                        .locate(&case_job(&net, &case, format!("S{c}"), exact))
+                        .map_or(f64::NAN, |m| (m.distance_m - case.leak_m).abs());
+                    let delay_only = true_position(&case, &truths, plain, tau)
+                        .map_or(f64::NAN, |x| (x - case.leak_m).abs());
+                    let mut speed_errs = Vec::new();
+                    for (k, &s) in case.segments.iter().enumerate() {
+                        if !plastic(s) {
+                            continue;
+                        }
+                        let i = locator.network.segment(&network[s].id).expect("in db");
+                        let (_, cur) = locator.curve(i).expect("curve");
+                        let tc = true_curve(&truths[&s], DEFAULT_BAND_HZ).expect("truth");
+                        let f = l.band_used_hz.0.max(100.0) + 15.0;
+                        let ct = tc.at(f).0;
+                        let kt = locator.korteweg(i).expect("korteweg");
+                        speed_errs.push((
+                            l.sources[k].as_str(),
+                            (cur.at(f).0 - ct) / ct,
+                            (kt - ct) / ct,
+                        ));
+                    }
+                    split.push(Split {
+                        total: o.err,
+                        table: o.table_err,
+                        delay_only,
+                        speeds_only,
+                        speed_errs,
+                    });
+                }
                 if verbose && (!o.covered || o.err > 2.0) {
                     eprintln!(
                         "  {}: span {:.1} {:?} leak {:.2} got {:.2} [{:.2}, {:.2}] table {:.2}; {:?}",
@@ -204,6 +270,17 @@ fn main() {
         mt,
         mp / mt
     );
+    report_split(&split);
+    {
+        let n = joint_ratio.len();
+        let below = joint_ratio.iter().filter(|r| **r < 0.99).count();
+        let above = joint_ratio.iter().filter(|r| **r > 1.01).count();
+        println!(
+            "  joint speed errors: {n} cases with correlated predicted neighbours; speeds' σ_x \
+             joint/independent median {:.3} (below 0.99 on {below}, above 1.01 on {above})",
+            median(&mut joint_ratio)
+        );
+    }
     let mut ms: Vec<f64> = given.iter().map(|o| o.ms).collect();
     let max = ms.iter().copied().fold(0.0, f64::max);
     println!(
@@ -298,6 +375,110 @@ fn main() {
             max
         );
     }
+}
+
+/// Where a plastic span's error comes from.
+struct Split {
+    total: f64,
+    table: f64,
+    /// With the true curves and the noisy delay.
+    delay_only: f64,
+    /// With the stored curves and the noise-free delay.
+    speeds_only: f64,
+    /// Per plastic segment: its curve's source, its stored speed's relative error and the
+    /// table (Korteweg) speed's, near the low edge of the band used.
+    speed_errs: Vec<(&'static str, f64, f64)>,
+}
+
+fn report_split(split: &[Split]) {
+    let med = |f: &dyn Fn(&Split) -> f64| {
+        let mut v: Vec<f64> = split.iter().map(f).filter(|v| v.is_finite()).collect();
+        median(&mut v)
+    };
+    println!(
+        "  plastic spans, error split: median total {:.2} m; true curves with the noisy delay \
+         {:.2} m; stored curves with the exact delay {:.2} m; table {:.2} m",
+        med(&|s| s.total),
+        med(&|s| s.delay_only),
+        med(&|s| s.speeds_only),
+        med(&|s| s.table),
+    );
+    for src in ["fit", "prediction"] {
+        let mut stored: Vec<f64> = split
+            .iter()
+            .flat_map(|s| s.speed_errs.iter())
+            .filter(|e| e.0 == src)
+            .map(|e| 100.0 * e.1.abs())
+            .collect();
+        let mut table: Vec<f64> = split
+            .iter()
+            .flat_map(|s| s.speed_errs.iter())
+            .filter(|e| e.0 == src)
+            .map(|e| 100.0 * e.2.abs())
+            .collect();
+        let n = stored.len();
+        let p90 = |v: &mut Vec<f64>| {
+            v.sort_by(|a, b| a.total_cmp(b));
+            v.get((0.9 * v.len() as f64) as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        println!(
+            "  plastic segments on those paths with a {src}: {n}; speed error median {:.1} % \
+             (p90 {:.1} %), table speed's {:.1} % (p90 {:.1} %)",
+            median(&mut stored.clone()),
+            p90(&mut stored),
+            median(&mut table.clone()),
+            p90(&mut table)
+        );
+    }
+    let worse: Vec<&Split> = split.iter().filter(|s| s.total > s.table / 3.0).collect();
+    println!(
+        "  {} of {} plastic spans miss a third of their table error; of those, the delay alone \
+         (true curves) would miss on {}, the speeds alone (exact delay) on {}",
+        worse.len(),
+        split.len(),
+        worse
+            .iter()
+            .filter(|s| s.delay_only > s.table / 3.0)
+            .count(),
+        worse
+            .iter()
+            .filter(|s| s.speeds_only > s.table / 3.0)
+            .count()
+    );
+}
+
+/// The position from delay `tau` with the segments' TRUE curves (P85, P86).
+fn true_position(
+    case: &pipewave::synth::locate::LeakCase,
+    truths: &HashMap<usize, TruthCurve>,
+    plain: bool,
+    tau: f64,
+) -> Option<f64> {
+    use pipewave::locate::model::{band_grid, solve, DelayModel, ModelPiece, MODEL_GRID_POINTS};
+    let curves: Vec<_> = case
+        .segments
+        .iter()
+        .map(|s| true_curve(truths.get(s)?, DEFAULT_BAND_HZ))
+        .collect::<Option<_>>()?;
+    let refs: Vec<_> = curves.iter().collect();
+    let pieces: Vec<ModelPiece> = case
+        .path
+        .pieces
+        .iter()
+        .map(|p| {
+            Some(ModelPiece {
+                curve: case.segments.iter().position(|&s| s == p.segment)?,
+                length_m: p.length_m(),
+            })
+        })
+        .collect::<Option<_>>()?;
+    let grid = band_grid(DEFAULT_BAND_HZ, MODEL_GRID_POINTS);
+    let model = DelayModel::new(&grid, &vec![1.0; grid.len()], plain, &refs, pieces);
+    solve(&model, tau, SIGMA_TAU_S, 0.0, &[])
+        .ok()
+        .map(|p| p.x_m)
 }
 
 fn report(label: &str, v: &[Outcome], failed: &[String]) {

@@ -397,6 +397,53 @@ fn bad_input_is_reported_never_a_panic() {
     rec(&a, &b, "is at 8000 Hz but");
     rec(&a, &c, "holds 80000 samples per channel but");
     rec(&a, &d, "has 1 channels but");
+    let missing = s.dir.join("missing.wav").to_str().unwrap().to_string();
+    rec(&a, &missing, "not a readable WAV file");
+    // A channel the file does not have.
+    fails(
+        &[
+            "--sensor1",
+            "A:10",
+            "--sensor2",
+            "A:90",
+            "--recording1",
+            &format!("{d}:0"),
+            "--recording2",
+            &format!("{d}:5"),
+        ],
+        "column channel names channel 5 but the file has 2 channels",
+    );
+    // A delay that is not a number, or a negative error.
+    fails(
+        &[
+            "--sensor1",
+            "A:10",
+            "--sensor2",
+            "A:90",
+            "--delay",
+            "NaN",
+            "--delay-std",
+            "1e-4",
+        ],
+        "expected a finite delay",
+    );
+    fails(
+        &[
+            "--sensor1",
+            "A:10",
+            "--sensor2",
+            "A:90",
+            "--delay",
+            "0.01",
+            "--delay-std=-1e-4",
+        ],
+        "--delay-std -0.0001: expected a non-negative number of seconds",
+    );
+    // A segment without geometry can be on a path only when the path is given.
+    fails(
+        &with(&["--sensor1", "E:10", "--sensor2", "A:90"]),
+        "segment E has no geometry, so no path can be routed from it",
+    );
     // The batch: a good row, a row with a bad cell, a row off the network.
     let jobs = s.dir.join("jobs.csv");
     std::fs::write(
@@ -405,7 +452,10 @@ fn bad_input_is_reported_never_a_panic() {
          j1,A,10,A,90,0.075,1e-4,,,\n\
          j2,A,ten,A,90,0.075,1e-4,,,\n\
          j3,A,10,C,30,0.075,1e-4,200,600,A;B;C\n\
-         j4,A,10,A,90,0.075,1e-4,600,200,\n",
+         j4,A,10,A,90,0.075,1e-4,600,200,\n\
+         j5,A,10,A,90,0.5,1e-4,,,\n\
+         j6,A,10,A,130,0.075,1e-4,,,\n\
+         j7,C,10,F,10,0.01,1e-4,,,\n",
     )
     .unwrap();
     let out = s.dir.join("located.csv");
@@ -420,13 +470,28 @@ fn bad_input_is_reported_never_a_panic() {
     ]);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(
-        stdout(&o).contains("2 of 4 jobs located, 2 failed"),
+        stdout(&o).contains("2 of 7 jobs located, 5 failed"),
         "{}",
         stdout(&o)
     );
+    assert!(!stderr(&o).contains("panicked"));
     let rows = csv_rows(&out);
     let status: Vec<&str> = rows.iter().map(|r| r["status"].as_str()).collect();
-    assert_eq!(status, vec!["ok", "failed", "ok", "failed"]);
+    assert_eq!(
+        status,
+        vec!["ok", "failed", "ok", "failed", "failed", "failed", "failed"]
+    );
+    for (row, want) in [
+        (4, "is longer than the span allows"),
+        (5, "chainage 130 m is off segment A"),
+        (6, "segment F on the path has no speed"),
+    ] {
+        assert!(
+            rows[row]["message"].contains(want),
+            "{}",
+            rows[row]["message"]
+        );
+    }
     assert!(
         rows[1]["message"]
             .contains("jobs.csv line 3, column sensor1_chainage_m: 'ten' is not a number"),
@@ -617,4 +682,107 @@ fn synthetic_leak_recordings_go_through_the_binary() {
         let err = (num(t, "distance_from_sensor1_m") - num(g, "distance_from_sensor1_m")).abs();
         assert!(err < 2.0, "{}: {err} m ({})", g["job_id"], g["band_note"]);
     }
+}
+
+/// A network with few measured segments, in geological units: the speed errors of predicted
+/// neighbours on one path are combined through the soil field's joint posterior. The combined
+/// speed error is sᵀ R s of the budget's signed speed terms with the correlation the locator
+/// reports, neighbours are correlated, and the independent answer is the identity's.
+#[test]
+fn predicted_neighbours_speed_errors_are_combined_through_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let seed = 0x42_2027;
+    let opts = SynthOptions {
+        segments: 80,
+        seed,
+        defect_fraction: 0.0,
+        measured_fraction: 0.2,
+        units: 2,
+        ..SynthOptions::default()
+    };
+    let network = generate(&opts);
+    let database = calibrated_database(dir.path(), &network, &opts, 2).unwrap();
+    let net = network_of(&network, &opts);
+    let joint = LocateOptions {
+        span_std_fraction: 0.0,
+        ..LocateOptions::default()
+    };
+    let independent = LocateOptions {
+        joint_speeds: false,
+        ..joint.clone()
+    };
+    let mut with = Locator::new(database.conn(), joint, 1.0).unwrap();
+    let mut without = Locator::new(database.conn(), independent, 1.0).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (mut checked, mut strongest) = (0, 0.0f64);
+    for c in 0..200 {
+        let Some(case) = draw_case(&net, &mut rng, 4, 400.0, &|_| true) else {
+            continue;
+        };
+        let job = case_job(
+            &net,
+            &case,
+            format!("J{c}"),
+            DelayInput::Given {
+                delay_s: 0.0,
+                std_s: 1e-4,
+            },
+        );
+        // A delay of zero: a leak near the middle of the span.
+        let Ok(probe) = with.locate(&job) else {
+            continue;
+        };
+        if probe
+            .sources
+            .iter()
+            .filter(|s| s.as_str() == "prediction")
+            .count()
+            < 2
+        {
+            continue;
+        }
+        let segs: Vec<usize> = probe
+            .path_ids
+            .iter()
+            .map(|id| with.network.segment(id).unwrap())
+            .collect();
+        let Some((corr, pairs)) = with.speed_correlation(&segs, &probe.sources).unwrap() else {
+            continue;
+        };
+        let shift = |id: &str| {
+            probe
+                .budget
+                .iter()
+                .find(|t| t.segment_id.as_deref() == Some(id))
+                .map_or(0.0, |t| t.shift_m)
+        };
+        let s: Vec<f64> = probe.path_ids.iter().map(|id| shift(id)).collect();
+        let mut v = 0.0;
+        for a in 0..s.len() {
+            for b in 0..s.len() {
+                v += s[a] * s[b] * corr[(a, b)];
+            }
+        }
+        assert!(
+            (v.sqrt() - probe.speeds_std_m).abs() < 1e-9,
+            "{} vs {}",
+            v.sqrt(),
+            probe.speeds_std_m
+        );
+        assert!(probe
+            .notes
+            .iter()
+            .any(|n| n.contains("correlated through the soil field")));
+        let alone = without.locate(&job).unwrap();
+        let indep = s.iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!((alone.speeds_std_m - indep).abs() < 1e-9);
+        assert!((alone.distance_m - probe.distance_m).abs() < 1e-12);
+        for (_, _, r) in pairs {
+            assert!((-1.0..=1.0).contains(&r));
+            strongest = strongest.max(r);
+        }
+        checked += 1;
+    }
+    assert!(checked >= 5, "{checked} paths with two predicted segments");
+    assert!(strongest > 0.3, "strongest correlation {strongest}");
 }

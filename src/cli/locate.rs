@@ -251,6 +251,7 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
         given_weighting,
         snap_tolerance_m: args.snap_tolerance,
         span_std_fraction: args.span_std_fraction,
+        ..LocateOptions::default()
     };
     let mut locator = Locator::new(db.conn(), options, args.join_tolerance)
         .with_context(|| format!("cannot read the network of {}", args.db.display()))?;

@@ -8,6 +8,7 @@
 //! fitted speed, the leave-one-out check of every measured one (P82), stored in place of the
 //! previous update's. [`plan`] chooses where to measure next (P83).
 
+pub mod joint;
 pub mod labels;
 pub mod model;
 pub mod plan;

@@ -335,7 +335,7 @@ pub fn gcc_delay(
         .map(|(o, w)| w * (o - mean_om) * (o - mean_om))
         .sum();
     let envelope_std = sxx.recip().sqrt();
-    let residual = correlation_peak(&omega, &w, &phi, 0.5 * (used.0 + used.1), used.1 - used.0);
+    let residual = correlation_peak(&omega, &w, &phi);
     let record_s = a.len() as f64 / fs;
     // eq. P87 with the integral over ω as a sum over bins of width 2π Δf.
     let sum = record_s / std::f64::consts::PI * info * std::f64::consts::TAU * df;

@@ -283,11 +283,7 @@ pub fn row(a: &Answer) -> Vec<String> {
             };
             let speeds: Vec<&super::BudgetTerm> =
                 l.budget.iter().filter(|t| t.segment_id.is_some()).collect();
-            let speed_total = speeds
-                .iter()
-                .map(|t| t.shift_m * t.shift_m)
-                .sum::<f64>()
-                .sqrt();
+            let speed_total = l.speeds_std_m;
             let (x, y) = l
                 .point
                 .map_or((String::new(), String::new()), |p| (f(p.0, 3), f(p.1, 3)));

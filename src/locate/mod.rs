@@ -23,12 +23,14 @@ use rusqlite::Connection;
 
 use crate::db::speeds::{speed_curve, CurveSource};
 use crate::db::SegmentRecord;
+use crate::field::joint::{JointField, Target};
 use crate::physics::{ContactMode, Model, Soil, System};
 use gcc::{gcc_delay, read_pair, RecordingPair};
 use model::{
     band_grid, solve, table_position, DelayModel, ModelPiece, SpeedCurve, TermKind, Weighting,
     MODEL_GRID_POINTS,
 };
+use nalgebra::DMatrix;
 use network::{Network, SensorPath, SensorSpec};
 
 /// Default correlation band, Hz (the leak band).
@@ -79,6 +81,9 @@ pub struct LocateOptions {
     pub snap_tolerance_m: f64,
     /// Relative error of the span's length.
     pub span_std_fraction: f64,
+    /// Combine the predicted segments' speed errors with their joint posterior through the soil
+    /// field (false: treat every segment's speed error as independent).
+    pub joint_speeds: bool,
 }
 
 impl Default for LocateOptions {
@@ -89,6 +94,7 @@ impl Default for LocateOptions {
             given_weighting: Weighting::Plain,
             snap_tolerance_m: network::DEFAULT_SNAP_TOLERANCE_M,
             span_std_fraction: DEFAULT_SPAN_STD_FRACTION,
+            joint_speeds: true,
         }
     }
 }
@@ -163,6 +169,9 @@ pub struct Located {
     pub hi_m: f64,
     /// Standard error, m.
     pub std_m: f64,
+    /// The speeds' part of it, m: the speed terms combined with the correlation of predicted
+    /// neighbours' errors (P86).
+    pub speeds_std_m: f64,
     /// The budget, largest first.
     pub budget: Vec<BudgetTerm>,
     /// What would shrink the largest term.
@@ -185,6 +194,10 @@ pub struct Located {
     pub notes: Vec<String>,
 }
 
+/// The correlation of a path's speed errors by curve, and the correlated pairs (curve a, curve
+/// b, ρ).
+pub type SpeedCorrelation = (DMatrix<f64>, Vec<(usize, usize, f64)>);
+
 /// Locates correlations on one database's network.
 pub struct Locator<'c> {
     conn: &'c Connection,
@@ -192,6 +205,11 @@ pub struct Locator<'c> {
     pub network: Network,
     records: Vec<SegmentRecord>,
     curves: HashMap<usize, Result<(CurveSource, SpeedCurve), String>>,
+    /// The soil field for joint posteriors (read when a path first has two predicted segments;
+    /// `None` inside when the database has no field).
+    joint: Option<Option<JointField>>,
+    /// Each predicted segment's leak-band speed error and its gradient in the soil (m/s).
+    gradients: HashMap<usize, Option<(f64, [f64; 2])>>,
     /// Settings.
     pub options: LocateOptions,
 }
@@ -211,6 +229,8 @@ impl<'c> Locator<'c> {
             network,
             records,
             curves: HashMap::new(),
+            joint: None,
+            gradients: HashMap::new(),
             options,
         })
     }
@@ -242,6 +262,70 @@ impl<'c> Locator<'c> {
             self.curves.insert(i, got);
         }
         self.curves[&i].clone().map_err(LocateError::NoSpeed)
+    }
+
+    /// The correlation of the speed errors of the path's segments `segs` (by curve) whose
+    /// curves are predictions: their soils' joint posterior (P80) carried to the leak-band speed
+    /// by each prediction's gradient ∂c/∂u, ρ_ab = g_aᵀ Cov(u_a, u_b) g_b / (σ_a σ_b). Fitted
+    /// speeds' errors are their own fits' and stay independent. `None` when fewer than two
+    /// predicted segments can be placed in the field.
+    pub fn speed_correlation(
+        &mut self,
+        segs: &[usize],
+        sources: &[CurveSource],
+    ) -> Result<Option<SpeedCorrelation>, LocateError> {
+        let db = |e: crate::db::DbError| LocateError::Db(e.to_string());
+        let predicted: Vec<usize> = (0..segs.len())
+            .filter(|&c| sources[c] == CurveSource::Prediction)
+            .collect();
+        if predicted.len() < 2 || !self.options.joint_speeds {
+            return Ok(None);
+        }
+        if self.joint.is_none() {
+            self.joint = Some(JointField::from_db(self.conn).map_err(db)?);
+        }
+        let mut usable: Vec<(usize, Target, f64, [f64; 2])> = Vec::new();
+        for &c in &predicted {
+            let s = segs[c];
+            if !self.gradients.contains_key(&s) {
+                let g = crate::db::field::prediction_for(self.conn, &self.network.segments[s].id)
+                    .map_err(db)?
+                    .and_then(|(row, _)| {
+                        let (_, std) = row.leak_band_speed?;
+                        let g = row.leak_band_speed_gradient?;
+                        (std > 0.0 && g.iter().all(|v| v.is_finite())).then_some((std, g))
+                    });
+                self.gradients.insert(s, g);
+            }
+            let Some(Some(joint)) = self.joint.as_ref() else {
+                return Ok(None);
+            };
+            if let (Some((std, g)), Some(t)) = (
+                self.gradients[&s],
+                joint.target(&self.network.segments[s].id),
+            ) {
+                usable.push((c, t, std, g));
+            }
+        }
+        let Some(Some(joint)) = self.joint.as_ref() else {
+            return Ok(None);
+        };
+        if usable.len() < 2 {
+            return Ok(None);
+        }
+        let targets: Vec<Target> = usable.iter().map(|u| u.1).collect();
+        let post = joint.posterior(&targets);
+        let mut corr = DMatrix::<f64>::identity(segs.len(), segs.len());
+        let mut pairs = Vec::new();
+        for (i, a) in usable.iter().enumerate() {
+            for (j, b) in usable.iter().enumerate().skip(i + 1) {
+                let r = (post.cov_of(i, a.3, j, b.3) / (a.2 * b.2)).clamp(-1.0, 1.0);
+                corr[(a.0, b.0)] = r;
+                corr[(b.0, a.0)] = r;
+                pairs.push((a.0, b.0, r));
+            }
+        }
+        Ok(Some((corr, pairs)))
     }
 
     /// Korteweg's speed of segment `i` (P45); it does not depend on the soil.
@@ -402,7 +486,7 @@ impl<'c> Locator<'c> {
         };
         let span_std = self.options.span_std_fraction * span;
         let speed_terms: Vec<usize> = (0..segs.len()).collect();
-        let pos = solve(&model, tau, tau_std, span_std, &speed_terms).map_err(|o| {
+        let mut pos = solve(&model, tau, tau_std, span_std, &speed_terms).map_err(|o| {
             LocateError::Delay(format!(
                 "delay {:.6} s is longer than the span allows: the sensors are {span:.1} m \
                  apart along the path ({}), so with these speeds the delay lies between \
@@ -417,16 +501,47 @@ impl<'c> Locator<'c> {
         let mut notes = Vec::new();
         if let Some(s) = pos.at_sensor {
             notes.push(format!(
-                "the delay is just beyond the span (within its error): leak put at sensor {s}"
+                "the delay is just beyond the span (within its error and the speeds'): leak put \
+                 at sensor {s}"
             ));
         }
-        if segs.len() > 1 {
-            notes.push(
-                "speed errors treated as independent per segment (no joint covariance of \
-                 neighbouring speeds is stored)"
-                    .into(),
-            );
-        }
+        let correlation = self.speed_correlation(&segs, &sources)?;
+        let speeds_std_m = match &correlation {
+            Some((corr, pairs)) => {
+                pos.correlate_speeds(corr, span);
+                let id = |c: usize| self.network.segments[segs[c]].id.as_str();
+                notes.push(format!(
+                    "predicted speeds' errors correlated through the soil field ({}); fitted \
+                     speeds' errors independent",
+                    pairs
+                        .iter()
+                        .map(|&(a, b, r)| format!("{}–{} ρ = {r:.2}", id(a), id(b)))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+                pos.speeds_std_m(Some(corr))
+            }
+            None => {
+                if segs.len() > 1 {
+                    notes.push(
+                        if sources
+                            .iter()
+                            .filter(|s| **s == CurveSource::Prediction)
+                            .count()
+                            > 1
+                        {
+                            "speed errors treated as independent per segment (no joint posterior \
+                             of the predicted segments from the soil field)"
+                        } else {
+                            "speed errors independent per segment (each fitted speed's error is \
+                             its own fit's)"
+                        }
+                        .into(),
+                    );
+                }
+                pos.speeds_std_m(None)
+            }
+        };
         for (i, c) in curves.iter().enumerate() {
             if !c.has_std {
                 notes.push(format!(
@@ -499,6 +614,7 @@ impl<'c> Locator<'c> {
             lo_m: pos.lo_m,
             hi_m: pos.hi_m,
             std_m: pos.std_m,
+            speeds_std_m,
             budget,
             advice,
             table_distance_m: table,

@@ -9,6 +9,7 @@
 //! does not depend on x: the two stretches always add up to the whole path), one for PHAT, the
 //! measured coherence for SCOT. No phase or group speed is chosen: the peak is found.
 
+use nalgebra::DMatrix;
 use num_complex::Complex64;
 
 use crate::db::results::CurvePoint;
@@ -16,12 +17,13 @@ use crate::units::{db_to_np, hz_to_omega};
 
 /// Frequencies of the model's band grid: enough to follow the phase of the longest path
 /// smoothly, while one predicted delay stays a few tens of microseconds (the correlation is
-/// searched only within a carrier period of the group delay, far inside its 1/Δf period).
+/// searched only within a few envelope widths of the group delay, inside its 1/Δf period).
 pub const MODEL_GRID_POINTS: usize = 160;
-/// Steps of the coarse search per carrier period of the band centre.
-const SEARCH_STEPS_PER_PERIOD: f64 = 24.0;
-/// Newton refinements of the correlation peak.
-const NEWTON_STEPS: usize = 6;
+/// A Newton step on a crest moves by at most this fraction of a carrier period (so it cannot
+/// slip to the next crest).
+const NEWTON_MAX_STEP_PERIODS: f64 = 0.125;
+/// Newton refinements of a crest of the correlation.
+const NEWTON_STEPS: usize = 8;
 /// Iterations of the position solve (Illinois regula falsi on a nearly linear T(x)).
 const SOLVE_ITERATIONS: usize = 60;
 /// The position solve stops when the delay matches to this, s.
@@ -189,8 +191,6 @@ pub struct DelayModel {
     /// Re k_s with the speed one standard error higher.
     k_fast: Vec<Vec<f64>>,
     pieces: Vec<ModelPiece>,
-    centre_hz: f64,
-    width_hz: f64,
 }
 
 impl DelayModel {
@@ -220,7 +220,6 @@ impl DelayModel {
             k.push(ks);
             k_fast.push(kf);
         }
-        let (lo, hi) = (freqs_hz[0], *freqs_hz.last().expect("a band"));
         DelayModel {
             omega,
             base_weight: weights.to_vec(),
@@ -228,8 +227,6 @@ impl DelayModel {
             k,
             k_fast,
             pieces,
-            centre_hz: 0.5 * (lo + hi),
-            width_hz: (hi - lo).max(1.0),
         }
     }
 
@@ -284,42 +281,122 @@ impl DelayModel {
         } else {
             self.base_weight.clone()
         };
-        correlation_peak(&self.omega, &w, &dphi, self.centre_hz, self.width_hz)
+        correlation_peak(&self.omega, &w, &dphi)
     }
 }
 
-/// The τ at which Σ w cos(ωτ − φ) peaks: near the weighted group delay of φ, by a coarse search
-/// over a carrier period either side, then Newton on the derivative.
-pub fn correlation_peak(
-    omega: &[f64],
-    w: &[f64],
-    phi: &[f64],
-    centre_hz: f64,
-    width_hz: f64,
-) -> f64 {
+/// The τ at which Σ w cos(ωτ − φ) peaks, following the band the weights leave (P85).
+///
+/// Attenuation can leave a plain correlation only a narrow part of the nominal band (over
+/// plastic pipe, a few tens of hertz at its low edge). Its correlation is then a carrier at
+/// the weights' centre frequency under a broad envelope |Σ w e^{i(ωτ − φ)}|, and a search tied to
+/// the nominal band's centre can miss the carrier's crests altogether. So: (1) find the
+/// envelope's peak, scanning about the weighted group delay of φ in steps of half the
+/// envelope's width 1/σ_ω (σ_ω the weights' RMS bandwidth); (2) take the envelope's main lobe,
+/// where it is at least half its peak (and at least half a carrier period either side); (3)
+/// take the highest crest of the correlation inside it, each crest refined by Newton's method.
+pub fn correlation_peak(omega: &[f64], w: &[f64], phi: &[f64]) -> f64 {
     let n = omega.len();
-    let (mut num, mut den) = (0.0, 0.0);
+    let wsum: f64 = w.iter().sum();
+    if n == 0 || wsum <= 0.0 || !wsum.is_finite() {
+        return 0.0;
+    }
+    let mut tg_num = 0.0;
+    let mut tg_den = 0.0;
     for i in 0..n.saturating_sub(1) {
         let g = (phi[i + 1] - phi[i]) / (omega[i + 1] - omega[i]);
         let ww = 0.5 * (w[i] + w[i + 1]);
-        num += ww * g;
-        den += ww;
+        tg_num += ww * g;
+        tg_den += ww;
     }
-    let tg = if den > 0.0 { num / den } else { 0.0 };
-    let r = |tau: f64| -> f64 { (0..n).map(|i| w[i] * (omega[i] * tau - phi[i]).cos()).sum() };
-    let period = 1.0 / centre_hz;
-    let half = period.max(1.0 / width_hz);
-    let step = period / SEARCH_STEPS_PER_PERIOD;
-    let steps = (2.0 * half / step).ceil() as usize;
-    let mut best = (f64::NEG_INFINITY, tg);
-    for j in 0..=steps {
-        let t = tg - half + j as f64 * step;
-        let v = r(t);
-        if v > best.0 {
-            best = (v, t);
+    let tg = if tg_den > 0.0 { tg_num / tg_den } else { 0.0 };
+    // The weights' centre and RMS width, rad/s.
+    let om_c = omega.iter().zip(w).map(|(o, w)| o * w).sum::<f64>() / wsum;
+    let var = omega
+        .iter()
+        .zip(w)
+        .map(|(o, w)| w * (o - om_c) * (o - om_c))
+        .sum::<f64>()
+        / wsum;
+    let spacing = if n > 1 {
+        (omega[n - 1] - omega[0]) / (n - 1) as f64
+    } else {
+        om_c
+    };
+    // A single line (or none) still has a finite envelope: the grid's own resolution.
+    let sigma = var.sqrt().max(0.5 * spacing).max(1e-9);
+    let period = std::f64::consts::TAU / om_c.max(1e-9);
+    // Z(τ) = Σ w e^{i(ωτ − φ)}: R = Re Z, the envelope |Z|.
+    let envelope_parts = |tau: f64| -> (f64, f64, f64) {
+        let (mut a, mut b) = (0.0, 0.0);
+        for i in 0..n {
+            let (s, c) = (omega[i] * tau - phi[i]).sin_cos();
+            a += w[i] * c;
+            b += w[i] * s;
+        }
+        (a.hypot(b), a, b)
+    };
+    let envelope = |tau: f64| envelope_parts(tau);
+    // (1) The envelope's peak: a coarse scan over ±3 envelope widths (inside the grid's own
+    // period 2π/Δω), refined by the parabola through the best sample and its neighbours.
+    let env_step = 0.5 / sigma;
+    let reach = (3.0 / sigma).min(0.45 * std::f64::consts::TAU / spacing.max(1e-9));
+    let scan = (2.0 * reach / env_step).ceil() as usize;
+    let samples: Vec<f64> = (0..=scan)
+        .map(|j| envelope(tg - reach + j as f64 * env_step).0)
+        .collect();
+    let jb = (0..samples.len())
+        .max_by(|&a, &b| samples[a].total_cmp(&samples[b]))
+        .unwrap_or(0);
+    let mut t_env = tg - reach + jb as f64 * env_step;
+    if jb > 0 && jb + 1 < samples.len() {
+        let (a, b, c) = (samples[jb - 1], samples[jb], samples[jb + 1]);
+        let den = a - 2.0 * b + c;
+        if den < 0.0 {
+            t_env += 0.5 * env_step * (a - c) / den;
         }
     }
-    let mut tau = best.1;
+    let (e_max, z_re, z_im) = envelope_parts(t_env);
+    // (2) The main lobe: where the envelope stays above half its peak, and at least half a
+    // carrier period either side.
+    let edge = |dir: f64| -> f64 {
+        let mut t = t_env;
+        for _ in 0..((reach / env_step).ceil() as usize) {
+            let next = t + dir * env_step;
+            if envelope(next).0 < 0.5 * e_max {
+                break;
+            }
+            t = next;
+        }
+        t + dir * env_step
+    };
+    let lo = edge(-1.0).min(t_env - 0.5 * period);
+    let hi = edge(1.0).max(t_env + 0.5 * period);
+    // (3) Its crests: the correlation's phase turns at the centre frequency, so they lie near
+    // t_env − arg Z(t_env)/ω_c + k·period; each is refined by Newton's method on R′ and the
+    // highest taken.
+    let first = t_env - z_im.atan2(z_re) / om_c;
+    let k_lo = ((lo - first) / period).floor() as i64;
+    let k_hi = ((hi - first) / period).ceil() as i64;
+    let step = NEWTON_MAX_STEP_PERIODS * period;
+    let r = |tau: f64| -> f64 { (0..n).map(|i| w[i] * (omega[i] * tau - phi[i]).cos()).sum() };
+    let mut top = (f64::NEG_INFINITY, t_env);
+    for k in k_lo..=k_hi {
+        let t = newton_crest(omega, w, phi, first + k as f64 * period, step);
+        if t < lo || t > hi {
+            continue;
+        }
+        let v = r(t);
+        if v > top.0 {
+            top = (v, t);
+        }
+    }
+    top.1
+}
+
+/// Newton's method on R′(τ) = 0 from `tau`, each step at most `step`.
+fn newton_crest(omega: &[f64], w: &[f64], phi: &[f64], mut tau: f64, step: f64) -> f64 {
+    let n = omega.len();
     for _ in 0..NEWTON_STEPS {
         let (mut d1, mut d2) = (0.0, 0.0);
         for i in 0..n {
@@ -375,9 +452,51 @@ pub struct Position {
     pub dt_dx: f64,
     /// The terms of the budget.
     pub terms: Vec<Term>,
-    /// Set when the delay lies just beyond what the span allows (within its error), so the leak
-    /// is put at that sensor.
+    /// Set when the delay lies just beyond what the span allows (within its error and the
+    /// speeds' and span's errors of that end), so the leak is put at that sensor.
     pub at_sensor: Option<u8>,
+}
+
+impl Position {
+    /// The speeds' part of σ_x: √(sᵀ R s) over the speed terms s, R the correlation of the
+    /// curves' errors indexed by curve (P86 in its covariance form); independent speeds without
+    /// one.
+    pub fn speeds_std_m(&self, corr: Option<&DMatrix<f64>>) -> f64 {
+        let speeds: Vec<(usize, f64)> = self
+            .terms
+            .iter()
+            .filter_map(|t| match t.kind {
+                TermKind::Speed(c) => Some((c, t.shift_m)),
+                _ => None,
+            })
+            .collect();
+        let mut v = 0.0;
+        for &(a, sa) in &speeds {
+            for &(b, sb) in &speeds {
+                let r = if a == b {
+                    1.0
+                } else {
+                    corr.map_or(0.0, |m| m[(a, b)].clamp(-1.0, 1.0))
+                };
+                v += sa * sb * r;
+            }
+        }
+        v.max(0.0).sqrt()
+    }
+
+    /// σ_x and the 95 % interval again with the speed errors correlated as `corr` (by curve),
+    /// inside a span of `span_m`.
+    pub fn correlate_speeds(&mut self, corr: &DMatrix<f64>, span_m: f64) {
+        let others: f64 = self
+            .terms
+            .iter()
+            .filter(|t| !matches!(t.kind, TermKind::Speed(_)))
+            .map(|t| t.shift_m * t.shift_m)
+            .sum();
+        self.std_m = (others + self.speeds_std_m(Some(corr)).powi(2)).sqrt();
+        self.lo_m = (self.x_m - Z95 * self.std_m).max(0.0);
+        self.hi_m = (self.x_m + Z95 * self.std_m).min(span_m);
+    }
 }
 
 /// Why no position can be given.
@@ -400,10 +519,23 @@ pub fn solve(
 ) -> Result<Position, OutsideSpan> {
     let d = model.span_m();
     let (t0, t1) = (model.delay(0.0), model.delay(d));
-    // T decreases from sensor 1 to sensor 2; a delay outside by more than three of its own
-    // errors is not a leak between the sensors.
-    let slack = 3.0 * tau_std;
-    if tau > t0 + slack || tau < t1 - slack {
+    // T decreases from sensor 1 to sensor 2; a delay outside by more than three errors of the
+    // difference τ − T(end) is not a leak between the sensors. T(end)'s error is that of the
+    // speeds (each segment's term at that end, as P86 adds them) and of the span.
+    let end_std = |x: f64, t: f64| -> f64 {
+        let mut v = 0.0;
+        for &c in speed_terms {
+            v += (model.delay_with(x, Some(c), 0.0) - t).powi(2);
+        }
+        if span_std_m > 0.0 {
+            v += (model.delay_with(x, None, span_std_m) - t).powi(2);
+        }
+        v
+    };
+    let outside = |t_end: f64, x_end: f64| {
+        3.0 * (tau_std * tau_std + end_std(x_end, t_end)).sqrt() < (tau - t_end).abs()
+    };
+    if (tau > t0 && outside(t0, 0.0)) || (tau < t1 && outside(t1, d)) {
         return Err(OutsideSpan {
             t_at_sensor1: t0,
             t_at_sensor2: t1,
@@ -627,6 +759,43 @@ mod tests {
         // Outside the span.
         let e = solve(&m, m.delay(0.0) + 0.01, 1e-4, 0.0, &[]).unwrap_err();
         assert!((e.t_at_sensor1 - m.delay(0.0)).abs() < 1e-12);
+    }
+
+    /// Weights that attenuation leaves only at the band's low edge, and a phase offset of two
+    /// radians (dispersion): the peak is the correlation's highest crest under the envelope,
+    /// a quarter of a carrier period and more away from the group delay, wherever the nominal
+    /// band's centre is.
+    #[test]
+    fn the_peak_follows_the_band_the_weights_leave() {
+        let grid = band_grid((100.0, 800.0), MODEL_GRID_POINTS);
+        let omega: Vec<f64> = grid.iter().map(|&f| hz_to_omega(f)).collect();
+        let w: Vec<f64> = grid.iter().map(|&f| (-(f - 100.0) / 12.0).exp()).collect();
+        let tau0 = 0.031;
+        let phi: Vec<f64> = omega.iter().map(|o| o * tau0 + 2.0).collect();
+        let r = |t: f64| -> f64 {
+            (0..omega.len())
+                .map(|i| w[i] * (omega[i] * t - phi[i]).cos())
+                .sum()
+        };
+        let got = correlation_peak(&omega, &w, &phi);
+        // The highest value of R within ±20 ms, on a 1-µs grid.
+        let best = (0..=40_000).map(|j| tau0 - 0.02 + j as f64 * 1e-6).fold(
+            (f64::NEG_INFINITY, 0.0),
+            |b, t| {
+                let v = r(t);
+                if v > b.0 {
+                    (v, t)
+                } else {
+                    b
+                }
+            },
+        );
+        assert!((got - best.1).abs() < 2e-6, "{got} vs {}", best.1);
+        assert!((got - tau0).abs() > 2.0e-3, "{got}");
+        // A flat band: the crest of a pure delay is the delay itself.
+        let flat = vec![1.0; omega.len()];
+        let lin: Vec<f64> = omega.iter().map(|o| o * tau0).collect();
+        assert!((correlation_peak(&omega, &flat, &lin) - tau0).abs() < 1e-9);
     }
 
     #[test]
