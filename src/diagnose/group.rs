@@ -25,11 +25,11 @@
 //!   before they are summed. This only lowers each term, so the mixture's tail stays an upper
 //!   bound of the statistic's null tail: the p-values are conservative.
 //! * **Twins are refitted together.** Air in the water and a thinner wall both add compliance
-//!   to the pipe–fluid system (air lowers the fluid's bulk modulus, P60; thinning the wall's hoop
-//!   stiffness, P62 in P10: both raise β), so a member's diagnosis that refitted one of them from a positive
-//!   score may have left the other at its score, 0 to first order, even though its refit
-//!   removes as much. Comparing a refit with a score would rank the refitted twin first; the
-//!   missing twin is refitted ([`TWINS`]).
+//!   to the pipe–fluid system (air lowers the fluid's bulk modulus, P60; thinning the wall's
+//!   hoop stiffness, P62 in P10): both slow the wave. A member's diagnosis that refitted one of
+//!   them from a positive score may have left the other at its score, 0 to first order, even
+//!   though its refit removes as much. Comparing a refit with a score would rank the refitted
+//!   twin first; the missing twin is refitted ([`TWINS`]).
 //! * **Which detected effects cannot be told apart** is decided by Vuong's (1989) test of two
 //!   non-nested extensions of the base: the members' gain differences g_A − g_B are twice their
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
