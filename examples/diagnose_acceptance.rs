@@ -12,7 +12,7 @@
 //! Run: `cargo run --release --example diagnose_acceptance -- effects 20 [BASE]` (etc.). `BASE`
 //! (default 0) offsets every trial's seed: tune on one base, report on another.
 
-use pipewave::diagnose::group::{member_scores, pooled_score_test};
+use pipewave::diagnose::group::{member_gains, pooled_score_test};
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
@@ -208,14 +208,14 @@ fn groups(seeds: u64, base: u64) {
                 .par_iter()
                 .enumerate()
                 .map(|(i, t)| {
-                    // Each member's own diagnosis, as `diagnose` makes it: its scores enter the
+                    // Each member's own diagnosis, as `diagnose` makes it: its gains enter the
                     // pooled test unless it left a gross misfit unexplained.
                     let d = diagnose_segment(&t.data, None, &settings);
                     let own = (with && i < 12).then(|| {
                         d.named == Some(Effect::WallThinning)
                             || d.ambiguous_with.contains(&Effect::WallThinning)
                     });
-                    (member_scores(&d), own)
+                    (member_gains(&d, &settings), own)
                 })
                 .collect();
             let scores: Vec<_> = res.iter().map(|r| r.0.clone()).collect();

@@ -20,22 +20,27 @@
 //!   quantile of NULL_REPS clean groups.
 //! * `null [REPS]`: the lr_sum null: simulated tail frequencies against the χ̄² mixture.
 //!
-//! * `groups SEEDS [BASE]`: the adopted test on refitted synthetic groups of 40 members. Per
-//!   seed, one group per effect (soil_damping, air_in_water, pipe_loss on a material of the
-//!   synthetic network's mix; wall_thinning on cast iron) hidden in 20–40 % of the members at a
-//!   magnitude near the one-segment floor (the per-member naming rate printed shows where it
-//!   sits), and one clean group; each tested as one of 8 groups of a run. Prints per group the
-//!   detected effect, its p-value, the true effect's rank, and the totals.
+//! * `floor [N]`: the one-segment floor of each effect on each material where it applies, from
+//!   N segments per pass (two passes).
+//! * `groups SEEDS [BASE] [CLEAN_PER_SEED]`: the adopted test (`diagnose`'s member gains and
+//!   pooled test) on refitted synthetic groups of 40 members. Per seed, one group per effect
+//!   (soil_damping, air_in_water, wall_thinning, pipe_loss), on a material of the synthetic
+//!   network's mix where the effect applies, hidden in 20–40 % of the members at 0.8–1.2 × that
+//!   material's floor, and CLEAN_PER_SEED clean groups; each tested as one of 8 groups of a run.
+//!   Prints per group the detected effect, its p-value, the true effect's rank, a table per
+//!   effect and material, and the totals.
 //!
 //! Run: `cargo run --release --example group_power -- curves 20000 2000`.
 
-use pipewave::diagnose::group::{member_scores, pooled_test};
+use std::collections::BTreeMap;
+
+use pipewave::diagnose::group::{member_gains, pooled_test};
 use pipewave::diagnose::stats::sum_chibar_sf;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::stats::normal;
-use pipewave::synth::trial::effect_trial;
+use pipewave::synth::trial::{effect_trial, Trial};
 use pipewave::synth::MATERIAL_MIX;
 use rand::Rng;
 use rand::SeedableRng;
@@ -194,88 +199,180 @@ fn null_check(reps: usize) {
     }
 }
 
-/// Hidden magnitudes near the one-segment floor (drawn uniformly; air log-uniformly).
-fn env_f64(name: &str, d: f64) -> f64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(d)
-}
+/// The four effects of the pooled test (one nested parameter on the bound of its range).
+const EFFECTS: [Effect; 4] = [
+    Effect::SoilDamping,
+    Effect::AirInWater,
+    Effect::WallThinning,
+    Effect::PipeLoss,
+];
 
-fn near_floor(e: Effect) -> (f64, f64) {
-    let f = env_f64;
-    // ±20 % about the floor measured by `floor` (deviation from the neutral value).
-    let band = |m: f64| (0.8 * m, 1.2 * m);
+/// The hidden value of `e` at deviation `m` from its neutral value on `material`: η_m, the air
+/// fraction, 1 − the wall ratio, or the pipe loss factor above the material's typical one.
+fn hidden_value(e: Effect, material: Material, m: f64) -> f64 {
     match e {
-        Effect::SoilDamping => band(f("FLOOR_SOIL", 0.08)),
-        Effect::AirInWater => band(f("FLOOR_AIR", 5e-6)),
-        Effect::WallThinning => {
-            let (lo, hi) = band(f("FLOOR_THIN", 0.06));
-            (1.0 - hi, 1.0 - lo)
-        }
-        _ => band(f("FLOOR_LOSS", 0.01)),
+        Effect::WallThinning => 1.0 - m,
+        Effect::PipeLoss => material.typical().loss_factor + m,
+        _ => m,
     }
 }
 
-/// Per effect: one-segment floors measured by `floor`: for 24 members each at a reference
-/// magnitude m0, the median √gain of the true effect δ0; the floor is m0·z_floor/δ0 (the gain's
-/// square root grows in proportion to the magnitude in the local model).
-fn floor(n: usize) {
-    let settings = DiagnoseSettings {
+/// The largest deviation the effect's range allows on `material`.
+fn max_deviation(e: Effect, material: Material) -> f64 {
+    let p = e.parameter().expect("the four effects have a parameter");
+    match e {
+        Effect::WallThinning => 1.0 - p.lower,
+        Effect::PipeLoss => p.upper - material.typical().loss_factor,
+        _ => p.upper,
+    }
+}
+
+/// One-segment floors (deviation from the neutral value) measured by
+/// `group_power -- floor 20` (docs/group-test.md): the magnitude at which the median gain of a
+/// segment carrying the effect alone is z_floor², i.e. its own one-sided test at the
+/// diagnosis's level has 50 % power there. `None`: not reached inside the effect's range (soil
+/// damping under metal and cement pipes: at η_m = 0.05 the median gain is 0–0.2, the soil
+/// mostly radiating, where its loss is almost invisible).
+fn floor_of(e: Effect, material: Material) -> Option<f64> {
+    use Material::Steel as St;
+    use Material::{AsbestosCement as Ac, CastIron as Ci, DuctileIron as Di, Hdpe, Mdpe, Pvc};
+    let f = match (e, material) {
+        (Effect::SoilDamping, Pvc) => 0.222,
+        (Effect::SoilDamping, Mdpe) => 0.127,
+        (Effect::SoilDamping, Hdpe) => 0.230,
+        (Effect::SoilDamping, _) => return None,
+        (Effect::AirInWater, Ci) => 8.74e-6,
+        (Effect::AirInWater, Di) => 1.12e-5,
+        (Effect::AirInWater, St) => 1.00e-5,
+        (Effect::AirInWater, Pvc) => 1.95e-4,
+        (Effect::AirInWater, Mdpe) => 1.67e-4,
+        (Effect::AirInWater, Hdpe) => 2.94e-4,
+        (Effect::AirInWater, Ac) => 1.70e-5,
+        (Effect::WallThinning, Ci) => 0.151,
+        (Effect::WallThinning, Di) => 0.122,
+        (Effect::WallThinning, St) => 0.125,
+        (Effect::WallThinning, Ac) => 0.0934,
+        (Effect::WallThinning, _) => return None,
+        (Effect::PipeLoss, Ci) => 0.0185,
+        (Effect::PipeLoss, Di) => 0.0222,
+        (Effect::PipeLoss, St) => 0.0179,
+        (Effect::PipeLoss, Pvc) => 0.0299,
+        (Effect::PipeLoss, Mdpe) => 0.0242,
+        (Effect::PipeLoss, Hdpe) => 0.0498,
+        (Effect::PipeLoss, Ac) => 0.0139,
+        _ => return None,
+    };
+    Some(f)
+}
+
+/// The members' gains of one segment's diagnosis, as `diagnose` makes them, and whether its
+/// own diagnosis named `hidden`.
+fn member(settings: &DiagnoseSettings, t: &Trial) -> (Vec<(Effect, f64)>, bool) {
+    let d = diagnose_segment(&t.data, None, settings);
+    let own = t.hidden.is_some_and(|(h, _)| d.named == Some(h));
+    (member_gains(&d, settings), own)
+}
+
+fn settings() -> DiagnoseSettings {
+    DiagnoseSettings {
         candidates: Effect::PHYSICAL.to_vec(),
         ..DiagnoseSettings::default()
-    };
-    for (e, m0) in [
-        (Effect::SoilDamping, env_f64("FLOOR_SOIL", 0.05)),
-        (Effect::AirInWater, env_f64("FLOOR_AIR", 2e-5)),
-        (Effect::WallThinning, env_f64("FLOOR_THIN", 0.08)),
-        (Effect::PipeLoss, env_f64("FLOOR_LOSS", 0.03)),
-    ] {
-        let mut rng = ChaCha8Rng::seed_from_u64(90_000 + e as u64);
-        let trials: Vec<_> = (0..n)
-            .map(|_| {
-                let material = if e == Effect::WallThinning {
-                    Material::CastIron
-                } else {
-                    mix_material(&mut rng)
-                };
-                let v = if e == Effect::WallThinning {
-                    1.0 - m0
-                } else {
-                    m0
-                };
-                loop {
-                    if let Some(t) = effect_trial(&mut rng, material, Some((e, v))) {
-                        break t;
-                    }
-                }
-            })
-            .collect();
-        let mut d0: Vec<f64> = trials
-            .par_iter()
-            .map(|t| {
-                let d = diagnose_segment(&t.data, None, &settings);
-                member_scores(&d)
-                    .iter()
-                    .find(|p| p.0 == e)
-                    .map(|p| p.1.sqrt())
-                    .unwrap_or(0.0)
-            })
-            .collect();
-        d0.sort_by(|a, b| a.total_cmp(b));
-        let med = d0[d0.len() / 2];
-        println!(
-            "{}: magnitude {m0} -> median sqrt(gain) {med:.2}; floor magnitude {:.3e}",
-            e.name(),
-            m0 * z_floor() / med
-        );
     }
 }
 
-fn mix_material<R: Rng>(rng: &mut R) -> Material {
-    let total: f64 = MATERIAL_MIX.iter().map(|m| m.1).sum();
+fn draw_trial<R: Rng>(rng: &mut R, material: Material, hidden: Option<(Effect, f64)>) -> Trial {
+    loop {
+        if let Some(t) = effect_trial(rng, material, hidden) {
+            break t;
+        }
+    }
+}
+
+/// Per effect and material: the one-segment floor. `n` segments carry the effect at a
+/// reference deviation m0; with δ0 the median √gain of the effect (member_gains), the next
+/// estimate is m1 = m0·z_floor/δ0 (√gain grows in proportion to the magnitude in the local
+/// model). A second pass at m1 gives δ1, and the floor is read off the power law √gain = c·m^q
+/// through the two passes (q from their ratio; the linear step when q ≤ 0, a noise-dominated
+/// pair). Each pass prints the median gain and the share of segments whose own diagnosis names
+/// the effect.
+fn floor(n: usize) {
+    let settings = settings();
+    let zf = z_floor();
+    println!(
+        "z_floor {zf:.3} (median gain at the floor {:.2}); {n} segments per pass",
+        zf * zf
+    );
+    for (ei, e) in EFFECTS.into_iter().enumerate() {
+        for (mi, (material, _)) in MATERIAL_MIX.into_iter().enumerate() {
+            if !e.applies_to(material) {
+                continue;
+            }
+            let cap = max_deviation(e, material);
+            let mut m = match e {
+                Effect::SoilDamping => 0.05,
+                Effect::AirInWater => 2e-5,
+                Effect::WallThinning => 0.08,
+                _ => 0.03,
+            };
+            let mut line = format!("{} {}:", e.name(), material.code());
+            let mut passes: Vec<(f64, f64)> = Vec::new();
+            for pass in 0..2u64 {
+                let mut rng =
+                    ChaCha8Rng::seed_from_u64(90_000 + 1000 * pass + 10 * ei as u64 + mi as u64);
+                let v = hidden_value(e, material, m);
+                let trials: Vec<Trial> = (0..n)
+                    .map(|_| draw_trial(&mut rng, material, Some((e, v))))
+                    .collect();
+                let res: Vec<(f64, bool)> = trials
+                    .par_iter()
+                    .map(|t| {
+                        let (g, own) = member(&settings, t);
+                        let gain = g.iter().find(|p| p.0 == e).map(|p| p.1).unwrap_or(0.0);
+                        (gain.max(0.0).sqrt(), own)
+                    })
+                    .collect();
+                let mut d: Vec<f64> = res.iter().map(|r| r.0).collect();
+                d.sort_by(|a, b| a.total_cmp(b));
+                let med = d[d.len() / 2];
+                let named = res.iter().filter(|r| r.1).count();
+                passes.push((m, med));
+                line += &format!(
+                    " at {m:.3e}: median gain {:.2}, named {named}/{n};",
+                    med * med
+                );
+                m = if med > 0.0 {
+                    m * zf / med
+                } else {
+                    f64::INFINITY
+                };
+                if pass == 1 {
+                    let ((m0, d0), (m1, d1)) = (passes[0], passes[1]);
+                    let q = (d0 / d1).ln() / (m0 / m1).ln();
+                    if q.is_finite() && q > 0.0 {
+                        m = m1 * (zf / d1).powf(1.0 / q);
+                    }
+                }
+                if m > cap {
+                    break;
+                }
+            }
+            if m > cap {
+                println!("{line} floor above the range (max {cap:.3e})");
+            } else {
+                println!("{line} floor {m:.3e}");
+            }
+        }
+    }
+}
+
+/// The material of a group carrying `e`: drawn from the synthetic network's mix among the
+/// materials where `e` applies and its floor lies inside its range (`None`: a clean group,
+/// any material).
+fn group_material<R: Rng>(rng: &mut R, e: Option<Effect>) -> Material {
+    let ok = |m: Material| e.is_none_or(|e| e.applies_to(m) && floor_of(e, m).is_some());
+    let total: f64 = MATERIAL_MIX.iter().filter(|m| ok(m.0)).map(|m| m.1).sum();
     let mut u = rng.gen::<f64>() * total;
-    for (m, w) in MATERIAL_MIX {
+    for (m, w) in MATERIAL_MIX.into_iter().filter(|m| ok(m.0)) {
         if u < w {
             return m;
         }
@@ -284,99 +381,99 @@ fn mix_material<R: Rng>(rng: &mut R) -> Material {
     Material::CastIron
 }
 
-fn real_groups(seeds: u64, base: u64) {
-    let settings = DiagnoseSettings {
-        candidates: Effect::PHYSICAL.to_vec(),
-        ..DiagnoseSettings::default()
-    };
-    let kinds = [
-        Some(Effect::SoilDamping),
-        Some(Effect::AirInWater),
-        Some(Effect::WallThinning),
-        Some(Effect::PipeLoss),
-        None,
-    ];
+/// The adopted test on refitted synthetic groups of 40 members: per seed, one group per effect
+/// (hidden in 8–16 of the 40 members, 20–40 %, at 0.8–1.2 × the floor of the group's material)
+/// and `clean` groups without an effect; each tested as one of 8 groups of a run.
+fn real_groups(seeds: u64, base: u64, clean: usize) {
+    let settings = settings();
+    let kinds: Vec<Option<Effect>> = EFFECTS
+        .into_iter()
+        .map(Some)
+        .chain(std::iter::repeat_n(None, clean))
+        .collect();
+    // Per (effect, material): groups, right first and significant, right or reported with it,
+    // any detection, own naming of the affected members, affected members.
+    let mut cells: BTreeMap<(String, String), [usize; 6]> = BTreeMap::new();
     let (mut det, mut n_eff, mut fa, mut n_clean, mut in_set) = (0, 0, 0, 0, 0);
     let (mut own_hit, mut own_n) = (0, 0);
+    let mut clean_p: Vec<f64> = Vec::new();
     for s in 0..seeds {
-        for (k, e) in kinds.into_iter().enumerate() {
-            let mut rng = ChaCha8Rng::seed_from_u64(base + 100_000 + 10 * s + k as u64);
-            let material = match e {
-                Some(Effect::WallThinning) => Material::CastIron,
-                _ => mix_material(&mut rng),
-            };
+        for (k, e) in kinds.iter().copied().enumerate() {
+            let mut rng = ChaCha8Rng::seed_from_u64(base + 100 * s + k as u64);
+            let material = group_material(&mut rng, e);
             let n_aff = if e.is_some() {
                 rng.gen_range(8..=16)
             } else {
                 0
             };
-            let trials: Vec<_> = (0..N)
+            let trials: Vec<Trial> = (0..N)
                 .map(|i| {
                     let hidden = e.filter(|_| i < n_aff).map(|e| {
-                        let (lo, hi) = near_floor(e);
-                        let v = if e == Effect::AirInWater {
-                            (lo.ln() + rng.gen::<f64>() * (hi.ln() - lo.ln())).exp()
-                        } else {
-                            rng.gen_range(lo..hi)
-                        };
-                        (e, v)
+                        let f =
+                            floor_of(e, material).expect("groups only where the floor is known");
+                        let m = (f * rng.gen_range(0.8..1.2)).min(max_deviation(e, material));
+                        (e, hidden_value(e, material, m))
                     });
-                    loop {
-                        if let Some(t) = effect_trial(&mut rng, material, hidden) {
-                            break t;
-                        }
-                    }
+                    draw_trial(&mut rng, material, hidden)
                 })
                 .collect();
-            let res: Vec<(Vec<(Effect, f64)>, bool)> = trials
-                .par_iter()
-                .map(|t| {
-                    let d = diagnose_segment(&t.data, None, &settings);
-                    let own = t.hidden.is_some_and(|(h, _)| d.named == Some(h));
-                    (member_scores(&d), own)
-                })
-                .collect();
+            let res: Vec<(Vec<(Effect, f64)>, bool)> =
+                trials.par_iter().map(|t| member(&settings, t)).collect();
             let scores: Vec<_> = res.iter().map(|r| r.0.clone()).collect();
-            own_hit += res.iter().filter(|r| r.1).count();
+            let named = res[..n_aff].iter().filter(|r| r.1).count();
+            own_hit += named;
             own_n += n_aff;
             let g = pooled_test("g", &(0..N).collect::<Vec<_>>(), &scores, 8);
-            let mut gains: Vec<f64> = e
-                .map(|e| {
-                    scores[..n_aff]
-                        .iter()
-                        .filter_map(|m| m.iter().find(|p| p.0 == e).map(|p| p.1))
-                        .collect()
-                })
-                .unwrap_or_default();
-            gains.sort_by(|a, b| a.total_cmp(b));
-            let med_gain = gains.get(gains.len() / 2).copied().unwrap_or(f64::NAN);
             let rank = e.and_then(|e| g.pooled.iter().position(|p| p.effect == e));
+            let key = (
+                e.map(|e| e.name()).unwrap_or("clean").to_string(),
+                material.code().to_string(),
+            );
+            let c = cells.entry(key).or_default();
+            c[0] += 1;
+            c[3] += g.effect.is_some() as usize;
+            c[4] += named;
+            c[5] += n_aff;
             match e {
                 Some(e) => {
                     n_eff += 1;
-                    det += (g.effect == Some(e)) as usize;
-                    in_set += (g.effect == Some(e) || g.ambiguous_with.contains(&e)) as usize;
+                    let right = g.effect == Some(e);
+                    let set = right || g.ambiguous_with.contains(&e);
+                    det += right as usize;
+                    in_set += set as usize;
+                    c[1] += right as usize;
+                    c[2] += set as usize;
                 }
                 None => {
                     n_clean += 1;
                     fa += g.effect.is_some() as usize;
+                    clean_p.push(g.p_value());
                 }
             }
             println!(
-                "seed {s} {} {} in {n_aff}/{N}: detected {} (p {:.2e}, level {:.1e}, true rank {:?}, carrying {}, median gain of the affected {med_gain:.1}, own naming {}/{n_aff})",
+                "seed {s} {} {} in {n_aff}/{N}: detected {} with {:?} (p {:.2e}, level {:.1e}, true rank {:?}, carrying {}, own naming {named}/{n_aff})",
                 material.code(),
                 e.map(|e| e.name()).unwrap_or("clean"),
                 g.effect.map(|e| e.name()).unwrap_or("none"),
+                g.ambiguous_with.iter().map(|e| e.name()).collect::<Vec<_>>(),
                 g.p_value(),
                 g.level,
                 rank.map(|r| r + 1),
                 g.carrying.len(),
-                res[..n_aff].iter().filter(|r| r.1).count()
             );
         }
     }
+    println!("| effect | material | groups | right first, p < level | right or reported with it | any detection | own naming |");
+    for ((e, m), c) in &cells {
+        println!(
+            "| {e} | {m} | {} | {} | {} | {} | {}/{} |",
+            c[0], c[1], c[2], c[3], c[4], c[5]
+        );
+    }
+    clean_p.sort_by(|a, b| a.total_cmp(b));
     println!(
-        "groups with an effect: detected (right effect first, p below level) {det}/{n_eff}, right effect detected or in the reported set {in_set}/{n_eff}; clean groups: false alarms {fa}/{n_clean}; affected members named by their own diagnosis {own_hit}/{own_n}"
+        "groups with an effect: detected (right effect first, p below level) {det}/{n_eff}, right effect detected or in the reported set {in_set}/{n_eff}; clean groups: false alarms {fa}/{n_clean} (smallest p {:.2e}); affected members named by their own diagnosis {own_hit}/{own_n}",
+        clean_p.first().copied().unwrap_or(f64::NAN)
     );
 }
 
@@ -386,8 +483,8 @@ fn main() {
     match args.get(1).map(String::as_str) {
         Some("curves") => curves(a(2, 20000.0) as usize, a(3, 2000.0) as usize, a(4, 1.0)),
         Some("null") => null_check(a(2, 100000.0) as usize),
-        Some("floor") => floor(a(2, 24.0) as usize),
-        Some("groups") => real_groups(a(2, 4.0) as u64, a(3, 0.0) as u64),
-        _ => eprintln!("usage: group_power curves [NULL_REPS] [ALT_REPS] [SHRINK] | null [REPS] | groups SEEDS [BASE]"),
+        Some("floor") => floor(a(2, 20.0) as usize),
+        Some("groups") => real_groups(a(2, 4.0) as u64, a(3, 0.0) as u64, a(4, 1.0) as usize),
+        _ => eprintln!("usage: group_power curves [NULL_REPS] [ALT_REPS] [SHRINK] | null [REPS] | floor [N] | groups SEEDS [BASE] [CLEAN_PER_SEED]"),
     }
 }

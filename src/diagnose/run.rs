@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use rusqlite::Connection;
 
-use super::group::{group_key, member_scores, test_groups, GroupBy, GroupTest};
+use super::group::{group_key, member_gains, test_groups, GroupBy, GroupTest};
 use super::inventory::{InventoryPipe, InventoryProfile};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
 use super::units::{convert_measurements, UnitMixUp};
@@ -299,7 +299,7 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
             *summary.named.entry(e.name().to_string()).or_default() += 1;
         }
     }
-    // Group detection: the pooled score test over each group, and the members of a detected
+    // Group detection: the pooled gain test over each group, and the members of a detected
     // group refitted with its effect.
     let zones = if opts.group_by == GroupBy::SoilZone {
         Some(soil_zones(conn)?.ok_or(DiagnoseError::NoZones)?)
@@ -322,8 +322,13 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
             )
         })
         .collect();
-    let scores: Vec<Vec<(Effect, f64)>> =
-        diags.iter().map(|d| member_scores(&d.diagnosis)).collect();
+    // Each member's gains, with the twin of a refitted compliance effect refitted too.
+    let scores: Vec<Vec<(Effect, f64)>> = pool.install(|| {
+        diags
+            .par_iter()
+            .map(|d| member_gains(&d.diagnosis, &d.settings))
+            .collect()
+    });
     let mut groups = test_groups(&keys, &scores);
     let rows = pool.install(|| refit_groups(&diags, &mut groups));
     summary.groups_detected = groups.iter().filter(|g| g.effect.is_some()).count();

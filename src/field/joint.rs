@@ -259,7 +259,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn normal(rng: &mut impl Rng) -> f64 {
-        crate::synth::normal(rng)
+        crate::stats::normal(rng)
     }
 
     fn hyper() -> Hyper {
