@@ -238,7 +238,7 @@ pub fn member_gains(
         effects.sort();
         effects.dedup();
         let fit = super::extended_fit(&d.data, settings, effects, &d.base);
-        if fit.status == crate::invert::FitStatus::Failed {
+        if fit.status == crate::types::FitStatus::Failed {
             continue;
         }
         let lr = chi2_base - super::Residuals::of(&d.data, &fit.predicted).chi2();
