@@ -1,0 +1,136 @@
+//! How often the default fit ends more than 0.1 in χ² above the independent yardstick
+//! (`invert::yardstick`), over fresh realistic networks, and which search stage found each
+//! answer; with `exhaustive`, also how often the yardstick reaches the χ² of the default
+//! search run far longer (`bench::exhaustive_fit`).
+//!
+//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]
+//!
+//! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
+//! do not depend on JOBS.
+
+use std::time::Instant;
+
+use pipewave::bench::{bench_network, exhaustive_fit, MaterialMix, VERIFY_DCHI2_MAX};
+use pipewave::invert::yardstick::yardstick;
+use pipewave::invert::{fit_segment, FitSettings, StageStatistics};
+use rayon::prelude::*;
+
+/// One segment's figures.
+struct Row {
+    id: String,
+    material: pipewave::physics::Material,
+    fit: f64,
+    yard: f64,
+    exhaustive: Option<f64>,
+    yard_evaluations: usize,
+    provenance: pipewave::invert::Provenance,
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]";
+    let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
+    let parsed = (|| -> Result<(MaterialMix, u64, u64, usize, usize), String> {
+        Ok((
+            arg(1).parse()?,
+            arg(2).parse().map_err(|e| format!("SEED: {e}"))?,
+            arg(3).parse().map_err(|e| format!("NETWORKS: {e}"))?,
+            arg(4).parse().map_err(|e| format!("SEGMENTS: {e}"))?,
+            arg(5).parse().map_err(|e| format!("JOBS: {e}"))?,
+        ))
+    })();
+    let (mix, seed, networks, segments, jobs) = match parsed {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("{e}\nusage: {usage}");
+            std::process::exit(2);
+        }
+    };
+    let exhaustive = arg(6) == "exhaustive";
+    let settings = FitSettings::default();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+        .expect("a thread pool");
+    let started = Instant::now();
+    let mut rows: Vec<Row> = Vec::new();
+    for n in 0..networks {
+        let net = bench_network(segments, seed + n, mix);
+        rows.extend(pool.install(|| {
+            net.par_iter()
+                .map(|seg| {
+                    let fit = fit_segment(&seg.data, &settings, seg.seed);
+                    let yard = yardstick(&seg.data, &settings);
+                    Row {
+                        id: format!("{}/{}", seed + n, seg.id),
+                        material: seg.material,
+                        fit: fit.misfit,
+                        yard: yard.as_ref().map_or(f64::NAN, |y| y.misfit),
+                        yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
+                        exhaustive: exhaustive.then(|| exhaustive_fit(seg).misfit),
+                        provenance: fit.provenance,
+                    }
+                })
+                .collect::<Vec<_>>()
+        }));
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    let total = rows.len();
+    let excess = |r: &Row| r.fit - r.yard.min(r.fit);
+    let misses: Vec<&Row> = rows
+        .iter()
+        .filter(|r| excess(r).is_nan() || excess(r) > VERIFY_DCHI2_MAX)
+        .collect();
+    println!(
+        "{total} segments ({networks} network(s) of {segments}, seeds {seed}..{}, {mix:?} mix), {:.0} s",
+        seed + networks - 1,
+        seconds
+    );
+    println!(
+        "  fit more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; yardstick not rated: {}; \
+         mean yardstick evaluations {:.0}",
+        misses.len(),
+        rows.iter().filter(|r| r.yard.is_nan()).count(),
+        rows.iter().map(|r| r.yard_evaluations).sum::<usize>() as f64 / total.max(1) as f64
+    );
+    for r in &misses {
+        println!(
+            "    {} ({:?}) fit {:.4} yardstick {:.4} won by {:?}",
+            r.id, r.material, r.fit, r.yard, r.provenance.winner
+        );
+    }
+    let below = rows.iter().filter(|r| r.yard < r.fit - 1e-6).count();
+    println!("  yardstick below the fit by more than 1e-6: {below}");
+    if exhaustive {
+        for tol in [1e-3, 1e-2, 0.1] {
+            let reached = rows
+                .iter()
+                .filter(|r| r.exhaustive.is_some_and(|e| r.yard <= e + tol))
+                .count();
+            println!("  yardstick within {tol} of the exhaustive chi2 or lower: {reached}/{total}");
+        }
+        for r in rows
+            .iter()
+            .filter(|r| r.exhaustive.is_some_and(|e| r.yard > e + 0.01))
+        {
+            println!(
+                "    {} ({:?}) yardstick {:.4} exhaustive {:.4} fit {:.4}",
+                r.id,
+                r.material,
+                r.yard,
+                r.exhaustive.unwrap_or(f64::NAN),
+                r.fit
+            );
+        }
+        let fit_over = rows
+            .iter()
+            .filter(|r| r.exhaustive.is_some_and(|e| r.fit > e + VERIFY_DCHI2_MAX))
+            .count();
+        println!("  fit more than {VERIFY_DCHI2_MAX} above the exhaustive chi2: {fit_over}");
+    }
+    let mut stages = StageStatistics::default();
+    for r in &rows {
+        stages.observe(&r.provenance);
+    }
+    print!("{stages}");
+}
