@@ -217,7 +217,7 @@ impl StageStatistics {
         let mut better = [false; Stage::ALL.len()];
         for r in &p.stages {
             let i = r.stage.index();
-            seen[i] = true;
+            seen[i] |= r.stop != StageStop::NotApplicable;
             better[i] |= r.improvement() > 0.0 && r.best_before.is_finite();
             self.evaluations[i] += r.evaluations;
         }
@@ -239,7 +239,7 @@ impl StageStatistics {
         self.won(stage) as f64 / self.answered.max(1) as f64
     }
 
-    /// Fits in which the stage ran.
+    /// Fits in which the stage ran (its condition held at the best so far).
     pub fn ran(&self, stage: Stage) -> usize {
         self.ran[stage.index()]
     }
