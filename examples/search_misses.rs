@@ -3,16 +3,22 @@
 //! answer; with `exhaustive`, also how often the yardstick reaches the χ² of the default
 //! search run far longer (`bench::exhaustive_fit`).
 //!
-//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]
+//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]
+//!
+//! With `sweep`, each segment is also fitted with the prototype global stage in the speed
+//! coordinates (`invert::sweep`), timed on the thread's CPU clock alternately with today's
+//! search, and both are judged against the yardstick.
 //!
 //! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
 //! do not depend on JOBS.
 
 use std::time::Instant;
 
-use pipewave::bench::{bench_network, exhaustive_fit, MaterialMix, VERIFY_DCHI2_MAX};
+use pipewave::bench::{
+    bench_network, exhaustive_fit, thread_cpu_ms, Distribution, MaterialMix, VERIFY_DCHI2_MAX,
+};
 use pipewave::invert::yardstick::yardstick;
-use pipewave::invert::{fit_segment, FitSettings, StageStatistics};
+use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
 use rayon::prelude::*;
 
 /// One segment's figures.
@@ -24,11 +30,15 @@ struct Row {
     exhaustive: Option<f64>,
     yard_evaluations: usize,
     provenance: pipewave::invert::Provenance,
+    /// Today's fit: CPU ms and evaluations.
+    cost: (f64, usize),
+    /// The sweep's fit: χ², CPU ms, evaluations and provenance.
+    sweep: Option<(f64, f64, usize, pipewave::invert::Provenance)>,
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]";
+    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]";
     let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
     let parsed = (|| -> Result<(MaterialMix, u64, u64, usize, usize), String> {
         Ok((
@@ -47,7 +57,12 @@ fn main() {
         }
     };
     let exhaustive = arg(6) == "exhaustive";
+    let sweeping = arg(6) == "sweep";
     let settings = FitSettings::default();
+    let sweep_settings = FitSettings {
+        global: GlobalStage::SpeedSweep,
+        ..FitSettings::default()
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.max(1))
         .build()
@@ -58,8 +73,24 @@ fn main() {
         let net = bench_network(segments, seed + n, mix);
         rows.extend(pool.install(|| {
             net.par_iter()
-                .map(|seg| {
-                    let fit = fit_segment(&seg.data, &settings, seg.seed);
+                .enumerate()
+                .map(|(i, seg)| {
+                    let timed = |s: &FitSettings| {
+                        let t = thread_cpu_ms();
+                        let r = fit_segment(&seg.data, s, seg.seed);
+                        (thread_cpu_ms() - t, r)
+                    };
+                    // Alternate which search runs first, so that a slow phase of a shared
+                    // machine hits both alike.
+                    let (mut today, mut swept) = (None, None);
+                    for k in 0..2 {
+                        if (i + k) % 2 == 0 {
+                            today = Some(timed(&settings));
+                        } else if sweeping {
+                            swept = Some(timed(&sweep_settings));
+                        }
+                    }
+                    let (ms, fit) = today.expect("today's fit ran");
                     let yard = yardstick(&seg.data, &settings);
                     Row {
                         id: format!("{}/{}", seed + n, seg.id),
@@ -68,7 +99,9 @@ fn main() {
                         yard: yard.as_ref().map_or(f64::NAN, |y| y.misfit),
                         yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
                         exhaustive: exhaustive.then(|| exhaustive_fit(seg).misfit),
+                        cost: (ms, fit.evaluations),
                         provenance: fit.provenance,
+                        sweep: swept.map(|(ms, r)| (r.misfit, ms, r.evaluations, r.provenance)),
                     }
                 })
                 .collect::<Vec<_>>()
@@ -133,4 +166,52 @@ fn main() {
         stages.observe(&r.provenance);
     }
     print!("{stages}");
+    let cost = |name: &str, ms: Vec<f64>, evaluations: Vec<usize>| {
+        let d = Distribution::of(&ms);
+        println!(
+            "  {name}: CPU ms/fit median {:.1} p90 {:.1} p99 {:.1} max {:.1}; {:.0} evaluations/fit",
+            d.median,
+            d.p90,
+            d.p99,
+            d.max,
+            evaluations.iter().sum::<usize>() as f64 / evaluations.len().max(1) as f64
+        );
+    };
+    cost(
+        "today's search",
+        rows.iter().map(|r| r.cost.0).collect(),
+        rows.iter().map(|r| r.cost.1).collect(),
+    );
+    if sweeping {
+        let swept: Vec<(&Row, &(f64, f64, usize, pipewave::invert::Provenance))> = rows
+            .iter()
+            .filter_map(|r| r.sweep.as_ref().map(|s| (r, s)))
+            .collect();
+        cost(
+            "speed sweep   ",
+            swept.iter().map(|(_, s)| s.1).collect(),
+            swept.iter().map(|(_, s)| s.2).collect(),
+        );
+        let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
+        let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
+        println!(
+            "  speed sweep more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; \
+             above today's fit by more than {VERIFY_DCHI2_MAX}: {}; below it: {}",
+            misses.len(),
+            swept
+                .iter()
+                .filter(|(r, s)| s.0 > r.fit + VERIFY_DCHI2_MAX)
+                .count(),
+            swept
+                .iter()
+                .filter(|(r, s)| s.0 < r.fit - VERIFY_DCHI2_MAX)
+                .count()
+        );
+        for (r, s) in misses {
+            println!(
+                "    {} ({:?}) sweep {:.4} today {:.4} yardstick {:.4}",
+                r.id, r.material, s.0, r.fit, r.yard
+            );
+        }
+    }
 }

@@ -19,6 +19,7 @@ use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
 use super::provenance::{Provenance, SearchError, Stage, StageRecord, StageStop};
+use super::sweep::{self, GlobalStage};
 use super::uncertainty::{determine, propagate, Determined, Interval, WithError};
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, LmStopReason, Objective,
@@ -45,6 +46,8 @@ pub struct FitSettings {
     pub restarts: usize,
     /// Evaluation budget of one default-method DE run, per fitted parameter.
     pub evaluations_per_dimension: usize,
+    /// The default method's global stage (today's DE and probes, or the prototype sweep).
+    pub global: GlobalStage,
 }
 
 impl Default for FitSettings {
@@ -56,6 +59,7 @@ impl Default for FitSettings {
             effects: Vec::new(),
             restarts: DEFAULT_RESTARTS,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
+            global: GlobalStage::De,
         }
     }
 }
@@ -70,6 +74,7 @@ impl FitSettings {
             effects: Vec::new(),
             restarts: 1,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
+            global: GlobalStage::De,
         }
     }
 }
@@ -650,7 +655,30 @@ fn search(
     // The stage that found each optimum, and what each stage did.
     let mut found_by: Vec<Stage> = Vec::with_capacity(restarts + 1);
     let mut stages: Vec<StageRecord> = Vec::new();
-    for r in 0..restarts {
+    // The prototype sweep in the speed coordinates instead of the DE runs and the probes.
+    let sweeping = settings.global == GlobalStage::SpeedSweep
+        && settings.method == Method::Default
+        && sweep::applies(problem);
+    if sweeping {
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let found = sweep::sweep(problem, bounds);
+        let n = found.len();
+        for (o, c) in found {
+            optima.push(o);
+            capped.push(c);
+            found_by.push(Stage::SpeedSweep);
+        }
+        let stop = if n > 0 {
+            StageStop::Polished {
+                starts: n,
+                optima: n,
+            }
+        } else {
+            StageStop::NoFiniteOptimum
+        };
+        stages.push(record(problem, Stage::SpeedSweep, stop, e0, b0, &optima));
+    }
+    for r in (0..restarts).filter(|_| !sweeping) {
         let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
         let de = de_for(settings, problem)?;
@@ -686,7 +714,8 @@ fn search(
         };
         stages.push(record(problem, Stage::NestedStart, stop, e0, b0, &optima));
     }
-    let pieces = probes::Pieces::new(problem).filter(|_| settings.method == Method::Default);
+    let pieces =
+        probes::Pieces::new(problem).filter(|_| settings.method == Method::Default && !sweeping);
     if let Some(pieces) = pieces {
         // The contact probe from each optimum of the DE runs (and the start), best first, but
         // one whose coordinates all lie within [`SAME_OPTIMUM_FRACTION`] of their range of

@@ -24,6 +24,7 @@ pub mod probes;
 pub mod problem;
 pub mod provenance;
 pub mod speed;
+pub mod sweep;
 pub mod uncertainty;
 pub mod yardstick;
 
@@ -34,4 +35,5 @@ pub use fit::{
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
 pub use provenance::{Provenance, SearchError, Stage, StageStatistics, StageStop};
+pub use sweep::GlobalStage;
 pub use uncertainty::{Interval, WithError};

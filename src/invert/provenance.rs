@@ -31,11 +31,13 @@ pub enum Stage {
     GrazingRescan,
     /// The answer's continued polish (it refines an optimum another stage found).
     ContinuedPolish,
+    /// The prototype sweep over c_P in the speed coordinates ([`super::sweep`]), polished.
+    SpeedSweep,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 9] = [
+    pub const ALL: [Stage; 10] = [
         Stage::Global,
         Stage::NestedStart,
         Stage::Contact,
@@ -45,6 +47,7 @@ impl Stage {
         Stage::Edge,
         Stage::GrazingRescan,
         Stage::ContinuedPolish,
+        Stage::SpeedSweep,
     ];
 
     /// Name used in reports.
@@ -59,6 +62,7 @@ impl Stage {
             Stage::Edge => "edge",
             Stage::GrazingRescan => "grazing rescan",
             Stage::ContinuedPolish => "continued polish",
+            Stage::SpeedSweep => "speed sweep",
         }
     }
 
