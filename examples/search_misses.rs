@@ -28,6 +28,8 @@ struct Row {
     fit: f64,
     yard: f64,
     exhaustive: Option<f64>,
+    /// Where the exhaustive search's and the yardstick's optima lie, in the speed coordinates.
+    places: String,
     yard_evaluations: usize,
     provenance: pipewave::invert::Provenance,
     /// Today's fit: CPU ms and evaluations.
@@ -70,7 +72,11 @@ fn main() {
     let started = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     for n in 0..networks {
-        let net = bench_network(segments, seed + n, mix);
+        let mut net = bench_network(segments, seed + n, mix);
+        // ONLY=ID,ID,…: only these segments of each network (to look at a few again).
+        if let Ok(only) = std::env::var("ONLY") {
+            net.retain(|s| only.split(',').any(|id| id == s.id));
+        }
         rows.extend(pool.install(|| {
             net.par_iter()
                 .enumerate()
@@ -92,13 +98,15 @@ fn main() {
                     }
                     let (ms, fit) = today.expect("today's fit ran");
                     let yard = yardstick(&seg.data, &settings);
+                    let ex = exhaustive.then(|| exhaustive_fit(seg));
                     Row {
                         id: format!("{}/{}", seed + n, seg.id),
                         material: seg.material,
                         fit: fit.misfit,
                         yard: yard.as_ref().map_or(f64::NAN, |y| y.misfit),
                         yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
-                        exhaustive: exhaustive.then(|| exhaustive_fit(seg).misfit),
+                        exhaustive: ex.as_ref().map(|e| e.misfit),
+                        places: places(&seg.data, ex.as_ref(), yard.as_ref().ok()),
                         cost: (ms, fit.evaluations),
                         provenance: fit.provenance,
                         sweep: swept.map(|(ms, r)| (r.misfit, ms, r.evaluations, r.provenance)),
@@ -147,12 +155,13 @@ fn main() {
             .filter(|r| r.exhaustive.is_some_and(|e| r.yard > e + 0.01))
         {
             println!(
-                "    {} ({:?}) yardstick {:.4} exhaustive {:.4} fit {:.4}",
+                "    {} ({:?}) yardstick {:.4} exhaustive {:.4} fit {:.4}\n{}",
                 r.id,
                 r.material,
                 r.yard,
                 r.exhaustive.unwrap_or(f64::NAN),
-                r.fit
+                r.fit,
+                r.places
             );
         }
         let fit_over = rows
@@ -214,4 +223,51 @@ fn main() {
             );
         }
     }
+}
+
+/// The exhaustive optimum and the yardstick's in (c_P, c_S/c_P, ξ), with the measured and the
+/// model's phase speeds at the exhaustive optimum, m/s.
+fn places(
+    data: &pipewave::invert::SegmentData,
+    ex: Option<&pipewave::invert::FitResult>,
+    yard: Option<&pipewave::invert::yardstick::Yardstick>,
+) -> String {
+    use pipewave::invert::speed::speeds_of;
+    let rho = data.soil_density;
+    let measured: Vec<String> = data
+        .measurements
+        .iter()
+        .map(|m| format!("{:.1}", m.phase_speed()))
+        .collect();
+    let mut out = format!("      measured phase speeds {}", measured.join(" "));
+    if let Some(e) = ex.filter(|e| e.status != pipewave::invert::FitStatus::Failed) {
+        let (l, r) = speeds_of(
+            e.soil_modulus().unwrap_or(f64::NAN),
+            e.soil_poisson().unwrap_or(f64::NAN),
+            rho,
+        );
+        let model: Vec<String> = data
+            .measurements
+            .iter()
+            .zip(&e.predicted)
+            .map(|(m, k)| format!("{:.1}", m.omega / k.re))
+            .collect();
+        out += &format!(
+            "\n      exhaustive: c_P {:.2} r {:.4} xi {:.3}; model phase speeds {}",
+            l.exp(),
+            r,
+            e.contact().unwrap_or(f64::NAN),
+            model.join(" ")
+        );
+    }
+    if let Some(y) = yard {
+        let (l, r) = speeds_of(10f64.powf(y.x[0]), y.x[1], rho);
+        out += &format!(
+            "\n      yardstick:  c_P {:.2} r {:.4} xi {:.3}",
+            l.exp(),
+            r,
+            y.x[2]
+        );
+    }
+    out
 }
