@@ -25,8 +25,10 @@
 //! the grid (ties broken by position). The [`POLISHED`] best minima of both grids are polished
 //! by Levenberg–Marquardt in the search coordinates (so the polish stays in the search box, up
 //! to its faces), with central differences and up to [`POLISH_ITERATIONS`] iterations, and each
-//! polished point and its grid point are rated on the reference path (model §5.3–5.4): the
-//! yardstick is the lowest of those misfits.
+//! polished point and its grid point are rated on the reference path (model §5.3–5.4). An
+//! optimum on a cliff's edge (P44) stops the polish short, its finite differences crossing the
+//! cliff; so the [`ZOOMED`] best rated points are also zoomed into by a derivative-free pattern
+//! search in (ln c_P, r, ξ) ([`zoom`]) and rated. The yardstick is the lowest of those misfits.
 
 use crate::optimize::{Bounds, FiniteDifference, LevenbergMarquardt, Objective};
 
@@ -51,6 +53,12 @@ pub const GAP_XI_POINTS: usize = 11;
 pub const POLISHED: usize = 12;
 /// Levenberg–Marquardt iterations of each polish at most.
 pub const POLISH_ITERATIONS: usize = 150;
+/// Best rated points zoomed into ([`zoom`]).
+pub const ZOOMED: usize = 4;
+/// Levels of the zoom.
+pub const ZOOM_LEVELS: usize = 8;
+/// The zoom's first steps in (ln c_P, r, ξ).
+pub const ZOOM_STEPS: [f64; 3] = [0.01, 0.01, 0.05];
 
 /// Why the yardstick cannot rate a segment.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -274,7 +282,8 @@ pub fn yardstick(data: &SegmentData, settings: &FitSettings) -> Result<Yardstick
         .map(|lm| lm.finite_difference(FiniteDifference::Central))
         .map(|lm| lm.final_jacobian(false))
         .map_err(|_| YardstickError::Unsupported)?;
-    let mut best: Option<(f64, Vec<f64>)> = None;
+    // Every rated point: (misfit on the reference path, search coordinates).
+    let mut rated: Vec<(f64, Vec<f64>)> = Vec::new();
     for &(_, l, r, xi) in &minima {
         let Some(x0) = coordinates(&region, l, r, xi) else {
             continue;
@@ -285,13 +294,26 @@ pub fn yardstick(data: &SegmentData, settings: &FitSettings) -> Result<Yardstick
             .filter(|p| p.cost.is_finite())
             .map(|p| p.x);
         for x in polished.into_iter().chain(std::iter::once(x0)) {
-            let rated = rate(&problem, &bounds, &x);
-            if rated.is_some_and(|f| best.as_ref().is_none_or(|(b, _)| f < *b)) {
-                best = rated.map(|f| (f, x));
+            if let Some(f) = rate(&problem, &bounds, &x) {
+                rated.push((f, x));
             }
         }
     }
-    let (misfit, x) = best.ok_or(YardstickError::NoReferenceRoot(minima.len()))?;
+    // A derivative-free zoom from the best rated points: an optimum on a cliff's edge (P44)
+    // stops the polish, whose finite differences cross the cliff, short of it.
+    rated.sort_by(|a, b| a.0.total_cmp(&b.0));
+    rated.dedup_by(|a, b| a.1 == b.1);
+    let starts: Vec<Vec<f64>> = rated.iter().take(ZOOMED).map(|r| r.1.clone()).collect();
+    for x0 in starts {
+        let x = zoom(&problem, &region, &bounds, &x0);
+        if let Some(f) = rate(&problem, &bounds, &x) {
+            rated.push((f, x));
+        }
+    }
+    let (misfit, x) = rated
+        .into_iter()
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .ok_or(YardstickError::NoReferenceRoot(minima.len()))?;
     Ok(Yardstick {
         misfit,
         x,
@@ -299,6 +321,56 @@ pub fn yardstick(data: &SegmentData, settings: &FitSettings) -> Result<Yardstick
         evaluations: problem.evaluations(),
         polished: minima.len(),
     })
+}
+
+/// The lowest point on the search path of a pattern search from `x0` in (ln c_P, r, ξ): at
+/// each of [`ZOOM_LEVELS`] levels the best of 5 × 5 × 5 points around the centre at
+/// [`ZOOM_STEPS`] (halved at each level, unless the best lies on the pattern's rim), inside the
+/// box.
+fn zoom(problem: &Problem<'_>, region: &SpeedBox, bounds: &Bounds, x0: &[f64]) -> Vec<f64> {
+    let (l0, r0) = super::speed::speeds_of(10f64.powf(x0[0]), x0[1], region.rho);
+    let mut centre = [l0, r0, x0[2]];
+    let mut best_x = x0.to_vec();
+    let mut best_f = problem.value(x0);
+    let mut h = ZOOM_STEPS;
+    for _ in 0..ZOOM_LEVELS {
+        let mut moved_to = None;
+        for a in -2i32..=2 {
+            for b in -2i32..=2 {
+                for c in -2i32..=2 {
+                    let p = [
+                        centre[0] + f64::from(a) * h[0],
+                        centre[1] + f64::from(b) * h[1],
+                        centre[2] + f64::from(c) * h[2],
+                    ];
+                    if !region.contains(p[0], p[1]) {
+                        continue;
+                    }
+                    let Some(x) = coordinates(region, p[0], p[1], p[2]) else {
+                        continue;
+                    };
+                    if !bounds.contains(&x) {
+                        continue;
+                    }
+                    let f = problem.value(&x);
+                    if f < best_f {
+                        best_f = f;
+                        best_x = x;
+                        moved_to = Some((p, a.abs() == 2 || b.abs() == 2 || c.abs() == 2));
+                    }
+                }
+            }
+        }
+        match moved_to {
+            Some((p, true)) => centre = p,
+            Some((p, false)) => {
+                centre = p;
+                h = h.map(|v| 0.5 * v);
+            }
+            None => h = h.map(|v| 0.5 * v),
+        }
+    }
+    best_x
 }
 
 /// The misfit at `x` (inside `bounds`) on the reference path, `None` where it finds no root.
