@@ -21,6 +21,9 @@ use pipewave::invert::yardstick::yardstick;
 use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
 use rayon::prelude::*;
 
+/// The sweep's fit of a segment: χ², CPU ms, evaluations and provenance.
+type Swept = (f64, f64, usize, pipewave::invert::Provenance);
+
 /// One segment's figures.
 struct Row {
     id: String,
@@ -34,8 +37,8 @@ struct Row {
     provenance: pipewave::invert::Provenance,
     /// Today's fit: CPU ms and evaluations.
     cost: (f64, usize),
-    /// The sweep's fit: χ², CPU ms, evaluations and provenance.
-    sweep: Option<(f64, f64, usize, pipewave::invert::Provenance)>,
+    /// The sweep's fit.
+    sweep: Option<Swept>,
 }
 
 fn main() {
@@ -192,7 +195,7 @@ fn main() {
         rows.iter().map(|r| r.cost.1).collect(),
     );
     if sweeping {
-        let swept: Vec<(&Row, &(f64, f64, usize, pipewave::invert::Provenance))> = rows
+        let swept: Vec<(&Row, &Swept)> = rows
             .iter()
             .filter_map(|r| r.sweep.as_ref().map(|s| (r, s)))
             .collect();
