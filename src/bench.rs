@@ -381,6 +381,8 @@ pub struct TimedFit {
     /// Wall time of building the result after the search (what the data determine: soil
     /// speeds, intervals, the curve with its errors, findings), ms.
     pub result_ms: f64,
+    /// Which stage of the search found the answer, and what every stage did.
+    pub provenance: crate::invert::Provenance,
 }
 
 /// Fit one segment with its stored curve (what a `calibrate` worker does: the fit result
@@ -397,6 +399,7 @@ pub fn timed_fit(seg: &BenchSegment, settings: &crate::invert::FitSettings) -> T
         evaluations: r.evaluations,
         misfit: r.misfit,
         failed: r.status == crate::types::FitStatus::Failed,
+        provenance: r.provenance,
     }
 }
 
@@ -504,6 +507,14 @@ impl NetworkRun {
     pub fn failed(&self) -> usize {
         self.fits.iter().filter(|f| f.failed).count()
     }
+    /// What the search's stages did over these fits.
+    pub fn stages(&self) -> crate::invert::StageStatistics {
+        let mut s = crate::invert::StageStatistics::default();
+        for f in &self.fits {
+            s.observe(&f.provenance);
+        }
+        s
+    }
 }
 
 /// Time the current algorithm and pipewave 0.1 on every segment of `net`, one core, back to
@@ -573,17 +584,35 @@ pub fn print_network_figures(label: &str, cur: &NetworkRun, old: &NetworkRun) {
          speeds, intervals, curve with errors, findings; issue 9)",
         100.0 * res / all.max(f64::MIN_POSITIVE)
     );
+    print!("{}", cur.stages());
 }
 
-/// Evaluations per parameter of each DE run of the exhaustive search of `bench --verify`:
+/// Evaluations per parameter of each DE run of the exhaustive search ([`exhaustive_fit`]):
 /// about 29× the default budget ([`crate::invert::fit::DEFAULT_EVALUATIONS_PER_DIMENSION`]).
-/// Fixed, not a multiple of the default budget, so that a cheaper default fit is not judged
-/// against a weaker reference.
-pub const VERIFY_EVALUATIONS_PER_DIMENSION: usize = 3200;
-/// Restarts of the exhaustive search of `bench --verify`.
-pub const VERIFY_RESTARTS: usize = 6;
-/// `bench --verify` passes when no segment's χ² is more than this above the exhaustive one.
+pub const EXHAUSTIVE_EVALUATIONS_PER_DIMENSION: usize = 3200;
+/// Restarts of the exhaustive search ([`exhaustive_fit`]).
+pub const EXHAUSTIVE_RESTARTS: usize = 6;
+/// `bench --verify` passes when no segment's χ² is more than this above the yardstick's.
 pub const VERIFY_DCHI2_MAX: f64 = 0.1;
+
+/// The default fit's own search run far longer: [`EXHAUSTIVE_RESTARTS`] DE runs of
+/// [`EXHAUSTIVE_EVALUATIONS_PER_DIMENSION`] evaluations per parameter, probes included, from
+/// another seed. `bench --verify` judged the fit against it up to fit algorithm 20; it shares
+/// the search's code, so it now serves only to check the yardstick
+/// ([`crate::invert::yardstick`]) against what the search itself can reach
+/// (`examples/search_misses.rs`).
+pub fn exhaustive_fit(seg: &BenchSegment) -> crate::invert::FitResult {
+    let exhaustive = crate::invert::FitSettings {
+        restarts: EXHAUSTIVE_RESTARTS,
+        evaluations_per_dimension: EXHAUSTIVE_EVALUATIONS_PER_DIMENSION,
+        ..crate::invert::FitSettings::default()
+    };
+    crate::invert::fit_segment(
+        &seg.data,
+        &exhaustive,
+        crate::seed::splitmix64(seg.seed ^ 0x5eed),
+    )
+}
 
 /// One segment of `bench --verify`.
 #[derive(Debug, Clone)]
@@ -594,45 +623,40 @@ pub struct VerifyRow {
     pub material: crate::physics::Material,
     /// χ² of the default fit.
     pub chi2: f64,
-    /// χ² of the exhaustive search ([`VERIFY_EVALUATIONS_PER_DIMENSION`] per parameter,
-    /// [`VERIFY_RESTARTS`] restarts, another seed).
-    pub chi2_exhaustive: f64,
+    /// χ² of the independent yardstick ([`crate::invert::yardstick`]); NaN where it could not
+    /// rate the segment.
+    pub chi2_yardstick: f64,
+    /// Forward evaluations of the yardstick.
+    pub yardstick_evaluations: usize,
+    /// Which stage of the search found the fit's answer, and what every stage did.
+    pub provenance: crate::invert::Provenance,
 }
 
 impl VerifyRow {
-    /// χ² of the default fit above the exhaustive one (NaN when either failed).
+    /// χ² of the default fit above the yardstick's (0 where the fit is lower or the yardstick
+    /// could not rate the segment; NaN when the fit failed).
     pub fn excess(&self) -> f64 {
-        self.chi2 - self.chi2_exhaustive.min(self.chi2)
+        self.chi2 - self.chi2_yardstick.min(self.chi2)
     }
 }
 
-/// Fit every segment of `net` with the default settings and with an exhaustive search, on
-/// `jobs` threads (the figures do not depend on the thread count).
+/// Fit every segment of `net` with the default settings and rate it with the independent
+/// yardstick, on `jobs` threads (the figures do not depend on the thread count).
 pub fn verify(net: &[BenchSegment], jobs: usize) -> Vec<VerifyRow> {
     use rayon::prelude::*;
-    let exhaustive = crate::invert::FitSettings {
-        restarts: VERIFY_RESTARTS,
-        evaluations_per_dimension: VERIFY_EVALUATIONS_PER_DIMENSION,
-        ..crate::invert::FitSettings::default()
-    };
+    let settings = crate::invert::FitSettings::default();
     let work = || {
         net.par_iter()
             .map(|seg| {
-                let cur = crate::invert::fit_segment(
-                    &seg.data,
-                    &crate::invert::FitSettings::default(),
-                    seg.seed,
-                );
-                let ex = crate::invert::fit_segment(
-                    &seg.data,
-                    &exhaustive,
-                    crate::seed::splitmix64(seg.seed ^ 0x5eed),
-                );
+                let cur = crate::invert::fit_segment(&seg.data, &settings, seg.seed);
+                let yard = crate::invert::yardstick::yardstick(&seg.data, &settings);
                 VerifyRow {
                     id: seg.id.clone(),
                     material: seg.material,
                     chi2: cur.misfit,
-                    chi2_exhaustive: ex.misfit,
+                    chi2_yardstick: yard.as_ref().map_or(f64::NAN, |y| y.misfit),
+                    yardstick_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
+                    provenance: cur.provenance,
                 }
             })
             .collect()
@@ -646,9 +670,12 @@ pub fn verify(net: &[BenchSegment], jobs: usize) -> Vec<VerifyRow> {
     }
 }
 
-/// Print the worst case of `bench --verify`; true when every segment passes.
+/// Print the worst case of `bench --verify` and the share of fits each search stage won; true
+/// when every segment passes.
 pub fn print_verify(rows: &[VerifyRow]) -> bool {
+    use crate::invert::yardstick as y;
     let failed = rows.iter().filter(|r| !r.chi2.is_finite()).count();
+    let unrated = rows.iter().filter(|r| r.chi2_yardstick.is_nan()).count();
     let worst = rows
         .iter()
         .filter(|r| r.chi2.is_finite())
@@ -658,28 +685,39 @@ pub fn print_verify(rows: &[VerifyRow]) -> bool {
         .filter(|r| r.excess().is_nan() || r.excess() > VERIFY_DCHI2_MAX)
         .count();
     let default = crate::invert::FitSettings::default();
+    let evaluations = rows.iter().map(|r| r.yardstick_evaluations).sum::<usize>() as f64
+        / rows.len().max(1) as f64;
     println!(
         "verify: {} segments, default fit ({} evaluations per parameter, {} restarts) against \
-         {} per parameter with {} restarts",
+         the yardstick: a grid of ln c_P every {} (and {:?} of each gap between measured phase \
+         speeds) by {} values of c_S/c_P by {} of the contact ({} by {} at the gap points), \
+         its {} best minima polished ({:.0} evaluations a segment)",
         rows.len(),
         default.evaluations_per_dimension,
         default.restarts,
-        VERIFY_EVALUATIONS_PER_DIMENSION,
-        VERIFY_RESTARTS
+        y::LN_CP_STEP,
+        y::GAP_FRACTIONS,
+        y::R_POINTS,
+        y::XI_POINTS,
+        y::GAP_R_POINTS,
+        y::GAP_XI_POINTS,
+        y::POLISHED,
+        evaluations
     );
     if let Some(w) = worst {
         println!(
-            "  worst: {} ({:?}) chi2 {:.4} vs exhaustive {:.4}: {:+.4}",
+            "  worst: {} ({:?}) chi2 {:.4} vs yardstick {:.4}: {:+.4}",
             w.id,
             w.material,
             w.chi2,
-            w.chi2_exhaustive,
+            w.chi2_yardstick,
             w.excess()
         );
     }
     println!(
-        "  {} segment(s) more than {} above the exhaustive chi2 (failed fits count), {} failed",
-        over, VERIFY_DCHI2_MAX, failed
+        "  {} segment(s) more than {} above the yardstick's chi2 (failed fits count), {} failed, \
+         {} not rated by the yardstick",
+        over, VERIFY_DCHI2_MAX, failed, unrated
     );
     let mut listed: Vec<&VerifyRow> = rows
         .iter()
@@ -688,14 +726,19 @@ pub fn print_verify(rows: &[VerifyRow]) -> bool {
     listed.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
     for r in listed {
         println!(
-            "    {} ({:?}) chi2 {:.4} vs exhaustive {:.4}: {:+.4}",
+            "    {} ({:?}) chi2 {:.4} vs yardstick {:.4}: {:+.4}",
             r.id,
             r.material,
             r.chi2,
-            r.chi2_exhaustive,
+            r.chi2_yardstick,
             r.excess()
         );
     }
+    let mut stages = crate::invert::StageStatistics::default();
+    for r in rows {
+        stages.observe(&r.provenance);
+    }
+    print!("{stages}");
     over == 0
 }
 

@@ -2,7 +2,8 @@
 //!
 //! Without options: per-fit times on a realistic synthetic network (`--network N`,
 //! `--materials plastic-heavy`), against pipewave 0.1 in the same run, then forward-model and
-//! single-segment inversion figures. `--verify N`: the default fit against an exhaustive search. `--calibrate N`: calibrate throughput on N synthetic
+//! single-segment inversion figures. `--verify N`: the default fit against the independent yardstick (a dense grid in the soil
+//! speeds, polished). `--calibrate N`: calibrate throughput on N synthetic
 //! segments. `--recovery DIR`: how well the calibration of a synthetic network directory
 //! recovered its truth (imports and calibrates DIR first, as `run` does, if needed).
 
@@ -44,8 +45,9 @@ pub struct BenchArgs {
     /// Material mix of that network: default (the synthetic network's) or plastic-heavy.
     #[arg(long, value_name = "MIX", default_value = "default")]
     materials: pipewave::synth::bench::MaterialMix,
-    /// Compare the default fit with an exhaustive search on N segments of a realistic network
-    /// and print the worst case.
+    /// Compare the default fit with the independent yardstick (a dense grid in the soil speeds
+    /// and the contact, its best minima polished) on N segments of a realistic network; print
+    /// the worst case and the share of fits each search stage won.
     #[arg(long, value_name = "N")]
     verify: Option<usize>,
     /// Database of --recovery (default: DIR/pipewave.sqlite).

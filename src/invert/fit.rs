@@ -15,6 +15,8 @@ use super::probes;
 use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
+use super::provenance::{Provenance, SearchError, Stage, StageRecord, StageStop};
+use super::sweep::{self, GlobalStage};
 use super::uncertainty::{determine, propagate, Determined, Interval, WithError};
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, LmStopReason, Objective,
@@ -42,6 +44,8 @@ pub struct FitSettings {
     pub restarts: usize,
     /// Evaluation budget of one default-method DE run, per fitted parameter.
     pub evaluations_per_dimension: usize,
+    /// The default method's global stage (today's DE and probes, or the prototype sweep).
+    pub global: GlobalStage,
 }
 
 impl Default for FitSettings {
@@ -53,6 +57,7 @@ impl Default for FitSettings {
             effects: Vec::new(),
             restarts: DEFAULT_RESTARTS,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
+            global: GlobalStage::De,
         }
     }
 }
@@ -67,6 +72,7 @@ impl FitSettings {
             effects: Vec::new(),
             restarts: 1,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
+            global: GlobalStage::De,
         }
     }
 }
@@ -232,6 +238,8 @@ pub struct FitResult {
     /// Wall-clock time of building the result after the search (uncertainty, curve with
     /// errors, findings), s: what reporting what the data determine costs (`pipewave bench`).
     pub result_seconds: f64,
+    /// Which stage of the search found the answer, and what every stage did.
+    pub provenance: Provenance,
 }
 
 impl FitResult {
@@ -294,7 +302,15 @@ impl FitResult {
             curve_source: CurveSource::Model,
             leak_band_extrapolation_octaves: None,
             result_seconds: 0.0,
+            provenance: Provenance::default(),
         }
+    }
+
+    /// A failed fit whose search gave the typed reason `e`.
+    fn failed_by(settings: &FitSettings, weighting: Weighting, n: usize, e: SearchError) -> Self {
+        let mut r = Self::failed(settings, weighting, n, e.to_string());
+        r.provenance.error = Some(e);
+        r
     }
 }
 
@@ -419,12 +435,7 @@ fn fit_from(
     let problem = problem_for(data, settings);
     let n_meas = data.measurements.len();
     if n_meas == 0 {
-        return FitResult::failed(
-            settings,
-            problem.weighting,
-            0,
-            "no measurements for this segment".into(),
-        );
+        return FitResult::failed_by(settings, problem.weighting, 0, SearchError::NoMeasurements);
     }
     let start = base.and_then(|b| nested_start(&problem, b));
     let first = fit_once(data, settings, seed, start.as_deref());
@@ -446,13 +457,12 @@ fn fit_from(
     );
     let evaluations = first.evaluations + second.evaluations;
     let result_seconds = first.result_seconds + second.result_seconds;
-    let mut r = if second.status != FitStatus::Failed && second.misfit < first.misfit {
-        second
-    } else {
-        first
-    };
+    let from_second = second.status != FitStatus::Failed && second.misfit < first.misfit;
+    let mut r = if from_second { second } else { first };
     r.evaluations = evaluations;
     r.result_seconds = result_seconds;
+    r.provenance.searches = 2;
+    r.provenance.from_second_search = from_second;
     r
 }
 
@@ -507,15 +517,19 @@ fn fit_once(
                     r
                 }
                 Err(e) => {
-                    let mut r = FitResult::failed(settings, problem.weighting, n_meas, e);
+                    let mut r = FitResult::failed_by(settings, problem.weighting, n_meas, e);
                     r.evaluations = problem.evaluations() + safe.evaluations();
+                    r.provenance.path = Some(SolvePath::Safe);
+                    r.provenance.searches = 1;
                     r
                 }
             }
         }
         Err(e) => {
-            let mut r = FitResult::failed(settings, problem.weighting, n_meas, e);
+            let mut r = FitResult::failed_by(settings, problem.weighting, n_meas, e);
             r.evaluations = problem.evaluations();
+            r.provenance.path = Some(SolvePath::Fast);
+            r.provenance.searches = 1;
             r
         }
     }
@@ -547,6 +561,37 @@ fn nested_start(problem: &Problem<'_>, base: &BaseOptimum) -> Option<Vec<f64>> {
 type ProbeFn<'f> =
     &'f dyn Fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
 
+/// The best misfit among `optima` (+∞ when there is none).
+fn best_cost(optima: &[Optimum]) -> f64 {
+    optima.iter().map(|o| o.cost).fold(f64::INFINITY, f64::min)
+}
+
+/// What the search found: its optima, the stage that found each, and the record of every
+/// stage.
+struct Searched {
+    optima: Vec<Optimum>,
+    found_by: Vec<Stage>,
+    stages: Vec<StageRecord>,
+}
+
+/// The record of a stage that began with `best_before` and `evaluations_before` evaluations.
+fn record(
+    problem: &Problem<'_>,
+    stage: Stage,
+    stop: StageStop,
+    evaluations_before: usize,
+    best_before: f64,
+    optima: &[Optimum],
+) -> StageRecord {
+    StageRecord {
+        stage,
+        stop,
+        evaluations: problem.evaluations() - evaluations_before,
+        best_before,
+        best_after: best_cost(optima),
+    }
+}
+
 /// The search: every restart's DE run polished, and the nested start polished.
 fn search(
     problem: &Problem<'_>,
@@ -554,35 +599,75 @@ fn search(
     seed: u64,
     bounds: &crate::optimize::Bounds,
     start: Option<&[f64]>,
-) -> Result<Vec<Optimum>, String> {
+) -> Result<Searched, SearchError> {
     let restarts = settings.restarts.max(1);
     let mut optima: Vec<Optimum> = Vec::with_capacity(restarts + 1);
     // Whether each optimum's polish stopped at its iteration cap, still descending.
     let mut capped: Vec<bool> = Vec::with_capacity(restarts + 1);
-    for r in 0..restarts {
+    // The stage that found each optimum, and what each stage did.
+    let mut found_by: Vec<Stage> = Vec::with_capacity(restarts + 1);
+    let mut stages: Vec<StageRecord> = Vec::new();
+    // The prototype sweep in the speed coordinates instead of the DE runs and the probes.
+    let sweeping = settings.global == GlobalStage::SpeedSweep
+        && settings.method == Method::Default
+        && sweep::applies(problem);
+    if sweeping {
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let found = sweep::sweep(problem, bounds);
+        let n = found.len();
+        for (o, c) in found {
+            optima.push(o);
+            capped.push(c);
+            found_by.push(Stage::SpeedSweep);
+        }
+        let stop = if n > 0 {
+            StageStop::Polished {
+                starts: n,
+                optima: n,
+            }
+        } else {
+            StageStop::NoFiniteOptimum
+        };
+        stages.push(record(problem, Stage::SpeedSweep, stop, e0, b0, &optima));
+    }
+    for r in (0..restarts).filter(|_| !sweeping) {
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
-        let de = de_for(settings, problem).map_err(|e| e.to_string())?;
-        let res = de
-            .minimize(problem, bounds, &mut rng)
-            .map_err(|e| e.to_string())?;
+        let de = de_for(settings, problem)?;
+        let res = de.minimize(problem, bounds, &mut rng)?;
         if !res.f.is_finite()
             || (settings.method == Method::Paper && res.f >= FAILED_SOLVE_OBJECTIVE)
         {
+            let stop = StageStop::NoFiniteOptimum;
+            stages.push(record(problem, Stage::Global, stop, e0, b0, &optima));
             continue;
         }
         let (o, c) = refine(problem, settings, bounds, res.x, res.f);
         optima.push(o);
         capped.push(c);
+        found_by.push(Stage::Global);
+        let stop = StageStop::Population(res.stop_reason);
+        stages.push(record(problem, Stage::Global, stop, e0, b0, &optima));
     }
     if let Some(x0) = start {
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let f0 = problem.value(x0);
-        if f0.is_finite() {
+        let stop = if f0.is_finite() {
             let (o, c) = refine(problem, settings, bounds, x0.to_vec(), f0);
             optima.push(o);
             capped.push(c);
-        }
+            found_by.push(Stage::NestedStart);
+            StageStop::Polished {
+                starts: 1,
+                optima: 1,
+            }
+        } else {
+            StageStop::NoFiniteOptimum
+        };
+        stages.push(record(problem, Stage::NestedStart, stop, e0, b0, &optima));
     }
-    let pieces = probes::Pieces::new(problem).filter(|_| settings.method == Method::Default);
+    let pieces =
+        probes::Pieces::new(problem).filter(|_| settings.method == Method::Default && !sweeping);
     if let Some(pieces) = pieces {
         // The contact probe from each optimum of the DE runs (and the start), best first, but
         // one whose coordinates all lie within [`SAME_OPTIMUM_FRACTION`] of their range of
@@ -593,6 +678,8 @@ fn search(
         let mut order: Vec<usize> = (0..optima.len()).collect();
         order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
         let mut tried: Vec<Vec<f64>> = Vec::new();
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let mut contact_optima = 0;
         for i in order {
             let x = optima[i].x.clone();
             let same = |y: &Vec<f64>| {
@@ -604,9 +691,20 @@ fn search(
             if let Some((o, c)) = probes::contact_probe(&pieces, bounds, &optima[i]) {
                 optima.push(o);
                 capped.push(c);
+                found_by.push(Stage::Contact);
+                contact_optima += 1;
             }
             tried.push(x);
         }
+        let stop = if contact_optima > 0 {
+            StageStop::Polished {
+                starts: contact_optima,
+                optima: contact_optima,
+            }
+        } else {
+            StageStop::NotApplicable
+        };
+        stages.push(record(problem, Stage::Contact, stop, e0, b0, &optima));
         // Each probe starts from the best optimum so far.
         let best = |optima: &[Optimum]| {
             optima
@@ -614,24 +712,43 @@ fn search(
                 .min_by(|a, b| a.cost.total_cmp(&b.cost))
                 .cloned()
         };
-        let mut run_probe = |probe: ProbeFn, optima: &mut Vec<Optimum>| {
-            let Some(b) = best(optima) else { return };
-            for (o, c) in probe(&pieces, bounds, &b) {
-                optima.push(o);
-                capped.push(c);
+        let mut run_probe = |stage: Stage, probe: ProbeFn, optima: &mut Vec<Optimum>| {
+            let (e0, b0) = (problem.evaluations(), best_cost(optima));
+            let mut found = 0;
+            if let Some(b) = best(optima) {
+                for (o, c) in probe(&pieces, bounds, &b) {
+                    optima.push(o);
+                    capped.push(c);
+                    found_by.push(stage);
+                    found += 1;
+                }
             }
+            let stop = if found > 0 {
+                StageStop::Polished {
+                    starts: found,
+                    optima: found,
+                }
+            } else {
+                StageStop::NotApplicable
+            };
+            stages.push(record(problem, stage, stop, e0, b0, optima));
         };
-        run_probe(&probes::incompressible_probe, &mut optima);
-        run_probe(&probes::valley_end_probe, &mut optima);
+        run_probe(
+            Stage::Incompressible,
+            &probes::incompressible_probe,
+            &mut optima,
+        );
+        run_probe(Stage::ValleyEnd, &probes::valley_end_probe, &mut optima);
         // The grazing and edge probes again from a best they moved: its pieces are others.
         // The first round with the gap scan's starts (`probes::gap_scan`).
         for round in 0..GRAZING_ROUNDS {
             let before = best(&optima).map_or(f64::INFINITY, |o| o.cost);
             run_probe(
+                Stage::Grazing,
                 &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, round == 0),
                 &mut optima,
             );
-            run_probe(&probes::edge_probe, &mut optima);
+            run_probe(Stage::Edge, &probes::edge_probe, &mut optima);
             let after = best(&optima).map_or(f64::INFINITY, |o| o.cost);
             if after >= before - GRAZING_ROUND_GAIN {
                 break;
@@ -646,6 +763,7 @@ fn search(
         // own probes, cost more and mended no more.
         if best(&optima).is_some_and(|b| pieces.near_grazing(&b.x)) {
             run_probe(
+                Stage::GrazingRescan,
                 &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, true),
                 &mut optima,
             );
@@ -664,6 +782,8 @@ fn search(
     // 19.6 on a ductile-iron pipe), and the answer falls back to a worse basin, while the
     // central polish ends within 0.1 of the exhaustive search.
     if let Some(i) = best {
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let mut polished = 0;
         for (iterations, fd) in [
             (POLISH_ITERATIONS, FiniteDifference::Forward),
             (POLISH_MORE_ITERATIONS, FiniteDifference::Central),
@@ -675,6 +795,7 @@ fn search(
             if !go {
                 continue;
             }
+            polished += 1;
             let Some((o, c)) =
                 polish_with(problem, &optima[i].x, bounds, iterations, fd, Depth::Answer)
             else {
@@ -685,8 +806,28 @@ fn search(
                 capped[i] = c;
             }
         }
+        let stop = match (polished, capped[i]) {
+            (0, _) => StageStop::NotApplicable,
+            (_, true) => StageStop::PolishCapped,
+            (n, false) => StageStop::Polished {
+                starts: n,
+                optima: 0,
+            },
+        };
+        stages.push(record(
+            problem,
+            Stage::ContinuedPolish,
+            stop,
+            e0,
+            b0,
+            &optima,
+        ));
     }
-    Ok(optima)
+    Ok(Searched {
+        optima,
+        found_by,
+        stages,
+    })
 }
 
 /// Two optima are the same for the contact probe when each coordinate differs by at most this
@@ -733,9 +874,13 @@ fn run(
     settings: &FitSettings,
     seed: u64,
     start: Option<&[f64]>,
-) -> Result<FitResult, String> {
-    let bounds = problem.bounds().map_err(|e| e.to_string())?;
-    let mut optima = search(problem, settings, seed, &bounds, start)?;
+) -> Result<FitResult, SearchError> {
+    let bounds = problem.bounds()?;
+    let Searched {
+        mut optima,
+        found_by,
+        stages,
+    } = search(problem, settings, seed, &bounds, start)?;
     let mut order: Vec<usize> = (0..optima.len()).collect();
     order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
     if order.is_empty() {
@@ -756,6 +901,8 @@ fn run(
     // still be better (its search misfit is lower), so the checks go on while it is.
     let mut off_cliff_best = f64::INFINITY;
     let pieces = probes::Pieces::new(problem);
+    // Whether the answer, when it is optimum i, was moved off a cliff.
+    let mut moved_off: Vec<usize> = Vec::new();
     for &i in &order {
         if optima[i].cost >= off_cliff_best {
             break;
@@ -779,6 +926,7 @@ fn run(
                         optima[i].x = x;
                         check = Check::Roots(c);
                         moved = true;
+                        moved_off.push(i);
                         break;
                     }
                 }
@@ -820,22 +968,34 @@ fn run(
         // (tests/stress.rs) the reference path finds no root at the two DE optima of the fast
         // search (χ² 33.7 there), and the contact probe's optimum (χ² 1532) would be the
         // answer; the safe path's is χ² 33.7.
-        Some(c) if (c.agree && !unconfirmed) || problem.path != SolvePath::Fast => assemble(
-            problem,
-            settings,
-            &bounds,
-            &optima,
-            c.i,
-            c.sys,
-            c.predicted,
-            &c.roots,
-        ),
-        None if problem.path != SolvePath::Fast => Err(format!(
-            "forward solve failed at the optimum: {}",
-            failure
+        Some(c) if (c.agree && !unconfirmed) || problem.path != SolvePath::Fast => {
+            let provenance = Provenance {
+                winner: Some(found_by[c.i]),
+                stages,
+                path: Some(problem.path),
+                moved_off_cliff: moved_off.contains(&c.i),
+                searches: 1,
+                from_second_search: false,
+                error: None,
+            };
+            let mut r = assemble(
+                problem,
+                settings,
+                &bounds,
+                &optima,
+                c.i,
+                c.sys,
+                c.predicted,
+                &c.roots,
+            )?;
+            r.provenance = provenance;
+            Ok(r)
+        }
+        None if problem.path != SolvePath::Fast => Err(SearchError::NoRootAtOptimum {
+            reason: failure
                 .and_then(|sys| problem.reference_failure(&sys))
-                .unwrap_or_else(|| "no root on the search path".to_string())
-        )),
+                .unwrap_or_else(|| "no root on the search path".to_string()),
+        }),
         _ => {
             let mut r = FitResult::failed(
                 settings,
@@ -900,7 +1060,7 @@ fn check_at(problem: &Problem<'_>, i: usize, x: &[f64]) -> Check {
 /// Why no soil in the search range gives an s = 1 root: the reference solver's reason (e.g.
 /// grazing at a soil wave speed, no convergence) at the centre of the search box, a typical
 /// soil, so the user learns the physical cause rather than only that the search failed.
-fn no_root_anywhere(problem: &Problem<'_>, bounds: &crate::optimize::Bounds) -> String {
+fn no_root_anywhere(problem: &Problem<'_>, bounds: &crate::optimize::Bounds) -> SearchError {
     let centre: Vec<f64> = bounds
         .lower()
         .iter()
@@ -917,10 +1077,10 @@ fn no_root_anywhere(problem: &Problem<'_>, bounds: &crate::optimize::Bounds) -> 
         .zip(problem.values(&centre))
         .map(|(s, v)| format!("{} = {}", s.param.name(), crate::units::short(v)))
         .collect();
-    format!(
-        "no s = 1 root for any soil in the search range; for a typical soil ({}): {reason}",
-        soil.join(", ")
-    )
+    SearchError::NoRootAnywhere {
+        soil: soil.join(", "),
+        reason,
+    }
 }
 
 /// Build the result once from the search's optima.
@@ -934,7 +1094,7 @@ fn assemble(
     sys: System,
     predicted: Vec<Complex64>,
     roots: &[Root],
-) -> Result<FitResult, String> {
+) -> Result<FitResult, SearchError> {
     let started = std::time::Instant::now();
     let x = &optima[best_i].x;
     let n = problem.specs.len();
@@ -1067,6 +1227,7 @@ fn assemble(
         curve_source,
         leak_band_extrapolation_octaves: extrapolation_octaves(LEAK_BAND_HZ, &measured_hz),
         result_seconds: started.elapsed().as_secs_f64(),
+        provenance: Provenance::default(),
     })
 }
 

@@ -13,13 +13,19 @@
 //! `fit` searches and builds the result once; `probes` looks for the basins a search leaves
 //! unvisited (across a grazing cliff, towards ν_m → ½ and back along a valley of constant c_P,
 //! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure
-//! functions of what the search found.
+//! functions of what the search found; `provenance` records which stage found the answer and
+//! why each stage stopped; `speed` maps the soil to (ln c_P, c_S/c_P); `yardstick` is the
+//! independent dense-grid search `bench --verify` judges the fit against.
 pub mod discrepancy;
 pub mod fit;
 pub mod flags;
 pub mod probes;
 pub mod problem;
+pub mod provenance;
+pub mod speed;
+pub mod sweep;
 pub mod uncertainty;
+pub mod yardstick;
 
 pub use fit::{
     fit_extended, fit_segment, fit_with_effects, BaseOptimum, CurveSource, Estimate, FitResult,
@@ -27,4 +33,6 @@ pub use fit::{
 };
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
+pub use provenance::{Provenance, SearchError, Stage, StageStatistics, StageStop};
+pub use sweep::GlobalStage;
 pub use uncertainty::{Interval, WithError};

@@ -1,0 +1,276 @@
+//! How often the default fit ends more than 0.1 in χ² above the independent yardstick
+//! (`invert::yardstick`), over fresh realistic networks, and which search stage found each
+//! answer; with `exhaustive`, also how often the yardstick reaches the χ² of the default
+//! search run far longer (`bench::exhaustive_fit`).
+//!
+//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]
+//!
+//! With `sweep`, each segment is also fitted with the prototype global stage in the speed
+//! coordinates (`invert::sweep`), timed on the thread's CPU clock alternately with today's
+//! search, and both are judged against the yardstick.
+//!
+//! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
+//! do not depend on JOBS.
+
+use std::time::Instant;
+
+use pipewave::bench::{
+    bench_network, exhaustive_fit, thread_cpu_ms, Distribution, MaterialMix, VERIFY_DCHI2_MAX,
+};
+use pipewave::invert::yardstick::yardstick;
+use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
+use rayon::prelude::*;
+
+/// The sweep's fit of a segment: χ², CPU ms, evaluations and provenance.
+type Swept = (f64, f64, usize, pipewave::invert::Provenance);
+
+/// One segment's figures.
+struct Row {
+    id: String,
+    material: pipewave::physics::Material,
+    fit: f64,
+    yard: f64,
+    exhaustive: Option<f64>,
+    /// Where the exhaustive search's and the yardstick's optima lie, in the speed coordinates.
+    places: String,
+    yard_evaluations: usize,
+    provenance: pipewave::invert::Provenance,
+    /// Today's fit: CPU ms and evaluations.
+    cost: (f64, usize),
+    /// The sweep's fit.
+    sweep: Option<Swept>,
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]";
+    let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
+    let parsed = (|| -> Result<(MaterialMix, u64, u64, usize, usize), String> {
+        Ok((
+            arg(1).parse()?,
+            arg(2).parse().map_err(|e| format!("SEED: {e}"))?,
+            arg(3).parse().map_err(|e| format!("NETWORKS: {e}"))?,
+            arg(4).parse().map_err(|e| format!("SEGMENTS: {e}"))?,
+            arg(5).parse().map_err(|e| format!("JOBS: {e}"))?,
+        ))
+    })();
+    let (mix, seed, networks, segments, jobs) = match parsed {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("{e}\nusage: {usage}");
+            std::process::exit(2);
+        }
+    };
+    let exhaustive = arg(6) == "exhaustive";
+    let sweeping = arg(6) == "sweep";
+    let settings = FitSettings::default();
+    let sweep_settings = FitSettings {
+        global: GlobalStage::SpeedSweep,
+        ..FitSettings::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.max(1))
+        .build()
+        .expect("a thread pool");
+    let started = Instant::now();
+    let mut rows: Vec<Row> = Vec::new();
+    for n in 0..networks {
+        let mut net = bench_network(segments, seed + n, mix);
+        // ONLY=ID,ID,…: only these segments of each network (to look at a few again).
+        if let Ok(only) = std::env::var("ONLY") {
+            net.retain(|s| only.split(',').any(|id| id == s.id));
+        }
+        rows.extend(pool.install(|| {
+            net.par_iter()
+                .enumerate()
+                .map(|(i, seg)| {
+                    let timed = |s: &FitSettings| {
+                        let t = thread_cpu_ms();
+                        let r = fit_segment(&seg.data, s, seg.seed);
+                        (thread_cpu_ms() - t, r)
+                    };
+                    // Alternate which search runs first, so that a slow phase of a shared
+                    // machine hits both alike.
+                    let (mut today, mut swept) = (None, None);
+                    for k in 0..2 {
+                        if (i + k) % 2 == 0 {
+                            today = Some(timed(&settings));
+                        } else if sweeping {
+                            swept = Some(timed(&sweep_settings));
+                        }
+                    }
+                    let (ms, fit) = today.expect("today's fit ran");
+                    let yard = yardstick(&seg.data, &settings);
+                    let ex = exhaustive.then(|| exhaustive_fit(seg));
+                    Row {
+                        id: format!("{}/{}", seed + n, seg.id),
+                        material: seg.material,
+                        fit: fit.misfit,
+                        yard: yard.as_ref().map_or(f64::NAN, |y| y.misfit),
+                        yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
+                        exhaustive: ex.as_ref().map(|e| e.misfit),
+                        places: places(&seg.data, ex.as_ref(), yard.as_ref().ok()),
+                        cost: (ms, fit.evaluations),
+                        provenance: fit.provenance,
+                        sweep: swept.map(|(ms, r)| (r.misfit, ms, r.evaluations, r.provenance)),
+                    }
+                })
+                .collect::<Vec<_>>()
+        }));
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    let total = rows.len();
+    let excess = |r: &Row| r.fit - r.yard.min(r.fit);
+    let misses: Vec<&Row> = rows
+        .iter()
+        .filter(|r| excess(r).is_nan() || excess(r) > VERIFY_DCHI2_MAX)
+        .collect();
+    println!(
+        "{total} segments ({networks} network(s) of {segments}, seeds {seed}..{}, {mix:?} mix), {:.0} s",
+        seed + networks - 1,
+        seconds
+    );
+    println!(
+        "  fit more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; yardstick not rated: {}; \
+         mean yardstick evaluations {:.0}",
+        misses.len(),
+        rows.iter().filter(|r| r.yard.is_nan()).count(),
+        rows.iter().map(|r| r.yard_evaluations).sum::<usize>() as f64 / total.max(1) as f64
+    );
+    for r in &misses {
+        println!(
+            "    {} ({:?}) fit {:.4} yardstick {:.4} won by {:?}",
+            r.id, r.material, r.fit, r.yard, r.provenance.winner
+        );
+    }
+    let below = rows.iter().filter(|r| r.yard < r.fit - 1e-6).count();
+    println!("  yardstick below the fit by more than 1e-6: {below}");
+    if exhaustive {
+        for tol in [1e-3, 1e-2, 0.1] {
+            let reached = rows
+                .iter()
+                .filter(|r| r.exhaustive.is_some_and(|e| r.yard <= e + tol))
+                .count();
+            println!("  yardstick within {tol} of the exhaustive chi2 or lower: {reached}/{total}");
+        }
+        for r in rows
+            .iter()
+            .filter(|r| r.exhaustive.is_some_and(|e| r.yard > e + 0.01))
+        {
+            println!(
+                "    {} ({:?}) yardstick {:.4} exhaustive {:.4} fit {:.4}\n{}",
+                r.id,
+                r.material,
+                r.yard,
+                r.exhaustive.unwrap_or(f64::NAN),
+                r.fit,
+                r.places
+            );
+        }
+        let fit_over = rows
+            .iter()
+            .filter(|r| r.exhaustive.is_some_and(|e| r.fit > e + VERIFY_DCHI2_MAX))
+            .count();
+        println!("  fit more than {VERIFY_DCHI2_MAX} above the exhaustive chi2: {fit_over}");
+    }
+    let mut stages = StageStatistics::default();
+    for r in &rows {
+        stages.observe(&r.provenance);
+    }
+    print!("{stages}");
+    let cost = |name: &str, ms: Vec<f64>, evaluations: Vec<usize>| {
+        let d = Distribution::of(&ms);
+        println!(
+            "  {name}: CPU ms/fit median {:.1} p90 {:.1} p99 {:.1} max {:.1}; {:.0} evaluations/fit",
+            d.median,
+            d.p90,
+            d.p99,
+            d.max,
+            evaluations.iter().sum::<usize>() as f64 / evaluations.len().max(1) as f64
+        );
+    };
+    cost(
+        "today's search",
+        rows.iter().map(|r| r.cost.0).collect(),
+        rows.iter().map(|r| r.cost.1).collect(),
+    );
+    if sweeping {
+        let swept: Vec<(&Row, &Swept)> = rows
+            .iter()
+            .filter_map(|r| r.sweep.as_ref().map(|s| (r, s)))
+            .collect();
+        cost(
+            "speed sweep   ",
+            swept.iter().map(|(_, s)| s.1).collect(),
+            swept.iter().map(|(_, s)| s.2).collect(),
+        );
+        let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
+        let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
+        println!(
+            "  speed sweep more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; \
+             above today's fit by more than {VERIFY_DCHI2_MAX}: {}; below it: {}",
+            misses.len(),
+            swept
+                .iter()
+                .filter(|(r, s)| s.0 > r.fit + VERIFY_DCHI2_MAX)
+                .count(),
+            swept
+                .iter()
+                .filter(|(r, s)| s.0 < r.fit - VERIFY_DCHI2_MAX)
+                .count()
+        );
+        for (r, s) in misses {
+            println!(
+                "    {} ({:?}) sweep {:.4} today {:.4} yardstick {:.4}",
+                r.id, r.material, s.0, r.fit, r.yard
+            );
+        }
+    }
+}
+
+/// The exhaustive optimum and the yardstick's in (c_P, c_S/c_P, ξ), with the measured and the
+/// model's phase speeds at the exhaustive optimum, m/s.
+fn places(
+    data: &pipewave::invert::SegmentData,
+    ex: Option<&pipewave::invert::FitResult>,
+    yard: Option<&pipewave::invert::yardstick::Yardstick>,
+) -> String {
+    use pipewave::invert::speed::speeds_of;
+    let rho = data.soil_density;
+    let measured: Vec<String> = data
+        .measurements
+        .iter()
+        .map(|m| format!("{:.1}", m.phase_speed()))
+        .collect();
+    let mut out = format!("      measured phase speeds {}", measured.join(" "));
+    if let Some(e) = ex.filter(|e| e.status != pipewave::invert::FitStatus::Failed) {
+        let (l, r) = speeds_of(
+            e.soil_modulus().unwrap_or(f64::NAN),
+            e.soil_poisson().unwrap_or(f64::NAN),
+            rho,
+        );
+        let model: Vec<String> = data
+            .measurements
+            .iter()
+            .zip(&e.predicted)
+            .map(|(m, k)| format!("{:.1}", m.omega / k.re))
+            .collect();
+        out += &format!(
+            "\n      exhaustive: c_P {:.2} r {:.4} xi {:.3}; model phase speeds {}",
+            l.exp(),
+            r,
+            e.contact().unwrap_or(f64::NAN),
+            model.join(" ")
+        );
+    }
+    if let Some(y) = yard {
+        let (l, r) = speeds_of(10f64.powf(y.x[0]), y.x[1], rho);
+        out += &format!(
+            "\n      yardstick:  c_P {:.2} r {:.4} xi {:.3}",
+            l.exp(),
+            r,
+            y.x[2]
+        );
+    }
+    out
+}
