@@ -14,11 +14,10 @@
 
 use std::time::Instant;
 
-use pipewave::bench::{
-    bench_network, exhaustive_fit, thread_cpu_ms, Distribution, MaterialMix, VERIFY_DCHI2_MAX,
-};
+use pipewave::bench::{exhaustive_fit, thread_cpu_ms, Distribution, VERIFY_DCHI2_MAX};
 use pipewave::invert::yardstick::yardstick;
 use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
+use pipewave::synth::bench::{bench_network, MaterialMix};
 use rayon::prelude::*;
 
 /// The sweep's fit of a segment: χ², CPU ms, evaluations and provenance.
@@ -243,7 +242,7 @@ fn places(
         .map(|m| format!("{:.1}", m.phase_speed()))
         .collect();
     let mut out = format!("      measured phase speeds {}", measured.join(" "));
-    if let Some(e) = ex.filter(|e| e.status != pipewave::invert::FitStatus::Failed) {
+    if let Some(e) = ex.filter(|e| e.status != pipewave::types::FitStatus::Failed) {
         let (l, r) = speeds_of(
             e.soil_modulus().unwrap_or(f64::NAN),
             e.soil_poisson().unwrap_or(f64::NAN),

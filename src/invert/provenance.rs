@@ -284,8 +284,10 @@ impl fmt::Display for StageStatistics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::{bench_network, synthetic_mdpe_data, MaterialMix};
-    use crate::invert::{fit_segment, FitSettings, FitStatus};
+    use crate::bench::synthetic_mdpe_data;
+    use crate::invert::{fit_segment, FitSettings};
+    use crate::synth::bench::{bench_network, MaterialMix};
+    use crate::types::FitStatus;
 
     /// Every fit of a bench network records the stage that found its answer, the global
     /// stage's stop reason, and evaluations per stage that add up to at most the fit's; the
