@@ -30,11 +30,11 @@ use crate::db::{pages, DbError, SegmentRecord};
 use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
 use crate::physics::{ContactMode, Model};
 
-use model::{Field, Observation, Posterior, Sym2, NEIGHBOURS};
+use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 1;
+pub const FIELD_ALGORITHM_VERSION: u32 = 2;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -46,6 +46,10 @@ pub const NETWORK_CLASS: &str = "network";
 
 /// The class of segments without a label whose neighbourhood has none either.
 pub const UNLABELLED_CLASS: &str = "unlabelled";
+
+/// A class less probable than this for a segment is left out of its mixture (model §7.12:
+/// labels are evidence; its share of the prediction would be below 1 %).
+pub const MIN_CLASS_PROBABILITY: f64 = 0.01;
 
 /// Segments read from the inventory at a time for the predictions (flat memory).
 const PAGE: usize = 256;
@@ -143,6 +147,9 @@ pub struct Site {
     pub class: Option<usize>,
     /// Its neighbourhood rejects its label.
     pub label_rejected: bool,
+    /// The probabilities of its true class (labels are evidence): its class alone when its
+    /// neighbourhood agrees.
+    pub classes: Vec<(usize, f64)>,
     /// Its index among the field's members, when it has a usable fit.
     pub member: Option<usize>,
     /// Its fitted leak-band speed and error, m/s.
@@ -239,6 +246,7 @@ pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<Stri
                     .or_else(|| label_of(i.soil_type.as_deref())),
                 class: None,
                 label_rejected: false,
+                classes: Vec::new(),
                 member: None,
                 fitted_speed: i.leak_band_speed.filter(|_| usable),
             }
@@ -273,6 +281,23 @@ pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<Stri
             })
         }));
         s.label_rejected = rejected;
+    }
+    // The network's label error rate, estimated by the share of labels its neighbourhoods
+    // reject, sets how much a split neighbourhood leaves a segment's class uncertain.
+    let labelled = own.iter().filter(|l| l.is_some()).count();
+    let rejected = sites.iter().filter(|s| s.label_rejected).count();
+    let error_rate = rejected as f64 / labelled.max(1) as f64;
+    let classes: Vec<usize> = sites.iter().map(|s| s.class.unwrap_or(0)).collect();
+    let probabilities = labels::class_probabilities(
+        &own,
+        &pos,
+        &classes,
+        names.len(),
+        error_rate,
+        MIN_CLASS_PROBABILITY,
+    );
+    for (s, p) in sites.iter_mut().zip(probabilities) {
+        s.classes = p;
     }
     let mut obs = Vec::new();
     for (s, i) in sites.iter_mut().zip(inputs) {
@@ -401,6 +426,7 @@ fn site_result(
     names: &[String],
     settings: &FieldSettings,
     run_id: Option<i64>,
+    screened: Option<Screened>,
 ) -> SiteResult {
     let class_name = site.class.map_or("", |k| names[k].as_str());
     let mut row = FieldSegmentRow {
@@ -409,6 +435,11 @@ fn site_result(
         soil_class: site.class.map(|k| names[k].clone()),
         label_rejected: site.label_rejected,
         measured: site.member.is_some(),
+        information_scale: site
+            .member
+            .zip(field)
+            .and_then(|(m, f)| f.scales.information.get(m).copied()),
+        screen_chi2: screened.map(|s| s.chi2),
         ..FieldSegmentRow::default()
     };
     let none = |mut row: FieldSegmentRow, why: String| {
@@ -434,8 +465,11 @@ fn site_result(
         Ok(d) => d,
         Err(e) => return none(row, format!("no speed: the pipe's data are unusable ({e})")),
     };
-    let class = site.class.unwrap_or(0);
-    let post = field.posterior(site.pos, class, site.member);
+    let post = if site.classes.is_empty() {
+        field.posterior(site.pos, site.class.unwrap_or(0), site.member)
+    } else {
+        field.mixture_posterior(site.pos, &site.classes, site.member)
+    };
     let speed = predict_speed(
         &data,
         settings.model,
@@ -525,6 +559,13 @@ pub fn update_field(
         (n_members > 0).then(|| Field::fit(obs, names.len(), ell_bounds))
     });
     let h = field.as_ref().map(|f| f.hyper);
+    // Every member's χ² against its leave-one-out prediction: the screening that set the
+    // information scales, else (given θ, too few members) one in the final field.
+    let screened: Vec<Screened> = in_pool(&pool, || match field.as_ref() {
+        Some(f) if !f.screened.is_empty() => f.screened.clone(),
+        Some(f) => f.screen(),
+        None => Vec::new(),
+    });
     let mut run = FieldRunRow {
         id: None,
         run_id,
@@ -562,6 +603,7 @@ pub fn update_field(
             n_measured: members.iter().filter(|s| s.member.is_some()).count() as i64,
             mean,
             std: [cov.pp.max(0.0).sqrt(), cov.ss.max(0.0).sqrt()],
+            scale: field.as_ref().map_or([1.0, 1.0], |f| f.scales.of_class(k)),
         });
     }
     let by_id: BTreeMap<&str, usize> = sites
@@ -608,6 +650,7 @@ pub fn update_field(
                                 &names,
                                 settings,
                                 run_id,
+                                sites[i].member.and_then(|m| screened.get(m).copied()),
                             ),
                         )
                     })

@@ -56,6 +56,43 @@ pub fn soil_of(u: [f64; 2], rho: f64) -> Option<(f64, f64)> {
     soil_from_speeds(cp, cs, rho).map(|(e, nu)| (e, nu.clamp(0.0, MAX_SOIL_POISSON)))
 }
 
+/// (phase speed, attenuation in dB/m) per frequency of the standard grid from the roots k₁.
+fn speeds_of(ks: &[Option<Complex64>]) -> Vec<Option<(f64, f64)>> {
+    ks.iter()
+        .zip(STANDARD_GRID_HZ)
+        .map(|(k, f)| {
+            k.filter(|k| k.re > 0.0)
+                .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
+        })
+        .collect()
+}
+
+/// A sigma point's curve with every frequency where its forward solve found no root replaced
+/// by its mirror point's, reflected through the centre: 2 f(m) − f(m − δ), exact for a
+/// function linear along that axis, so the transform keeps its mean and its variance to first
+/// order (P81) instead of losing the node's weight. Where the centre has no root either, the
+/// mirror's value itself stands in (a function even along that axis); where the reflection
+/// would not be a positive speed, likewise.
+fn mirrored(
+    own: &[Option<(f64, f64)>],
+    mirror: &[Option<(f64, f64)>],
+    centre: &[Option<(f64, f64)>],
+) -> Vec<Option<(f64, f64)>> {
+    own.iter()
+        .zip(mirror)
+        .zip(centre)
+        .map(|((o, m), c)| {
+            o.or_else(|| {
+                let m = (*m)?;
+                Some(match c {
+                    Some(c) if 2.0 * c.0 - m.0 > 0.0 => (2.0 * c.0 - m.0, 2.0 * c.1 - m.1),
+                    _ => m,
+                })
+            })
+        })
+        .collect()
+}
+
 /// The speed of the pipe `data` (measurements ignored) under the run's `model` and
 /// `contact_mode`, averaged over u ~ N(`mean`, `cov`) and ξ ~ U[0, 1] (P81).
 pub fn predict_speed(
@@ -121,8 +158,8 @@ pub fn predict_speed(
     // (as a fit's stored curve); every other node starts each frequency's root from it (as the
     // fit's curve errors do), and falls back to its own continuation where that fails.
     let reference = system_of(mean, 0.5).map(|s| full_curve(&s));
-    let mut nodes: Vec<Node> = Vec::new();
-    for &(u, xi, weight) in &points {
+    let mut solved: Vec<Vec<Option<(f64, f64)>>> = Vec::new();
+    for &(u, xi, _) in &points {
         let ks: Vec<Option<Complex64>> = match system_of(u, xi) {
             Some(sys) => {
                 let from_guess: Option<Vec<Option<Complex64>>> = reference.as_ref().map(|r| {
@@ -144,22 +181,24 @@ pub fn predict_speed(
             }
             None => vec![None; nf],
         };
-        let pts: Vec<Option<(f64, f64)>> = ks
-            .iter()
-            .zip(STANDARD_GRID_HZ)
-            .map(|(k, f)| {
-                k.filter(|k| k.re > 0.0)
-                    .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
-            })
-            .collect();
-        let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
-            .iter()
-            .zip(&pts)
-            .map(|(&f, p)| (f, p.map(|v| v.0)))
-            .collect();
-        let band = band_mean(&speeds, LEAK_BAND_HZ);
-        nodes.push((weight, pts, band));
+        solved.push(speeds_of(&ks));
     }
+    let centre: Vec<Option<(f64, f64)>> = reference
+        .as_ref()
+        .map_or_else(|| vec![None; nf], |r| speeds_of(r));
+    let nodes: Vec<Node> = points
+        .iter()
+        .enumerate()
+        .map(|(j, &(_, _, weight))| {
+            let pts = mirrored(&solved[j], &solved[j ^ 1], &centre);
+            let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
+                .iter()
+                .zip(&pts)
+                .map(|(&f, p)| (f, p.map(|v| v.0)))
+                .collect();
+            (weight, pts, band_mean(&speeds, LEAK_BAND_HZ))
+        })
+        .collect();
     let moments = |vals: &mut dyn Iterator<Item = (f64, Option<f64>)>| -> Option<WithError> {
         let v: Vec<(f64, f64)> = vals.filter_map(|(w, x)| x.map(|x| (w, x))).collect();
         let wsum: f64 = v.iter().map(|p| p.0).sum();
@@ -206,5 +245,27 @@ pub fn predict_speed(
         curve: curve_pts,
         band,
         band_gradient,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sigma point without a root takes its mirror's value reflected through the centre
+    /// (the centre's missing too: the mirror's own value); a node with a root keeps it.
+    #[test]
+    fn a_failed_sigma_point_is_its_mirror_reflected() {
+        let own = [None, None, Some((290.0, 0.2))];
+        let mirror = [Some((300.0, 0.10)), Some((300.0, 0.10)), Some((330.0, 0.3))];
+        let centre = [Some((310.0, 0.12)), None, Some((310.0, 0.25))];
+        let m = mirrored(&own, &mirror, &centre);
+        let (c, a) = m[0].unwrap();
+        assert!(
+            (c - 320.0).abs() < 1e-12 && (a - 0.14).abs() < 1e-12,
+            "{m:?}"
+        );
+        assert_eq!(m[1], Some((300.0, 0.10)));
+        assert_eq!(m[2], Some((290.0, 0.2)));
     }
 }
