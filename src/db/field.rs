@@ -41,6 +41,19 @@ pub struct FieldInput {
 
 /// Every segment's [`FieldInput`], in id order.
 pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
+    let mut out = Vec::new();
+    for_each_field_input(conn, |i| {
+        out.push(i);
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Every segment's [`FieldInput`] in id order, one at a time (flat memory: no row is kept).
+pub fn for_each_field_input(
+    conn: &Connection,
+    mut f: impl FnMut(FieldInput) -> Result<(), DbError>,
+) -> Result<(), DbError> {
     let mut stmt = conn.prepare(
         "SELECT s.segment_id, s.geometry_wkt, s.srid, s.soil_type, s.soil_zone, s.length_m, \
          s.inputs_hash, f.id, f.status, f.soil_p_wave_speed_m_per_s, \
@@ -75,7 +88,10 @@ pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
             material: r.get(16)?,
         })
     })?;
-    Ok(rows.collect::<Result<_, _>>()?)
+    for row in rows {
+        f(row?)?;
+    }
+    Ok(())
 }
 
 /// One row of `field_runs`.

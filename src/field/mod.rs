@@ -24,7 +24,7 @@ use crate::db::field::{
     self as store, FieldClassRow, FieldInput, FieldRunRow, FieldSegmentRow, Prediction,
     PredictionRow,
 };
-use crate::db::hash::fnv1a64;
+use crate::db::hash::{fnv1a64, fnv1a64_update, FNV1A64_START};
 use crate::db::wkt::LineString;
 use crate::db::{pages, DbError, SegmentRecord};
 use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
@@ -206,17 +206,23 @@ fn label_of(v: Option<&str>) -> Option<String> {
         .map(str::to_string)
 }
 
-/// Fingerprint of everything a field update depends on.
-fn fingerprint(inputs: &[FieldInput], settings: &FieldSettings) -> String {
-    let mut text = format!(
-        "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
-        settings.model.as_str(),
-        settings.contact_mode.as_str()
-    );
-    for i in inputs {
-        let _ = writeln!(
-            text,
-            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+/// The fingerprint of everything a field update depends on, hashed as the inputs stream past
+/// (FNV-1a is a fold over the bytes, so the value is that of the whole text).
+struct Fingerprint(u64);
+
+impl Fingerprint {
+    fn new(settings: &FieldSettings) -> Fingerprint {
+        let head = format!(
+            "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
+            settings.model.as_str(),
+            settings.contact_mode.as_str()
+        );
+        Fingerprint(fnv1a64_update(FNV1A64_START, head.as_bytes()))
+    }
+
+    fn add(&mut self, i: &FieldInput) {
+        let line = format!(
+            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n",
             i.segment_id,
             i.inputs_hash,
             i.soil_type,
@@ -226,32 +232,78 @@ fn fingerprint(inputs: &[FieldInput], settings: &FieldSettings) -> String {
             i.length_m,
             i.fit_id
         );
+        self.0 = fnv1a64_update(self.0, line.as_bytes());
     }
-    format!("{:016x}", fnv1a64(text.as_bytes()))
+
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
+}
+
+/// What a segment's input gives the field besides its site: its fit's soil, if usable.
+#[derive(Debug, Clone, Copy)]
+struct FittedSoil {
+    speeds: Option<(f64, f64)>,
+    information: Option<[f64; 3]>,
+    usable: bool,
+}
+
+/// A segment's site (its geometry reduced to a midpoint and a length) and its fit's soil.
+fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
+    let geo = site_geometry(i.geometry_wkt.as_deref(), i.srid);
+    let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
+    (
+        Site {
+            segment_id: i.segment_id.clone(),
+            pos: geo.map(|g| g.0),
+            length: geo.map(|g| g.1).or(i.length_m),
+            material: i.material.clone(),
+            label: label_of(i.soil_zone.as_deref()).or_else(|| label_of(i.soil_type.as_deref())),
+            class: None,
+            label_rejected: false,
+            classes: Vec::new(),
+            member: None,
+            fitted_speed: i.leak_band_speed.filter(|_| usable),
+        },
+        FittedSoil {
+            speeds: i.speeds,
+            information: i.information,
+            usable,
+        },
+    )
+}
+
+/// Read every segment's site from the database, one inventory row at a time (no geometry text
+/// is kept: flat memory), with the fingerprint of the inputs; then the classes and members.
+fn read_sites(
+    conn: &Connection,
+    settings: &FieldSettings,
+) -> Result<(String, Vec<Site>, Vec<Observation>, Vec<String>), DbError> {
+    let mut fp = Fingerprint::new(settings);
+    let mut sites = Vec::new();
+    let mut soils = Vec::new();
+    store::for_each_field_input(conn, |i| {
+        fp.add(&i);
+        let (site, soil) = site_of(&i);
+        sites.push(site);
+        soils.push(soil);
+        Ok(())
+    })?;
+    let (sites, obs, names) = classes_and_members(sites, &soils);
+    Ok((fp.hex(), sites, obs, names))
 }
 
 /// The sites and members of the field from the inputs, with the class names.
 pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
-    let mut sites: Vec<Site> = inputs
-        .iter()
-        .map(|i| {
-            let geo = site_geometry(i.geometry_wkt.as_deref(), i.srid);
-            let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
-            Site {
-                segment_id: i.segment_id.clone(),
-                pos: geo.map(|g| g.0),
-                length: geo.map(|g| g.1).or(i.length_m),
-                material: i.material.clone(),
-                label: label_of(i.soil_zone.as_deref())
-                    .or_else(|| label_of(i.soil_type.as_deref())),
-                class: None,
-                label_rejected: false,
-                classes: Vec::new(),
-                member: None,
-                fitted_speed: i.leak_band_speed.filter(|_| usable),
-            }
-        })
-        .collect();
+    let (sites, soils): (Vec<Site>, Vec<FittedSoil>) = inputs.iter().map(site_of).unzip();
+    classes_and_members(sites, &soils)
+}
+
+/// Classes (labels smoothed over neighbours, with their probabilities) and the members.
+fn classes_and_members(
+    mut sites: Vec<Site>,
+    soils: &[FittedSoil],
+) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
     // Classes: the labels in sorted order (one "network" class when there are none).
     let mut names: Vec<String> = sites.iter().filter_map(|s| s.label.clone()).collect();
     names.sort();
@@ -300,9 +352,8 @@ pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<Stri
         s.classes = p;
     }
     let mut obs = Vec::new();
-    for (s, i) in sites.iter_mut().zip(inputs) {
-        let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
-        let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, usable) else {
+    for (s, i) in sites.iter_mut().zip(soils) {
+        let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, i.usable) else {
             continue;
         };
         if !(cp > 0.0 && cs > 0.0 && info.iter().all(|v| v.is_finite())) {
@@ -535,8 +586,7 @@ pub fn update_field(
     settings: &FieldSettings,
 ) -> Result<FieldUpdate, DbError> {
     let started = Instant::now();
-    let inputs = store::field_inputs(conn)?;
-    let fp = fingerprint(&inputs, settings);
+    let (fp, sites, obs, names) = read_sites(conn, settings)?;
     if !settings.force {
         if let Some(last) = store::latest_field_run(conn)? {
             if last.fingerprint == fp {
@@ -547,8 +597,6 @@ pub fn update_field(
             }
         }
     }
-    let (sites, obs, names) = sites_of(&inputs);
-    drop(inputs);
     let ell_bounds = length_bounds(&sites);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.jobs.max(1))

@@ -374,9 +374,15 @@ pub fn plan(
 ) -> Result<Vec<crate::db::field::PlanPick>, PlanError> {
     use crate::db::field as store;
     let last = store::latest_field_run(conn)?.ok_or(PlanError::NoField)?;
-    let inputs = store::field_inputs(conn)?;
-    let (sites, obs, names) = super::sites_of(&inputs);
-    drop(inputs);
+    // The sites, one inventory row at a time (no geometry text is kept).
+    let (mut sites, mut soils) = (Vec::new(), Vec::new());
+    store::for_each_field_input(conn, |i| {
+        let (site, soil) = super::site_of(&i);
+        sites.push(site);
+        soils.push(soil);
+        Ok(())
+    })?;
+    let (sites, obs, names) = super::classes_and_members(sites, &soils);
     if obs.is_empty() {
         return Err(PlanError::NoField);
     }
