@@ -273,12 +273,15 @@ fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
     )
 }
 
+/// The sites, the field's members and the class names.
+type SitesAndMembers = (Vec<Site>, Vec<Observation>, Vec<String>);
+
 /// Read every segment's site from the database, one inventory row at a time (no geometry text
 /// is kept: flat memory), with the fingerprint of the inputs; then the classes and members.
 fn read_sites(
     conn: &Connection,
     settings: &FieldSettings,
-) -> Result<(String, Vec<Site>, Vec<Observation>, Vec<String>), DbError> {
+) -> Result<(String, SitesAndMembers), DbError> {
     let mut fp = Fingerprint::new(settings);
     let mut sites = Vec::new();
     let mut soils = Vec::new();
@@ -289,8 +292,7 @@ fn read_sites(
         soils.push(soil);
         Ok(())
     })?;
-    let (sites, obs, names) = classes_and_members(sites, &soils);
-    Ok((fp.hex(), sites, obs, names))
+    Ok((fp.hex(), classes_and_members(sites, &soils)))
 }
 
 /// The sites and members of the field from the inputs, with the class names.
@@ -586,7 +588,7 @@ pub fn update_field(
     settings: &FieldSettings,
 ) -> Result<FieldUpdate, DbError> {
     let started = Instant::now();
-    let (fp, sites, obs, names) = read_sites(conn, settings)?;
+    let (fp, (sites, obs, names)) = read_sites(conn, settings)?;
     if !settings.force {
         if let Some(last) = store::latest_field_run(conn)? {
             if last.fingerprint == fp {

@@ -1098,7 +1098,7 @@ impl Field {
         else {
             return self.posterior(pos, 0, skip);
         };
-        if parts.len() == 1 || !(total > 0.0) {
+        if parts.len() == 1 || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return parts.into_iter().nth(best).map(|x| x.1).expect("one part");
         }
         let mut mean = [0.0; 2];
