@@ -206,6 +206,7 @@ fn plan_prefers_a_pick_among_many_unmeasured_pipes() {
         .map(|(i, p)| CandidateInput {
             site: i,
             pos: *p,
+            class: 0,
             weight: 100.0,
             speed: 400.0,
             gradient: [60.0, 120.0],

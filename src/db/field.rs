@@ -41,6 +41,19 @@ pub struct FieldInput {
 
 /// Every segment's [`FieldInput`], in id order.
 pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
+    let mut out = Vec::new();
+    for_each_field_input(conn, |i| {
+        out.push(i);
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Every segment's [`FieldInput`] in id order, one at a time (flat memory: no row is kept).
+pub fn for_each_field_input(
+    conn: &Connection,
+    mut f: impl FnMut(FieldInput) -> Result<(), DbError>,
+) -> Result<(), DbError> {
     let mut stmt = conn.prepare(
         "SELECT s.segment_id, s.geometry_wkt, s.srid, s.soil_type, s.soil_zone, s.length_m, \
          s.inputs_hash, f.id, f.status, f.soil_p_wave_speed_m_per_s, \
@@ -75,7 +88,10 @@ pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
             material: r.get(16)?,
         })
     })?;
-    Ok(rows.collect::<Result<_, _>>()?)
+    for row in rows {
+        f(row?)?;
+    }
+    Ok(())
 }
 
 /// One row of `field_runs`.
@@ -140,6 +156,8 @@ pub struct FieldClassRow {
     pub mean: [f64; 2],
     /// Standard deviations of the mean.
     pub std: [f64; 2],
+    /// Its multipliers of the field covariance B and of the per-pipe scatter T.
+    pub scale: [f64; 2],
 }
 
 /// One row of `field_segments`.
@@ -165,6 +183,11 @@ pub struct FieldSegmentRow {
     pub field_outlier: bool,
     /// Why, in words.
     pub note: String,
+    /// The factor the field multiplied its fit's information by (measured segments: 1 unless
+    /// the field could not explain its fit).
+    pub information_scale: Option<f64>,
+    /// χ² of its fitted soil against its leave-one-out prediction (measured segments).
+    pub screen_chi2: Option<f64>,
 }
 
 /// One row of `predictions`.
@@ -299,7 +322,8 @@ pub fn finish_field(
     )?;
     let mut ins = tx.prepare_cached(
         "INSERT INTO field_classes (field_run_id, soil_class, n_segments, n_measured, \
-         mean_ln_cp, mean_ln_cs, std_ln_cp, std_ln_cs) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)",
+         mean_ln_cp, mean_ln_cs, std_ln_cp, std_ln_cs, field_scale, scatter_scale) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
     )?;
     for c in classes {
         ins.execute(params![
@@ -311,6 +335,8 @@ pub fn finish_field(
             c.mean[1],
             c.std[0],
             c.std[1],
+            c.scale[0],
+            c.scale[1],
         ])?;
     }
     Ok(())
@@ -327,8 +353,8 @@ pub fn insert_field_rows(
         let mut ins = tx.prepare_cached(
             "INSERT INTO field_segments (segment_id, field_run_id, label, soil_class, \
              label_rejected, measured, field_leak_band_speed_m_per_s, \
-             field_leak_band_speed_std_m_per_s, loo_z, field_outlier, note) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+             field_leak_band_speed_std_m_per_s, loo_z, field_outlier, note, information_scale, \
+             screen_chi2) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
         )?;
         for s in segments {
             ins.execute(params![
@@ -343,6 +369,8 @@ pub fn insert_field_rows(
                 s.loo_z,
                 s.field_outlier,
                 s.note,
+                s.information_scale,
+                s.screen_chi2,
             ])?;
         }
     }
@@ -483,6 +511,27 @@ pub fn prediction_for(conn: &Connection, segment_id: &str) -> Result<Option<Pred
     Ok(Some((row, pts)))
 }
 
+/// The class multipliers [B, T] of field update `field_run_id`, by class name (classes stored
+/// before they existed read as [1, 1]).
+pub fn field_class_scales(
+    conn: &Connection,
+    field_run_id: i64,
+) -> Result<std::collections::BTreeMap<String, [f64; 2]>, DbError> {
+    let mut stmt = conn.prepare(
+        "SELECT soil_class, field_scale, scatter_scale FROM field_classes WHERE field_run_id = ?1",
+    )?;
+    let rows = stmt.query_map([field_run_id], |r| {
+        Ok((
+            r.get::<_, String>(0)?,
+            [
+                r.get::<_, Option<f64>>(1)?.unwrap_or(1.0),
+                r.get::<_, Option<f64>>(2)?.unwrap_or(1.0),
+            ],
+        ))
+    })?;
+    Ok(rows.collect::<Result<_, _>>()?)
+}
+
 /// A segment's row of the latest field update, if any.
 pub fn field_segment(
     conn: &Connection,
@@ -513,6 +562,8 @@ fn field_segment_from_row(r: &Row<'_>) -> rusqlite::Result<FieldSegmentRow> {
         loo_z: r.get("loo_z")?,
         field_outlier: r.get("field_outlier")?,
         note: r.get("note")?,
+        information_scale: r.get("information_scale")?,
+        screen_chi2: r.get("screen_chi2")?,
     })
 }
 

@@ -72,6 +72,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0010_forced_refits.sql",
         sql: include_str!("../../migrations/0010_forced_refits.sql"),
     },
+    Migration {
+        version: 11,
+        name: "0011_field.sql",
+        sql: include_str!("../../migrations/0011_field.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

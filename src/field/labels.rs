@@ -47,6 +47,75 @@ pub fn smooth(labels: &[Option<usize>], pos: &[Option<[f64; 2]>]) -> Vec<(Option
         .collect()
 }
 
+/// Bounds of the label error rate used by [`class_probabilities`]: at least one label in a
+/// hundred is taken as possibly wrong, at most three in ten.
+pub const LABEL_ERROR_RANGE: (f64, f64) = (0.01, 0.3);
+
+/// Each segment's probabilities of its true class (model §7.12: labels are evidence), from the
+/// labels of its [`LABEL_VOTERS`] nearest segments (itself included) read as independent noisy
+/// reports of one true class: P(k) ∝ Π_j [(1 − ε) if label_j = k, else ε/(K − 1)], with ε the
+/// network's label error rate. Deep inside a unit a lone wrong label leaves its class almost
+/// certain (each agreeing vote is worth a factor (1 − ε)(K − 1)/ε); a segment whose
+/// neighbourhood is split keeps a share for each class. Classes under `min_share` are dropped
+/// and the rest renormalised; a segment without a position or voters gets `fallback` (its
+/// class) with probability 1.
+pub fn class_probabilities(
+    labels: &[Option<usize>],
+    pos: &[Option<[f64; 2]>],
+    fallback: &[usize],
+    n_classes: usize,
+    error_rate: f64,
+    min_share: f64,
+) -> Vec<Vec<(usize, f64)>> {
+    let tree = index_of(pos.iter().copied());
+    let eps = error_rate.clamp(LABEL_ERROR_RANGE.0, LABEL_ERROR_RANGE.1);
+    let k = n_classes.max(2) as f64;
+    let (agree, disagree) = ((1.0 - eps).ln(), (eps / (k - 1.0)).ln());
+    pos.iter()
+        .zip(fallback)
+        .map(|(p, &own)| {
+            let Some(p) = p else {
+                return vec![(own, 1.0)];
+            };
+            let votes: Vec<usize> = tree
+                .nearest_neighbor_iter(p)
+                .take(LABEL_VOTERS)
+                .filter_map(|g| labels[g.data as usize])
+                .collect();
+            if votes.is_empty() {
+                return vec![(own, 1.0)];
+            }
+            let mut cands: Vec<usize> = votes.clone();
+            cands.push(own);
+            cands.sort_unstable();
+            cands.dedup();
+            let logp: Vec<f64> = cands
+                .iter()
+                .map(|&c| {
+                    votes
+                        .iter()
+                        .map(|&v| if v == c { agree } else { disagree })
+                        .sum()
+                })
+                .collect();
+            let top = logp.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let w: Vec<f64> = logp.iter().map(|l| (l - top).exp()).collect();
+            let total: f64 = w.iter().sum();
+            let mut out: Vec<(usize, f64)> = cands
+                .iter()
+                .zip(&w)
+                .map(|(&c, &x)| (c, x / total))
+                .filter(|&(c, x)| x >= min_share || c == own)
+                .collect();
+            let kept: f64 = out.iter().map(|x| x.1).sum();
+            for x in &mut out {
+                x.1 /= kept;
+            }
+            out
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,5 +138,25 @@ mod tests {
         assert_eq!(out[15], (Some(1), false));
         let rejected = out.iter().filter(|o| o.1).count();
         assert_eq!(rejected, 2);
+    }
+
+    /// Class probabilities: a lone wrong label deep inside a unit leaves the class certain; a
+    /// segment at the boundary of two units keeps a share of each, as the independent-report
+    /// model gives: 5 votes against 4 with ε = 0.1, K = 2 is a ratio of 9¹ = 9, i.e. 0.9/0.1.
+    #[test]
+    fn class_probabilities_follow_the_votes() {
+        let pos: Vec<Option<[f64; 2]>> = (0..30).map(|i| Some([i as f64 * 50.0, 0.0])).collect();
+        let mut labels: Vec<Option<usize>> = (0..30).map(|i| Some(usize::from(i >= 15))).collect();
+        labels[5] = Some(1);
+        let fallback: Vec<usize> = smooth(&labels, &pos).iter().map(|c| c.0.unwrap()).collect();
+        let p = class_probabilities(&labels, &pos, &fallback, 2, 0.1, 1e-3);
+        // Segment 5: 8 votes for class 0, 1 for class 1: ratio 9⁷, class 1 below 1e-3 kept as
+        // the segment's own class only if it is the fallback (it is not).
+        assert_eq!(p[5].len(), 1);
+        assert_eq!(p[5][0].0, 0);
+        // Segment 14 (the last of unit 0): its 9 nearest are 10..=18, 5 of class 0, 4 of 1.
+        let p14 = &p[14];
+        let share0 = p14.iter().find(|x| x.0 == 0).unwrap().1;
+        assert!((share0 - 0.9).abs() < 1e-9, "{p14:?}");
     }
 }

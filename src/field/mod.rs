@@ -25,17 +25,17 @@ use crate::db::field::{
     self as store, FieldClassRow, FieldInput, FieldRunRow, FieldSegmentRow, Prediction,
     PredictionRow,
 };
-use crate::db::hash::fnv1a64;
+use crate::db::hash::{fnv1a64, fnv1a64_update, FNV1A64_START};
 use crate::db::wkt::LineString;
 use crate::db::{pages, DbError, SegmentRecord};
 use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
 use crate::physics::{ContactMode, Model};
 
-use model::{Field, Observation, Posterior, Sym2, NEIGHBOURS};
+use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 1;
+pub const FIELD_ALGORITHM_VERSION: u32 = 2;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -47,6 +47,10 @@ pub const NETWORK_CLASS: &str = "network";
 
 /// The class of segments without a label whose neighbourhood has none either.
 pub const UNLABELLED_CLASS: &str = "unlabelled";
+
+/// A class less probable than this for a segment is left out of its mixture (model §7.12:
+/// labels are evidence; its share of the prediction would be below 1 %).
+pub const MIN_CLASS_PROBABILITY: f64 = 0.01;
 
 /// Segments read from the inventory at a time for the predictions (flat memory).
 const PAGE: usize = 256;
@@ -144,6 +148,9 @@ pub struct Site {
     pub class: Option<usize>,
     /// Its neighbourhood rejects its label.
     pub label_rejected: bool,
+    /// The probabilities of its true class (labels are evidence): its class alone when its
+    /// neighbourhood agrees.
+    pub classes: Vec<(usize, f64)>,
     /// Its index among the field's members, when it has a usable fit.
     pub member: Option<usize>,
     /// Its fitted leak-band speed and error, m/s.
@@ -200,17 +207,23 @@ fn label_of(v: Option<&str>) -> Option<String> {
         .map(str::to_string)
 }
 
-/// Fingerprint of everything a field update depends on.
-fn fingerprint(inputs: &[FieldInput], settings: &FieldSettings) -> String {
-    let mut text = format!(
-        "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
-        settings.model.as_str(),
-        settings.contact_mode.as_str()
-    );
-    for i in inputs {
-        let _ = writeln!(
-            text,
-            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
+/// The fingerprint of everything a field update depends on, hashed as the inputs stream past
+/// (FNV-1a is a fold over the bytes, so the value is that of the whole text).
+struct Fingerprint(u64);
+
+impl Fingerprint {
+    fn new(settings: &FieldSettings) -> Fingerprint {
+        let head = format!(
+            "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
+            settings.model.as_str(),
+            settings.contact_mode.as_str()
+        );
+        Fingerprint(fnv1a64_update(FNV1A64_START, head.as_bytes()))
+    }
+
+    fn add(&mut self, i: &FieldInput) {
+        let line = format!(
+            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n",
             i.segment_id,
             i.inputs_hash,
             i.soil_type,
@@ -220,31 +233,80 @@ fn fingerprint(inputs: &[FieldInput], settings: &FieldSettings) -> String {
             i.length_m,
             i.fit_id
         );
+        self.0 = fnv1a64_update(self.0, line.as_bytes());
     }
-    format!("{:016x}", fnv1a64(text.as_bytes()))
+
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
+}
+
+/// What a segment's input gives the field besides its site: its fit's soil, if usable.
+#[derive(Debug, Clone, Copy)]
+struct FittedSoil {
+    speeds: Option<(f64, f64)>,
+    information: Option<[f64; 3]>,
+    usable: bool,
+}
+
+/// A segment's site (its geometry reduced to a midpoint and a length) and its fit's soil.
+fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
+    let geo = site_geometry(i.geometry_wkt.as_deref(), i.srid);
+    let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
+    (
+        Site {
+            segment_id: i.segment_id.clone(),
+            pos: geo.map(|g| g.0),
+            length: geo.map(|g| g.1).or(i.length_m),
+            material: i.material.clone(),
+            label: label_of(i.soil_zone.as_deref()).or_else(|| label_of(i.soil_type.as_deref())),
+            class: None,
+            label_rejected: false,
+            classes: Vec::new(),
+            member: None,
+            fitted_speed: i.leak_band_speed.filter(|_| usable),
+        },
+        FittedSoil {
+            speeds: i.speeds,
+            information: i.information,
+            usable,
+        },
+    )
+}
+
+/// The sites, the field's members and the class names.
+type SitesAndMembers = (Vec<Site>, Vec<Observation>, Vec<String>);
+
+/// Read every segment's site from the database, one inventory row at a time (no geometry text
+/// is kept: flat memory), with the fingerprint of the inputs; then the classes and members.
+fn read_sites(
+    conn: &Connection,
+    settings: &FieldSettings,
+) -> Result<(String, SitesAndMembers), DbError> {
+    let mut fp = Fingerprint::new(settings);
+    let mut sites = Vec::new();
+    let mut soils = Vec::new();
+    store::for_each_field_input(conn, |i| {
+        fp.add(&i);
+        let (site, soil) = site_of(&i);
+        sites.push(site);
+        soils.push(soil);
+        Ok(())
+    })?;
+    Ok((fp.hex(), classes_and_members(sites, &soils)))
 }
 
 /// The sites and members of the field from the inputs, with the class names.
 pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
-    let mut sites: Vec<Site> = inputs
-        .iter()
-        .map(|i| {
-            let geo = site_geometry(i.geometry_wkt.as_deref(), i.srid);
-            let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
-            Site {
-                segment_id: i.segment_id.clone(),
-                pos: geo.map(|g| g.0),
-                length: geo.map(|g| g.1).or(i.length_m),
-                material: i.material.clone(),
-                label: label_of(i.soil_zone.as_deref())
-                    .or_else(|| label_of(i.soil_type.as_deref())),
-                class: None,
-                label_rejected: false,
-                member: None,
-                fitted_speed: i.leak_band_speed.filter(|_| usable),
-            }
-        })
-        .collect();
+    let (sites, soils): (Vec<Site>, Vec<FittedSoil>) = inputs.iter().map(site_of).unzip();
+    classes_and_members(sites, &soils)
+}
+
+/// Classes (labels smoothed over neighbours, with their probabilities) and the members.
+fn classes_and_members(
+    mut sites: Vec<Site>,
+    soils: &[FittedSoil],
+) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
     // Classes: the labels in sorted order (one "network" class when there are none).
     let mut names: Vec<String> = sites.iter().filter_map(|s| s.label.clone()).collect();
     names.sort();
@@ -275,10 +337,26 @@ pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<Stri
         }));
         s.label_rejected = rejected;
     }
+    // The network's label error rate, estimated by the share of labels its neighbourhoods
+    // reject, sets how much a split neighbourhood leaves a segment's class uncertain.
+    let labelled = own.iter().filter(|l| l.is_some()).count();
+    let rejected = sites.iter().filter(|s| s.label_rejected).count();
+    let error_rate = rejected as f64 / labelled.max(1) as f64;
+    let classes: Vec<usize> = sites.iter().map(|s| s.class.unwrap_or(0)).collect();
+    let probabilities = labels::class_probabilities(
+        &own,
+        &pos,
+        &classes,
+        names.len(),
+        error_rate,
+        MIN_CLASS_PROBABILITY,
+    );
+    for (s, p) in sites.iter_mut().zip(probabilities) {
+        s.classes = p;
+    }
     let mut obs = Vec::new();
-    for (s, i) in sites.iter_mut().zip(inputs) {
-        let usable = matches!(i.fit_status.as_deref(), Some("ok" | "flagged"));
-        let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, usable) else {
+    for (s, i) in sites.iter_mut().zip(soils) {
+        let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, i.usable) else {
             continue;
         };
         if !(cp > 0.0 && cs > 0.0 && info.iter().all(|v| v.is_finite())) {
@@ -402,6 +480,7 @@ fn site_result(
     names: &[String],
     settings: &FieldSettings,
     run_id: Option<i64>,
+    screened: Option<Screened>,
 ) -> SiteResult {
     let class_name = site.class.map_or("", |k| names[k].as_str());
     let mut row = FieldSegmentRow {
@@ -410,6 +489,11 @@ fn site_result(
         soil_class: site.class.map(|k| names[k].clone()),
         label_rejected: site.label_rejected,
         measured: site.member.is_some(),
+        information_scale: site
+            .member
+            .zip(field)
+            .and_then(|(m, f)| f.scales.information.get(m).copied()),
+        screen_chi2: screened.map(|s| s.chi2),
         ..FieldSegmentRow::default()
     };
     let none = |mut row: FieldSegmentRow, why: String| {
@@ -435,8 +519,11 @@ fn site_result(
         Ok(d) => d,
         Err(e) => return none(row, format!("no speed: the pipe's data are unusable ({e})")),
     };
-    let class = site.class.unwrap_or(0);
-    let post = field.posterior(site.pos, class, site.member);
+    let post = if site.classes.is_empty() {
+        field.posterior(site.pos, site.class.unwrap_or(0), site.member)
+    } else {
+        field.mixture_posterior(site.pos, &site.classes, site.member)
+    };
     let speed = predict_speed(
         &data,
         settings.model,
@@ -502,8 +589,7 @@ pub fn update_field(
     settings: &FieldSettings,
 ) -> Result<FieldUpdate, DbError> {
     let started = Instant::now();
-    let inputs = store::field_inputs(conn)?;
-    let fp = fingerprint(&inputs, settings);
+    let (fp, (sites, obs, names)) = read_sites(conn, settings)?;
     if !settings.force {
         if let Some(last) = store::latest_field_run(conn)? {
             if last.fingerprint == fp {
@@ -514,8 +600,6 @@ pub fn update_field(
             }
         }
     }
-    let (sites, obs, names) = sites_of(&inputs);
-    drop(inputs);
     let ell_bounds = length_bounds(&sites);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(settings.jobs.max(1))
@@ -526,6 +610,13 @@ pub fn update_field(
         (n_members > 0).then(|| Field::fit(obs, names.len(), ell_bounds))
     });
     let h = field.as_ref().map(|f| f.hyper);
+    // Every member's χ² against its leave-one-out prediction: the screening that set the
+    // information scales, else (given θ, too few members) one in the final field.
+    let screened: Vec<Screened> = in_pool(&pool, || match field.as_ref() {
+        Some(f) if !f.screened.is_empty() => f.screened.clone(),
+        Some(f) => f.screen(),
+        None => Vec::new(),
+    });
     let mut run = FieldRunRow {
         id: None,
         run_id,
@@ -563,6 +654,7 @@ pub fn update_field(
             n_measured: members.iter().filter(|s| s.member.is_some()).count() as i64,
             mean,
             std: [cov.pp.max(0.0).sqrt(), cov.ss.max(0.0).sqrt()],
+            scale: field.as_ref().map_or([1.0, 1.0], |f| f.scales.of_class(k)),
         });
     }
     let by_id: BTreeMap<&str, usize> = sites
@@ -609,6 +701,7 @@ pub fn update_field(
                                 &names,
                                 settings,
                                 run_id,
+                                sites[i].member.and_then(|m| screened.get(m).copied()),
                             ),
                         )
                     })

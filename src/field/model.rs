@@ -67,6 +67,36 @@ pub const HYPER_STALL_TOL: f64 = 1e-2;
 /// See [`HYPER_STALL_TOL`].
 pub const HYPER_STALL_EVALUATIONS: usize = 50;
 
+/// χ² of a member's u against its leave-one-out prediction from its neighbours beyond which
+/// the field cannot explain it: χ²₂ at p = 0.001 (a field that describes its members well
+/// screens about one in a thousand). Such a fit (e.g. a metal fit in a rock-like second basin
+/// of its misfit, its ln c_P off by 1–3 while its information claims σ 0.05–0.3) has its
+/// information scaled down before the hyper-parameters are refitted (P79–P80).
+pub const SCREEN_CHI2: f64 = 13.8;
+
+/// The χ² a screened member is brought to by scaling its information: the expectation of χ²₂,
+/// i.e. its claimed noise is widened (a Birge ratio against its neighbourhood, as P88 does
+/// against its own residuals) until its distance from the field is typical.
+pub const SCREEN_TARGET_CHI2: f64 = 2.0;
+
+/// Rounds of screening and refitting the hyper-parameters (each round's screening uses the
+/// previous round's field, whose per-pipe scatter the screened fits no longer inflate).
+pub const SCREEN_ROUNDS: usize = 2;
+
+/// Standard deviation of the prior of each class's ln multiplier of B and of T: a factor 1.65
+/// either way at one sigma. It holds the multipliers near 1 where a class has few members and
+/// breaks the degeneracy between the common B, T and the multipliers.
+pub const CLASS_SCALE_PRIOR_SD: f64 = 0.5;
+
+/// A class with fewer members keeps multipliers 1 (too few to estimate a spread of its own).
+pub const MIN_MEMBERS_FOR_CLASS_SCALE: usize = 5;
+
+/// Range of the class multipliers searched.
+const CLASS_SCALE_RANGE: (f64, f64) = (0.05, 20.0);
+
+/// Evaluation budget of each refit after screening (warm-started from the previous optimum).
+const REFIT_EVALUATIONS: usize = 150;
+
 /// Range of the variances searched (ln units²): from a 0.1 % spread to a factor e^1.4.
 const VAR_RANGE: (f64, f64) = (1e-6, 2.0);
 /// Range of the field's correlation between ln c_P and ln c_S.
@@ -168,7 +198,13 @@ pub struct Observation {
 impl Observation {
     /// The fit's noise covariance (I_s + ε·1)⁻¹.
     pub fn noise(&self) -> Sym2 {
+        self.noise_scaled(1.0)
+    }
+
+    /// The noise with the information multiplied by `s`: (s I_s + ε·1)⁻¹.
+    pub fn noise_scaled(&self, s: f64) -> Sym2 {
         self.info
+            .scale(s)
             .add(&Sym2::diag(UNSEEN_PRECISION))
             .inverse()
             .unwrap_or(Sym2::diag(1.0 / UNSEEN_PRECISION))
@@ -237,15 +273,43 @@ struct Conditional {
     v: Sym2,
 }
 
-/// The conditional of a target at `pos` with variance `target_var`, given the observations
-/// `nbrs` of `obs` (their noise `noise[j]` on the diagonal).
+/// What the conditionals are taken with: the hyper-parameters, the members, each member's
+/// noise (its class's scatter t_k T plus its fit's (s_i I_i + ε)⁻¹) and the square root of its
+/// class's multiplier of B. A class multiplier b_k scales the field inside class k as
+/// w_k(x) = √b_k w(x), so Cov(w(x), w(x′)) = √(b_k b_k′) B e^(−|x − x′|/ℓ): positive definite
+/// across class boundaries (P78 with a class-dependent amplitude).
+struct Terms<'a> {
+    hyper: &'a Hyper,
+    obs: &'a [Observation],
+    noise: &'a [Sym2],
+    root_b: &'a [f64],
+}
+
+impl Terms<'_> {
+    /// The field covariance between members i and j (i ≠ j).
+    fn between(&self, i: usize, j: usize) -> Sym2 {
+        self.hyper
+            .kernel_between(self.obs[i].pos, self.obs[j].pos)
+            .scale(self.root_b[i] * self.root_b[j])
+    }
+
+    /// Member i's own variance: b_i B + its noise.
+    fn own(&self, i: usize) -> Sym2 {
+        self.hyper
+            .b
+            .scale(self.root_b[i] * self.root_b[i])
+            .add(&self.noise[i])
+    }
+}
+
+/// The conditional of a target at `pos` (√ of its class's multiplier of B `root_b`) with
+/// variance `target_var`, given the members `nbrs`.
 fn conditional(
-    hyper: &Hyper,
+    t: &Terms,
     pos: Option<[f64; 2]>,
+    root_b: f64,
     target_var: Sym2,
     nbrs: &[usize],
-    obs: &[Observation],
-    noise: &[Sym2],
 ) -> Option<Conditional> {
     let k = nbrs.len();
     if k == 0 {
@@ -257,12 +321,8 @@ fn conditional(
     let mut c = DMatrix::<f64>::zeros(2 * k, 2 * k);
     let mut ct = DMatrix::<f64>::zeros(2 * k, 2);
     for (p, &i) in nbrs.iter().enumerate() {
-        let oi = &obs[i];
         for (q, &j) in nbrs.iter().enumerate().take(p + 1) {
-            let mut s = hyper.kernel_between(oi.pos, obs[j].pos);
-            if p == q {
-                s = hyper.b.add(&noise[i]);
-            }
+            let s = if p == q { t.own(i) } else { t.between(i, j) };
             for a in 0..2 {
                 for b in 0..2 {
                     c[(2 * p + a, 2 * q + b)] = s.at(a, b);
@@ -270,7 +330,10 @@ fn conditional(
                 }
             }
         }
-        let s = hyper.kernel_between(pos, oi.pos);
+        let s = t
+            .hyper
+            .kernel_between(pos, t.obs[i].pos)
+            .scale(root_b * t.root_b[i]);
         for a in 0..2 {
             for b in 0..2 {
                 ct[(2 * p + a, b)] = s.at(a, b);
@@ -393,14 +456,9 @@ fn design(
 /// thread count).
 const PASS_CHUNK: usize = 256;
 
-/// One Vecchia pass at `hyper`: `None` when a conditional is not positive definite.
-fn pass(
-    hyper: &Hyper,
-    obs: &[Observation],
-    noise: &[Sym2],
-    v: &Vecchia,
-    nk: usize,
-) -> Option<Pass> {
+/// One Vecchia pass: `None` when a conditional is not positive definite.
+fn pass(t: &Terms, v: &Vecchia, nk: usize) -> Option<Pass> {
+    let obs = t.obs;
     let positions: Vec<usize> = (0..v.order.len()).collect();
     let parts: Vec<Option<Pass>> = positions
         .par_chunks(PASS_CHUNK)
@@ -410,7 +468,7 @@ fn pass(
                 let i = v.order[pos];
                 let nb = v.neighbours(pos);
                 let o = &obs[i];
-                let cond = conditional(hyper, o.pos, hyper.b.add(&noise[i]), &nb, obs, noise)?;
+                let cond = conditional(t, o.pos, t.root_b[i], t.own(i), &nb)?;
                 let vinv = cond.v.inverse()?;
                 let mut yt = o.u;
                 for (p, &j) in nb.iter().enumerate() {
@@ -487,11 +545,67 @@ fn class_posterior(p: &Pass, nk: usize) -> Option<(DVector<f64>, DMatrix<f64>, f
 }
 
 /// Log marginal likelihood of the observations at `hyper` (P80, Vecchia form, class means
-/// integrated out), without the constant −n ln 2π; `None` where not defined.
+/// integrated out), without the constant −n ln 2π; `None` where not defined. Every class
+/// multiplier and information scale 1.
 pub fn log_likelihood(hyper: &Hyper, obs: &[Observation], v: &Vecchia, nk: usize) -> Option<f64> {
-    let noise: Vec<Sym2> = obs.iter().map(|o| hyper.t.add(&o.noise())).collect();
-    let p = pass(hyper, obs, &noise, v, nk)?;
+    let scales = Scales::unit(nk, obs.len());
+    log_likelihood_scaled(hyper, &scales, obs, v, nk)
+}
+
+/// [`log_likelihood`] with class multipliers and information scales.
+fn log_likelihood_scaled(
+    hyper: &Hyper,
+    scales: &Scales,
+    obs: &[Observation],
+    v: &Vecchia,
+    nk: usize,
+) -> Option<f64> {
+    let (noise, root_b) = scales.terms(hyper, obs);
+    let t = Terms {
+        hyper,
+        obs,
+        noise: &noise,
+        root_b: &root_b,
+    };
+    let p = pass(&t, v, nk)?;
     class_posterior(&p, nk).map(|x| x.2)
+}
+
+/// The per-class multipliers of B and T and the per-member information scales of a field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scales {
+    /// Per class: [multiplier of B, multiplier of T].
+    pub class: Vec<[f64; 2]>,
+    /// Per member: the factor its information is multiplied by (1: as fitted; below 1: the
+    /// field could not explain it, see [`SCREEN_CHI2`]).
+    pub information: Vec<f64>,
+}
+
+impl Scales {
+    /// All 1: every class as the common B and T, every fit's information as stored.
+    pub fn unit(nk: usize, n: usize) -> Scales {
+        Scales {
+            class: vec![[1.0, 1.0]; nk],
+            information: vec![1.0; n],
+        }
+    }
+
+    /// Class k's multipliers ([1, 1] for a class it does not know).
+    pub fn of_class(&self, k: usize) -> [f64; 2] {
+        self.class.get(k).copied().unwrap_or([1.0, 1.0])
+    }
+
+    /// Each member's noise t_k T + (s_i I_i + ε)⁻¹ and √b_k.
+    fn terms(&self, hyper: &Hyper, obs: &[Observation]) -> (Vec<Sym2>, Vec<f64>) {
+        obs.iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let [b, t] = self.of_class(o.class);
+                let s = self.information.get(i).copied().unwrap_or(1.0);
+                (hyper.t.scale(t).add(&o.noise_scaled(s)), b.sqrt())
+            })
+            .unzip()
+    }
 }
 
 /// The hyper-parameters' search coordinates: ln ℓ, ln B_PP, ln B_SS, corr(B), ln T_PP, ln T_SS.
@@ -501,6 +615,133 @@ fn hyper_of(x: &[f64]) -> Hyper {
         b: Sym2::new(bp, x[3] * (bp * bs).sqrt(), bs),
         ell: x[0].exp(),
         t: Sym2::new(x[4].exp(), 0.0, x[5].exp()),
+    }
+}
+
+/// A member's screening against its leave-one-out prediction (see [`Field::screen`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Screened {
+    /// χ² of its fitted u with its full information.
+    pub chi2: f64,
+    /// The factor its information is scaled by: 1, or below 1 beyond [`SCREEN_CHI2`].
+    pub scale: f64,
+}
+
+/// The marginal-likelihood searches of a field's construction.
+struct HyperSearch<'a> {
+    obs: &'a [Observation],
+    v: &'a Vecchia,
+    nk: usize,
+    /// Bounds of ℓ, m.
+    bounds: (f64, f64),
+}
+
+impl HyperSearch<'_> {
+    /// The common θ maximising the marginal likelihood at fixed scales, from `start`
+    /// (Nelder–Mead in the coordinates of [`hyper_of`], initial steps times `step`).
+    fn common(&self, start: Hyper, scales: &Scales, budget: usize, step: f64) -> Option<Hyper> {
+        let (lo, hi) = self.bounds;
+        let corr = start.b.ps / (start.b.pp * start.b.ss).sqrt();
+        let lower = [
+            lo.ln(),
+            VAR_RANGE.0.ln(),
+            VAR_RANGE.0.ln(),
+            CORR_RANGE.0,
+            VAR_RANGE.0.ln(),
+            VAR_RANGE.0.ln(),
+        ];
+        let upper = [
+            hi.ln(),
+            VAR_RANGE.1.ln(),
+            VAR_RANGE.1.ln(),
+            CORR_RANGE.1,
+            VAR_RANGE.1.ln(),
+            VAR_RANGE.1.ln(),
+        ];
+        let x0: Vec<f64> = [
+            start.ell.ln(),
+            start.b.pp.ln(),
+            start.b.ss.ln(),
+            corr,
+            start.t.pp.ln(),
+            start.t.ss.ln(),
+        ]
+        .iter()
+        .zip(lower.iter().zip(&upper))
+        .map(|(x, (l, u))| {
+            if x.is_finite() {
+                x.clamp(*l, *u)
+            } else {
+                0.5 * (l + u)
+            }
+        })
+        .collect();
+        let objective = FnObjective::new(6, |x: &[f64]| {
+            log_likelihood_scaled(&hyper_of(x), scales, self.obs, self.v, self.nk)
+                .map_or(f64::INFINITY, |l| -l)
+        });
+        let steps: Vec<f64> = [0.7, 1.0, 1.0, 0.3, 1.0, 1.0]
+            .iter()
+            .map(|s| s * step)
+            .collect();
+        let bounds = Bounds::new(lower.to_vec(), upper.to_vec()).ok()?;
+        let r = NelderMead::new()
+            .max_evaluations(budget)
+            .and_then(|nm| nm.stall(HYPER_STALL_EVALUATIONS, HYPER_STALL_TOL))
+            .ok()?
+            .minimize(&objective, &bounds, &x0, &steps)
+            .ok()?;
+        r.f.is_finite().then(|| hyper_of(&r.x))
+    }
+
+    /// The class multipliers of B and T maximising the marginal likelihood times their prior
+    /// (ln b_k, ln t_k ~ N(0, [`CLASS_SCALE_PRIOR_SD`]²)) at fixed θ and information scales;
+    /// classes with fewer than [`MIN_MEMBERS_FOR_CLASS_SCALE`] members keep theirs.
+    fn classes(&self, hyper: &Hyper, scales: &Scales) -> Vec<[f64; 2]> {
+        let mut count = vec![0usize; self.nk];
+        for o in self.obs {
+            if let Some(c) = count.get_mut(o.class) {
+                *c += 1;
+            }
+        }
+        let active: Vec<usize> = (0..self.nk)
+            .filter(|&k| count[k] >= MIN_MEMBERS_FOR_CLASS_SCALE)
+            .collect();
+        let current = scales.class.clone();
+        if active.is_empty() {
+            return current;
+        }
+        let of = |x: &[f64]| -> Scales {
+            let mut s = scales.clone();
+            for (j, &k) in active.iter().enumerate() {
+                s.class[k] = [x[2 * j].exp(), x[2 * j + 1].exp()];
+            }
+            s
+        };
+        let prior_var = CLASS_SCALE_PRIOR_SD * CLASS_SCALE_PRIOR_SD;
+        let objective = FnObjective::new(2 * active.len(), |x: &[f64]| {
+            let penalty = 0.5 * x.iter().map(|v| v * v).sum::<f64>() / prior_var;
+            log_likelihood_scaled(hyper, &of(x), self.obs, self.v, self.nk)
+                .map_or(f64::INFINITY, |l| penalty - l)
+        });
+        let (lo, hi) = (CLASS_SCALE_RANGE.0.ln(), CLASS_SCALE_RANGE.1.ln());
+        let x0: Vec<f64> = active
+            .iter()
+            .flat_map(|&k| current[k].map(|m| m.ln().clamp(lo, hi)))
+            .collect();
+        let n = x0.len();
+        let found = Bounds::new(vec![lo; n], vec![hi; n]).ok().and_then(|b| {
+            NelderMead::new()
+                .max_evaluations(REFIT_EVALUATIONS)
+                .and_then(|nm| nm.stall(HYPER_STALL_EVALUATIONS, HYPER_STALL_TOL))
+                .ok()?
+                .minimize(&objective, &b, &x0, &vec![0.5; n])
+                .ok()
+        });
+        match found.filter(|r| r.f.is_finite()) {
+            Some(r) => of(&r.x).class,
+            None => current,
+        }
     }
 }
 
@@ -540,8 +781,15 @@ pub struct Field {
     pub class_cov: DMatrix<f64>,
     /// The members.
     pub obs: Vec<Observation>,
-    /// Each member's noise T + (I + ε)⁻¹.
+    /// The class multipliers of B and T and the members' information scales.
+    pub scales: Scales,
+    /// The screening that set the information scales (empty when none was done: given θ or
+    /// too few members).
+    pub screened: Vec<Screened>,
+    /// Each member's noise t_k T + (s_i I_i + ε)⁻¹.
     noise: Vec<Sym2>,
+    /// Each member's √b_k.
+    root_b: Vec<f64>,
     /// Spatial index of the positioned members.
     tree: Index,
 }
@@ -576,65 +824,117 @@ impl Field {
         Self::build(obs, nk, ell_bounds, Some((hyper, source)))
     }
 
+    /// The field with given hyper-parameters, class multipliers and information scales (those
+    /// of a stored update): only the class means are estimated.
+    pub fn with_scales(
+        obs: Vec<Observation>,
+        nk: usize,
+        ell_bounds: (f64, f64),
+        hyper: Hyper,
+        source: HyperSource,
+        scales: Scales,
+    ) -> Field {
+        let bounds = Self::clamp_bounds(ell_bounds);
+        let scales = Scales {
+            class: (0..nk).map(|k| scales.of_class(k)).collect(),
+            information: (0..obs.len())
+                .map(|i| scales.information.get(i).copied().unwrap_or(1.0))
+                .collect(),
+        };
+        let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
+        Self::assemble(obs, nk, bounds, hyper, source, scales, &v)
+    }
+
+    fn clamp_bounds(ell_bounds: (f64, f64)) -> (f64, f64) {
+        (
+            ell_bounds.0.max(1e-3),
+            ell_bounds.1.max(ell_bounds.0 * 1.001),
+        )
+    }
+
     fn build(
         obs: Vec<Observation>,
         nk: usize,
         ell_bounds: (f64, f64),
         given: Option<(Hyper, HyperSource)>,
     ) -> Field {
-        let (lo, hi) = (
-            ell_bounds.0.max(1e-3),
-            ell_bounds.1.max(ell_bounds.0 * 1.001),
-        );
+        let (lo, hi) = Self::clamp_bounds(ell_bounds);
         let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
         let start = Hyper::defaults((lo * hi).sqrt());
-        let (mut hyper, mut source) = given.unwrap_or((start, HyperSource::Defaults));
-        if given.is_none() && obs.len() >= MIN_MEMBERS_FOR_HYPER {
-            let x0 = [
-                start.ell.ln(),
-                start.b.pp.ln(),
-                start.b.ss.ln(),
-                DEFAULT_FIELD_CORR,
-                start.t.pp.ln(),
-                start.t.ss.ln(),
-            ];
-            let bounds = Bounds::new(
-                vec![
-                    lo.ln(),
-                    VAR_RANGE.0.ln(),
-                    VAR_RANGE.0.ln(),
-                    CORR_RANGE.0,
-                    VAR_RANGE.0.ln(),
-                    VAR_RANGE.0.ln(),
-                ],
-                vec![
-                    hi.ln(),
-                    VAR_RANGE.1.ln(),
-                    VAR_RANGE.1.ln(),
-                    CORR_RANGE.1,
-                    VAR_RANGE.1.ln(),
-                    VAR_RANGE.1.ln(),
-                ],
+        let mut scales = Scales::unit(nk, obs.len());
+        let Some((mut hyper, source)) = given.or_else(|| {
+            (obs.len() < MIN_MEMBERS_FOR_HYPER).then_some((start, HyperSource::Defaults))
+        }) else {
+            // Maximum marginal likelihood (P80): the common θ; then rounds of screening the
+            // members the field cannot explain and refitting θ and the class multipliers.
+            let search = HyperSearch {
+                obs: &obs,
+                v: &v,
+                nk,
+                bounds: (lo, hi),
+            };
+            let Some(mut hyper) = search.common(start, &scales, HYPER_EVALUATIONS, 1.0) else {
+                return Self::assemble(obs, nk, (lo, hi), start, HyperSource::Defaults, scales, &v);
+            };
+            let mut field = Self::assemble(
+                obs,
+                nk,
+                (lo, hi),
+                hyper,
+                HyperSource::MarginalLikelihood,
+                scales.clone(),
+                &v,
             );
-            let objective = FnObjective::new(6, |x: &[f64]| {
-                log_likelihood(&hyper_of(x), &obs, &v, nk).map_or(f64::INFINITY, |l| -l)
-            });
-            let steps = [0.7, 1.0, 1.0, 0.3, 1.0, 1.0];
-            let found = bounds.ok().and_then(|b| {
-                NelderMead::new()
-                    .max_evaluations(HYPER_EVALUATIONS)
-                    .and_then(|nm| nm.stall(HYPER_STALL_EVALUATIONS, HYPER_STALL_TOL))
-                    .ok()?
-                    .minimize(&objective, &b, &x0, &steps)
-                    .ok()
-            });
-            if let Some(r) = found.filter(|r| r.f.is_finite()) {
-                hyper = hyper_of(&r.x);
-                source = HyperSource::MarginalLikelihood;
+            let mut screened = Vec::new();
+            for _ in 0..SCREEN_ROUNDS {
+                screened = field.screen();
+                scales.information = screened.iter().map(|s| s.scale).collect();
+                let obs = field.obs;
+                let search = HyperSearch {
+                    obs: &obs,
+                    v: &v,
+                    nk,
+                    bounds: (lo, hi),
+                };
+                if let Some(h) = search.common(hyper, &scales, REFIT_EVALUATIONS, 0.3) {
+                    hyper = h;
+                }
+                scales.class = search.classes(&hyper, &scales);
+                field = Self::assemble(
+                    obs,
+                    nk,
+                    (lo, hi),
+                    hyper,
+                    HyperSource::MarginalLikelihood,
+                    scales.clone(),
+                    &v,
+                );
             }
-        }
-        let noise: Vec<Sym2> = obs.iter().map(|o| hyper.t.add(&o.noise())).collect();
-        let post = pass(&hyper, &obs, &noise, &v, nk).and_then(|p| class_posterior(&p, nk));
+            field.screened = screened;
+            return field;
+        };
+        hyper.ell = hyper.ell.clamp(lo, hi.max(lo));
+        Self::assemble(obs, nk, (lo, hi), hyper, source, scales, &v)
+    }
+
+    /// The field at fixed θ and scales: the class means' posterior and the spatial index.
+    fn assemble(
+        obs: Vec<Observation>,
+        nk: usize,
+        ell_bounds: (f64, f64),
+        hyper: Hyper,
+        source: HyperSource,
+        scales: Scales,
+        v: &Vecchia,
+    ) -> Field {
+        let (noise, root_b) = scales.terms(&hyper, &obs);
+        let t = Terms {
+            hyper: &hyper,
+            obs: &obs,
+            noise: &noise,
+            root_b: &root_b,
+        };
+        let post = pass(&t, v, nk).and_then(|p| class_posterior(&p, nk));
         let (class_mean, class_cov, log_likelihood) = match post {
             Some((m, c, l)) => (m, c, Some(l)),
             None => {
@@ -647,13 +947,60 @@ impl Field {
             hyper,
             source,
             log_likelihood,
-            ell_bounds: (lo, hi),
+            ell_bounds,
             class_mean,
             class_cov,
             obs,
+            scales,
+            screened: Vec::new(),
             noise,
+            root_b,
             tree,
         }
+    }
+
+    /// Each member's information scale (P79–P80 screening): 1 when its fitted u is within
+    /// χ²₂ = [`SCREEN_CHI2`] of its leave-one-out prediction from the others, with its fit's
+    /// full information; otherwise the factor s < 1 that brings that χ² down to
+    /// [`SCREEN_TARGET_CHI2`], χ²(s) = dᵀ (S* + (s I + ε)⁻¹)⁻¹ d with d = û − m* and S* the
+    /// prediction's covariance (field, class means and per-pipe scatter). χ²(s) falls
+    /// monotonically to about 0 as s → 0, so s is found by bisection in ln s.
+    pub fn screen(&self) -> Vec<Screened> {
+        (0..self.obs.len())
+            .into_par_iter()
+            .with_min_len(PASS_CHUNK)
+            .map(|i| {
+                let o = &self.obs[i];
+                let p = self.posterior(o.pos, o.class, Some(i));
+                let d = [o.u[0] - p.mean[0], o.u[1] - p.mean[1]];
+                let chi2 = |s: f64| {
+                    p.cov
+                        .add(&o.noise_scaled(s))
+                        .inverse()
+                        .map_or(0.0, |inv| inv.quad(d))
+                };
+                let full = chi2(1.0);
+                if full <= SCREEN_CHI2 {
+                    return Screened {
+                        chi2: full,
+                        scale: 1.0,
+                    };
+                }
+                let (mut lo, mut hi) = ((1e-12f64).ln(), 0.0f64);
+                for _ in 0..60 {
+                    let mid = 0.5 * (lo + hi);
+                    if chi2(mid.exp()) > SCREEN_TARGET_CHI2 {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                Screened {
+                    chi2: full,
+                    scale: lo.exp(),
+                }
+            })
+            .collect()
     }
 
     /// Number of classes.
@@ -661,12 +1008,46 @@ impl Field {
         self.class_mean.len() / 2
     }
 
-    /// The kriging weights A (2 × 2k) and neighbours of a pipe at `pos` (as [`Self::posterior`]
-    /// uses them), for the plan's cross-covariances.
-    pub fn weights(&self, pos: [f64; 2]) -> (Vec<f64>, Vec<usize>) {
-        let h = &self.hyper;
+    /// The terms the conditionals are taken with.
+    fn terms(&self) -> Terms<'_> {
+        Terms {
+            hyper: &self.hyper,
+            obs: &self.obs,
+            noise: &self.noise,
+            root_b: &self.root_b,
+        }
+    }
+
+    /// The prior variance of a pipe's u in class `class`: b_k B + t_k T (P78).
+    pub fn prior_var(&self, class: usize) -> Sym2 {
+        let [b, t] = self.scales.of_class(class);
+        self.hyper.b.scale(b).add(&self.hyper.t.scale(t))
+    }
+
+    /// The per-pipe scatter of class `class`: t_k T.
+    pub fn scatter(&self, class: usize) -> Sym2 {
+        self.hyper.t.scale(self.scales.of_class(class)[1])
+    }
+
+    /// The field covariance between a pipe at `a` in class `ka` and one at `b` in class `kb`:
+    /// √(b_ka b_kb) B e^(−|a − b|/ℓ).
+    pub fn kernel_classes(&self, a: [f64; 2], ka: usize, b: [f64; 2], kb: usize) -> Sym2 {
+        let r = (self.scales.of_class(ka)[0] * self.scales.of_class(kb)[0]).sqrt();
+        self.hyper.kernel(dist(a, b)).scale(r)
+    }
+
+    /// The kriging weights A (2 × 2k) and neighbours of a pipe at `pos` in class `class` (as
+    /// [`Self::posterior`] uses them), for the plan's cross-covariances.
+    pub fn weights(&self, pos: [f64; 2], class: usize) -> (Vec<f64>, Vec<usize>) {
         let idx: Vec<usize> = self.neighbours_of(pos, None).iter().map(|n| n.0).collect();
-        match conditional(h, Some(pos), h.b.add(&h.t), &idx, &self.obs, &self.noise) {
+        let root_b = self.scales.of_class(class)[0].sqrt();
+        match conditional(
+            &self.terms(),
+            Some(pos),
+            root_b,
+            self.prior_var(class),
+            &idx,
+        ) {
             Some(c) if c.a.ncols() > 0 => {
                 let k = idx.len();
                 let mut a = Vec::with_capacity(4 * k);
@@ -694,6 +1075,51 @@ impl Field {
         )
     }
 
+    /// The posterior of a pipe whose class is uncertain (labels are evidence, model §7.12): the
+    /// mixture over `classes` (class, probability) of the class posteriors of
+    /// [`Self::posterior`], by its mean and covariance: m = Σ p_k m_k,
+    /// S = Σ p_k (S_k + (m_k − m)(m_k − m)ᵀ). The neighbours are those of the likeliest class.
+    pub fn mixture_posterior(
+        &self,
+        pos: Option<[f64; 2]>,
+        classes: &[(usize, f64)],
+        skip: Option<usize>,
+    ) -> Posterior {
+        let mut parts: Vec<(f64, Posterior)> = classes
+            .iter()
+            .map(|&(k, p)| (p, self.posterior(pos, k, skip)))
+            .collect();
+        let total: f64 = parts.iter().map(|x| x.0).sum();
+        let Some(best) = parts
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0).then(b.0.cmp(&a.0)))
+            .map(|x| x.0)
+        else {
+            return self.posterior(pos, 0, skip);
+        };
+        if parts.len() == 1 || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return parts.into_iter().nth(best).map(|x| x.1).expect("one part");
+        }
+        let mut mean = [0.0; 2];
+        for (p, q) in &parts {
+            for (m, v) in mean.iter_mut().zip(q.mean) {
+                *m += p / total * v;
+            }
+        }
+        let mut cov = Sym2::default();
+        for (p, q) in &parts {
+            let d = [q.mean[0] - mean[0], q.mean[1] - mean[1]];
+            let spread = Sym2::new(d[0] * d[0], d[0] * d[1], d[1] * d[1]);
+            cov = cov.add(&q.cov.add(&spread).scale(p / total));
+        }
+        Posterior {
+            mean,
+            cov,
+            neighbours: parts.swap_remove(best).1.neighbours,
+        }
+    }
+
     /// The members nearest to `pos` (at most [`NEIGHBOURS`]), leaving out member `skip`.
     pub fn neighbours_of(&self, pos: [f64; 2], skip: Option<usize>) -> Vec<(usize, f64)> {
         self.tree
@@ -709,12 +1135,12 @@ impl Field {
     /// its nearest members, the class means' error included), leaving out member `skip` (its
     /// leave-one-out prediction, P82). Without a position: its class mean, B and T added.
     pub fn posterior(&self, pos: Option<[f64; 2]>, class: usize, skip: Option<usize>) -> Posterior {
-        let h = &self.hyper;
-        let target_var = h.b.add(&h.t);
+        let target_var = self.prior_var(class);
+        let root_b = self.scales.of_class(class)[0].sqrt();
         let neighbours = pos.map_or_else(Vec::new, |p| self.neighbours_of(p, skip));
         let idx: Vec<usize> = neighbours.iter().map(|n| n.0).collect();
         let cond =
-            conditional(h, pos, target_var, &idx, &self.obs, &self.noise).unwrap_or(Conditional {
+            conditional(&self.terms(), pos, root_b, target_var, &idx).unwrap_or(Conditional {
                 a: DMatrix::zeros(2, 0),
                 v: target_var,
             });
@@ -789,6 +1215,19 @@ mod tests {
         mu: [[f64; 2]; 2],
         info: Sym2,
     ) -> Vec<Observation> {
+        draw_scaled(seed, n, side, truth, mu, info, [1.0, 1.0])
+    }
+
+    /// [`draw`] with class k's field amplitude √b_k (the model's class multiplier of B).
+    fn draw_scaled(
+        seed: u64,
+        n: usize,
+        side: f64,
+        truth: &Hyper,
+        mu: [[f64; 2]; 2],
+        info: Sym2,
+        b: [f64; 2],
+    ) -> Vec<Observation> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let pos: Vec<[f64; 2]> = (0..n)
             .map(|_| [rng.gen_range(0.0..side), rng.gen_range(0.0..side)])
@@ -813,7 +1252,8 @@ mod tests {
         (0..n)
             .map(|i| {
                 let class = usize::from(pos[i][0] > side / 2.0);
-                let mut u = [mu[class][0] + w[2 * i], mu[class][1] + w[2 * i + 1]];
+                let r = b[class].sqrt();
+                let mut u = [mu[class][0] + r * w[2 * i], mu[class][1] + r * w[2 * i + 1]];
                 for l in [tl, nl] {
                     let (a, b) = (normal(&mut rng), normal(&mut rng));
                     u[0] += l[0] * a;
@@ -964,5 +1404,81 @@ mod tests {
         // c_S: the prior's mean and spread, untouched by the value 7.0 the fits report.
         assert!((m[1] - TYPICAL_LN_SPEEDS[1]).abs() < 0.05, "{m:?}");
         assert!((cov.ss.sqrt() - CLASS_PRIOR_SD).abs() < 0.05, "{cov:?}");
+    }
+
+    /// Fits the field cannot explain: 12 of 300 members moved by +1.5 in ln c_P (a rock-like
+    /// second basin) while their information claims σ 0.1. Screening scales exactly those
+    /// down, and the refitted per-pipe scatter stays near the truth (0.002) instead of
+    /// absorbing them (12/300 × 1.5² ≈ 0.09 spread over every member).
+    #[test]
+    fn unexplained_fits_are_screened_and_do_not_inflate_the_scatter() {
+        let (t, mu) = truth();
+        let mut obs = draw(11, 300, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let bad: Vec<usize> = (0..12).map(|j| 7 + 25 * j).collect();
+        for &i in &bad {
+            obs[i].u[0] += 1.5;
+            obs[i].info = Sym2::new(100.0, 0.0, 100.0);
+        }
+        let field = Field::fit(obs, 2, (50.0, 4243.0));
+        let s = &field.scales.information;
+        for &i in &bad {
+            assert!(s[i] < 0.05, "member {i}: scale {}", s[i]);
+        }
+        let clean_kept = (0..300)
+            .filter(|i| !bad.contains(i) && s[*i] == 1.0)
+            .count();
+        assert!(clean_kept >= 285, "{clean_kept} of 288 clean members kept");
+        assert!(field.hyper.t.pp < 0.01, "T_PP {}", field.hyper.t.pp);
+        // The screening that set the scales is stored with the field, beyond the threshold.
+        assert_eq!(field.screened.len(), 300);
+        assert!(bad.iter().all(|&i| field.screened[i].chi2 > SCREEN_CHI2));
+    }
+
+    /// Class multipliers: a class whose field spread is 4× the other's (in variance) gets a
+    /// multiplier of B 2–8× the other's; the common B alone would give both the same.
+    #[test]
+    fn class_multipliers_follow_the_class_spread() {
+        let (t, mu) = truth();
+        let obs = draw_scaled(
+            5,
+            400,
+            3000.0,
+            &t,
+            mu,
+            Sym2::new(2500.0, 500.0, 900.0),
+            [0.5, 2.0],
+        );
+        let field = Field::fit(obs, 2, (50.0, 4243.0));
+        let [b0, _] = field.scales.of_class(0);
+        let [b1, _] = field.scales.of_class(1);
+        assert!(b1 / b0 > 2.0 && b1 / b0 < 8.0, "b {b0} {b1}");
+        // The prior variance follows: class 1's b_k B is the larger.
+        assert!(field.prior_var(1).pp > 2.0 * field.prior_var(0).pp);
+    }
+
+    /// A field rebuilt from its stored θ, class multipliers and information scales predicts
+    /// exactly as the fitted one (what `plan` and a joint update rely on).
+    #[test]
+    fn stored_scales_rebuild_the_same_field() {
+        let (t, mu) = truth();
+        let mut obs = draw(3, 120, 2000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        obs[10].u[0] += 2.0;
+        let fitted = Field::fit(obs.clone(), 2, (50.0, 2828.0));
+        assert!(fitted.scales.information[10] < 0.01);
+        let rebuilt = Field::with_scales(
+            obs,
+            2,
+            (50.0, 2828.0),
+            fitted.hyper,
+            fitted.source,
+            fitted.scales.clone(),
+        );
+        for p in [[500.0, 700.0], [1500.0, 300.0]] {
+            let (a, b) = (
+                fitted.posterior(Some(p), 1, None),
+                rebuilt.posterior(Some(p), 1, None),
+            );
+            assert!((a.mean[0] - b.mean[0]).abs() < 1e-12 && (a.cov.pp - b.cov.pp).abs() < 1e-12);
+        }
     }
 }

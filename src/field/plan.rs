@@ -38,6 +38,8 @@ pub struct Candidate {
     pub site: usize,
     /// Its midpoint, m.
     pub pos: [f64; 2],
+    /// Its soil class.
+    pub class: usize,
     /// Its weight (length, m).
     pub weight: f64,
     /// Predicted leak-band speed ĉ, m/s.
@@ -46,24 +48,23 @@ pub struct Candidate {
     pub gradient: [f64; 2],
     /// Posterior covariance of its u.
     pub cov: Sym2,
-    /// Noise of a hypothetical measurement of it: T + I⁻¹ of a fit like it.
+    /// Noise of a hypothetical measurement of it: t_k T + I⁻¹ of a fit like it.
     pub noise: Sym2,
     /// Its kriging weights (2 × 2k, row-major) and neighbours (field members).
     weights: (Vec<f64>, Vec<usize>),
 }
 
-/// The posterior cross-covariance of the field w between two candidates (i ≠ j): B ρ(d_ij) −
-/// A_i c(N_i, x_j).
+/// The posterior cross-covariance of the field w between two candidates (i ≠ j):
+/// √(b_i b_j) B ρ(d_ij) − A_i c(N_i, x_j) (class multipliers of B as in the field).
 fn cross(field: &Field, a: &Candidate, b: &Candidate) -> Sym2 {
-    let h = &field.hyper;
-    let mut k = h.kernel(dist(a.pos, b.pos));
+    let mut k = field.kernel_classes(a.pos, a.class, b.pos, b.class);
     let (w, nb) = &a.weights;
     let n2 = 2 * nb.len();
     for (p, &m) in nb.iter().enumerate() {
         let Some(pm) = field.obs[m].pos else {
             continue;
         };
-        let c = h.kernel(dist(pm, b.pos));
+        let c = field.kernel_classes(pm, field.obs[m].class, b.pos, b.class);
         // (A c)[r][s] = Σ_t A[r][2p + t] c[t][s]
         let mut red = [[0.0; 2]; 2];
         for (r, row) in red.iter_mut().enumerate() {
@@ -182,6 +183,8 @@ pub struct CandidateInput {
     pub site: usize,
     /// Midpoint, m.
     pub pos: [f64; 2],
+    /// Soil class (index into the field's classes).
+    pub class: usize,
     /// Weight.
     pub weight: f64,
     /// Predicted speed, m/s.
@@ -210,12 +213,13 @@ impl<'a> Planner<'a> {
                 Candidate {
                     site: c.site,
                     pos: c.pos,
+                    class: c.class,
                     weight: c.weight,
                     speed: c.speed,
                     gradient: c.gradient,
                     cov: c.cov,
-                    noise: field.hyper.t.add(&probe.noise()),
-                    weights: field.weights(c.pos),
+                    noise: field.scatter(c.class).add(&probe.noise()),
+                    weights: field.weights(c.pos, c.class),
                 }
             })
             .collect();
@@ -370,9 +374,15 @@ pub fn plan(
 ) -> Result<Vec<crate::db::field::PlanPick>, PlanError> {
     use crate::db::field as store;
     let last = store::latest_field_run(conn)?.ok_or(PlanError::NoField)?;
-    let inputs = store::field_inputs(conn)?;
-    let (sites, obs, names) = super::sites_of(&inputs);
-    drop(inputs);
+    // The sites, one inventory row at a time (no geometry text is kept).
+    let (mut sites, mut soils) = (Vec::new(), Vec::new());
+    store::for_each_field_input(conn, |i| {
+        let (site, soil) = super::site_of(&i);
+        sites.push(site);
+        soils.push(soil);
+        Ok(())
+    })?;
+    let (sites, obs, names) = super::classes_and_members(sites, &soils);
     if obs.is_empty() {
         return Err(PlanError::NoField);
     }
@@ -392,13 +402,36 @@ pub fn plan(
         .build()
         .ok();
     let nk = names.len();
+    // The stored update's class multipliers and information scales: the same field.
+    let class_scales = match last.id {
+        Some(id) => store::field_class_scales(conn, id)?,
+        None => BTreeMap::new(),
+    };
+    let stored: BTreeMap<String, f64> = store::field_segments(conn)?
+        .into_iter()
+        .filter_map(|r| r.information_scale.map(|s| (r.segment_id, s)))
+        .collect();
+    let mut information = vec![1.0; obs.len()];
+    for s in &sites {
+        if let (Some(m), Some(&v)) = (s.member, stored.get(&s.segment_id)) {
+            information[m] = v;
+        }
+    }
+    let scales = super::model::Scales {
+        class: names
+            .iter()
+            .map(|n| class_scales.get(n).copied().unwrap_or([1.0, 1.0]))
+            .collect(),
+        information,
+    };
     let field = super::in_pool(&pool, || match hyper {
-        Some(h) => Field::with_hyper(
+        Some(h) => Field::with_scales(
             obs,
             nk,
             bounds,
             h,
             super::model::HyperSource::MarginalLikelihood,
+            scales,
         ),
         None => Field::fit(obs, nk, bounds),
     });
@@ -424,6 +457,7 @@ pub fn plan(
         inputs.push(CandidateInput {
             site: i,
             pos,
+            class: s.class.unwrap_or(0),
             weight: s.length.filter(|l| *l > 0.0).unwrap_or(1.0),
             speed,
             gradient,

@@ -29,6 +29,35 @@ const XI_SD: f64 = 0.288_675_134_594_812_9;
 /// before that point (or the band mean) is left empty rather than averaged over the rest.
 const MAX_LOST_WEIGHT: f64 = 0.25;
 
+/// Frequencies at which the six sigma points are solved (field algorithm 2; the centre is
+/// solved on the whole standard grid): six of the grid's, spanning the leak band. The band mean
+/// of each sigma point is taken over them, corrected by the centre's difference between its
+/// whole-grid and six-point band means; elsewhere on the grid the curve's shift and spread
+/// relative to the centre are interpolated in ln f (held at the band's ends outside it).
+pub const SIGMA_FREQUENCIES_HZ: [f64; 6] = [100.0, 200.0, 350.0, 500.0, 650.0, 800.0];
+
+/// Interpolate `v` (values at [`SIGMA_FREQUENCIES_HZ`], None where missing) linearly in ln f at
+/// `f`, held constant beyond the first and last available.
+fn interpolate_ln_f(v: &[Option<f64>], f: f64) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = SIGMA_FREQUENCIES_HZ
+        .iter()
+        .zip(v)
+        .filter_map(|(&x, y)| y.map(|y| (x.ln(), y)))
+        .collect();
+    let (first, last) = (pts.first()?, pts.last()?);
+    let x = f.ln();
+    if x <= first.0 {
+        return Some(first.1);
+    }
+    if x >= last.0 {
+        return Some(last.1);
+    }
+    pts.windows(2).find(|w| x <= w[1].0).map(|w| {
+        let t = (x - w[0].0) / (w[1].0 - w[0].0);
+        w[0].1 + t * (w[1].1 - w[0].1)
+    })
+}
+
 /// One quadrature node: its weight, (phase speed, attenuation in dB/m) per frequency of the
 /// grid (None without a root), and its leak-band mean speed.
 type Node = (f64, Vec<Option<(f64, f64)>>, Option<f64>);
@@ -54,6 +83,43 @@ pub fn soil_of(u: [f64; 2], rho: f64) -> Option<(f64, f64)> {
     let hi = shear_to_compressional(0.0) * (1.0 - 1e-9);
     let cs = u[1].exp().clamp(cp * lo, cp * hi);
     soil_from_speeds(cp, cs, rho).map(|(e, nu)| (e, nu.clamp(0.0, MAX_SOIL_POISSON)))
+}
+
+/// (phase speed, attenuation in dB/m) per frequency of the standard grid from the roots k₁.
+fn speeds_of(ks: &[Option<Complex64>]) -> Vec<Option<(f64, f64)>> {
+    ks.iter()
+        .zip(STANDARD_GRID_HZ)
+        .map(|(k, f)| {
+            k.filter(|k| k.re > 0.0)
+                .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
+        })
+        .collect()
+}
+
+/// A sigma point's curve with every frequency where its forward solve found no root replaced
+/// by its mirror point's, reflected through the centre: 2 f(m) − f(m − δ), exact for a
+/// function linear along that axis, so the transform keeps its mean and its variance to first
+/// order (P81) instead of losing the node's weight. Where the centre has no root either, the
+/// mirror's value itself stands in (a function even along that axis); where the reflection
+/// would not be a positive speed, likewise.
+fn mirrored(
+    own: &[Option<(f64, f64)>],
+    mirror: &[Option<(f64, f64)>],
+    centre: &[Option<(f64, f64)>],
+) -> Vec<Option<(f64, f64)>> {
+    own.iter()
+        .zip(mirror)
+        .zip(centre)
+        .map(|((o, m), c)| {
+            o.or_else(|| {
+                let m = (*m)?;
+                Some(match c {
+                    Some(c) if 2.0 * c.0 - m.0 > 0.0 => (2.0 * c.0 - m.0, 2.0 * c.1 - m.1),
+                    _ => m,
+                })
+            })
+        })
+        .collect()
 }
 
 /// The speed of the pipe `data` (measurements ignored) under the run's `model` and
@@ -121,15 +187,17 @@ pub fn predict_speed(
     // (as a fit's stored curve); every other node starts each frequency's root from it (as the
     // fit's curve errors do), and falls back to its own continuation where that fails.
     let reference = system_of(mean, 0.5).map(|s| full_curve(&s));
-    let mut nodes: Vec<Node> = Vec::new();
-    for &(u, xi, weight) in &points {
+    // With the centre's curve the sigma points are solved at the six frequencies only.
+    let at = |f: f64| reference.is_none() || SIGMA_FREQUENCIES_HZ.contains(&f);
+    let mut solved: Vec<Vec<Option<(f64, f64)>>> = Vec::new();
+    for &(u, xi, _) in &points {
         let ks: Vec<Option<Complex64>> = match system_of(u, xi) {
             Some(sys) => {
                 let from_guess: Option<Vec<Option<Complex64>>> = reference.as_ref().map(|r| {
                     r.iter()
                         .zip(STANDARD_GRID_HZ)
                         .map(|(g, f)| {
-                            g.and_then(|g| {
+                            g.filter(|_| at(f)).and_then(|g| {
                                 solve_from_guess_tol(&sys, hz_to_omega(f), g, Tolerance::FAST)
                                     .ok()
                                     .map(|root| root.k1)
@@ -137,29 +205,59 @@ pub fn predict_speed(
                         })
                         .collect()
                 });
+                let complete = |k: &[Option<Complex64>]| {
+                    k.iter()
+                        .zip(STANDARD_GRID_HZ)
+                        .all(|(k, f)| k.is_some() || !at(f))
+                };
                 match from_guess {
-                    Some(k) if k.iter().all(Option::is_some) => k,
+                    Some(k) if complete(&k) => k,
                     _ => full_curve(&sys),
                 }
             }
             None => vec![None; nf],
         };
-        let pts: Vec<Option<(f64, f64)>> = ks
-            .iter()
-            .zip(STANDARD_GRID_HZ)
-            .map(|(k, f)| {
-                k.filter(|k| k.re > 0.0)
-                    .map(|k| (hz_to_omega(f) / k.re, np_to_db(-k.im)))
-            })
-            .collect();
+        let mut pts = speeds_of(&ks);
+        for (p, f) in pts.iter_mut().zip(STANDARD_GRID_HZ) {
+            if !at(f) {
+                *p = None;
+            }
+        }
+        solved.push(pts);
+    }
+    let centre: Vec<Option<(f64, f64)>> = reference
+        .as_ref()
+        .map_or_else(|| vec![None; nf], |r| speeds_of(r));
+    // A curve's band mean over the frequencies the sigma points are solved at.
+    let band_at = |pts: &[Option<(f64, f64)>]| {
         let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
             .iter()
-            .zip(&pts)
+            .zip(pts)
+            .filter(|(&f, _)| at(f))
             .map(|(&f, p)| (f, p.map(|v| v.0)))
             .collect();
-        let band = band_mean(&speeds, LEAK_BAND_HZ);
-        nodes.push((weight, pts, band));
-    }
+        band_mean(&speeds, LEAK_BAND_HZ)
+    };
+    let nodes: Vec<Node> = points
+        .iter()
+        .enumerate()
+        .map(|(j, &(_, _, weight))| {
+            let pts = mirrored(&solved[j], &solved[j ^ 1], &centre);
+            let band = band_at(&pts);
+            (weight, pts, band)
+        })
+        .collect();
+    // The centre's whole-grid band mean less its band mean at the sigma frequencies: the
+    // quadrature's discretisation offset, the same for every node to first order.
+    let whole: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
+        .iter()
+        .zip(&centre)
+        .map(|(&f, p)| (f, p.map(|v| v.0)))
+        .collect();
+    let offset = match (band_mean(&whole, LEAK_BAND_HZ), band_at(&centre)) {
+        (Some(a), Some(b)) => a - b,
+        _ => 0.0,
+    };
     let moments = |vals: &mut dyn Iterator<Item = (f64, Option<f64>)>| -> Option<WithError> {
         let v: Vec<(f64, f64)> = vals.filter_map(|(w, x)| x.map(|x| (w, x))).collect();
         let wsum: f64 = v.iter().map(|p| p.0).sum();
@@ -173,12 +271,48 @@ pub fn predict_speed(
             std: var.max(0.0).sqrt(),
         })
     };
+    let solved_moments = |i: usize| {
+        (
+            moments(&mut nodes.iter().map(|n| (n.0, n.1[i].map(|p| p.0)))),
+            moments(&mut nodes.iter().map(|n| (n.0, n.1[i].map(|p| p.1)))),
+        )
+    };
+    // Relative shift and spread of the mean against the centre at the sigma frequencies.
+    let relative: Vec<[Option<f64>; 4]> = SIGMA_FREQUENCIES_HZ
+        .iter()
+        .map(|&f| {
+            let i = STANDARD_GRID_HZ.iter().position(|&g| g == f);
+            let (c, a) = i.map_or((None, None), solved_moments);
+            let mid = i.and_then(|i| centre[i]);
+            let rel = |m: Option<WithError>, x: Option<f64>| match (m, x) {
+                (Some(m), Some(x)) if x.abs() > 0.0 => [Some(m.value / x - 1.0), Some(m.std / x)],
+                _ => [None, None],
+            };
+            let [cs, cd] = rel(c, mid.map(|p| p.0));
+            let [as_, ad] = rel(a, mid.map(|p| p.1));
+            [cs, cd, as_, ad]
+        })
+        .collect();
+    let column = |k: usize| -> Vec<Option<f64>> { relative.iter().map(|r| r[k]).collect() };
     let curve_pts = STANDARD_GRID_HZ
         .iter()
         .enumerate()
         .map(|(i, &f)| {
-            let c = moments(&mut nodes.iter().map(|n| (n.0, n.1[i].map(|p| p.0))));
-            let a = moments(&mut nodes.iter().map(|n| (n.0, n.1[i].map(|p| p.1))));
+            let (c, a) = if at(f) {
+                solved_moments(i)
+            } else {
+                let scaled = |x: Option<f64>, shift: usize, spread: usize| {
+                    let x = x?;
+                    Some(WithError {
+                        value: x * (1.0 + interpolate_ln_f(&column(shift), f)?),
+                        std: (x * interpolate_ln_f(&column(spread), f)?).abs(),
+                    })
+                };
+                (
+                    scaled(centre[i].map(|p| p.0), 0, 1),
+                    scaled(centre[i].map(|p| p.1), 2, 3),
+                )
+            };
             CurvePoint {
                 frequency_hz: f,
                 phase_speed_m_per_s: c.map(|c| c.value),
@@ -190,7 +324,10 @@ pub fn predict_speed(
             }
         })
         .collect();
-    let band = moments(&mut nodes.iter().map(|n| (n.0, n.2)));
+    let band = moments(&mut nodes.iter().map(|n| (n.0, n.2))).map(|b| WithError {
+        value: b.value + offset,
+        std: b.std,
+    });
     // Gradient: (b(+j) − b(−j)) / (2·spread) = g·L e_j, so g = L⁻ᵀ d.
     let band_of = |i: usize| nodes.get(i).and_then(|n| n.2);
     let band_gradient = match (band_of(0), band_of(1), band_of(2), band_of(3)) {
@@ -206,5 +343,46 @@ pub fn predict_speed(
         curve: curve_pts,
         band,
         band_gradient,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sigma point without a root takes its mirror's value reflected through the centre
+    /// (the centre's missing too: the mirror's own value); a node with a root keeps it.
+    #[test]
+    fn a_failed_sigma_point_is_its_mirror_reflected() {
+        let own = [None, None, Some((290.0, 0.2))];
+        let mirror = [Some((300.0, 0.10)), Some((300.0, 0.10)), Some((330.0, 0.3))];
+        let centre = [Some((310.0, 0.12)), None, Some((310.0, 0.25))];
+        let m = mirrored(&own, &mirror, &centre);
+        let (c, a) = m[0].unwrap();
+        assert!(
+            (c - 320.0).abs() < 1e-12 && (a - 0.14).abs() < 1e-12,
+            "{m:?}"
+        );
+        assert_eq!(m[1], Some((300.0, 0.10)));
+        assert_eq!(m[2], Some((290.0, 0.2)));
+    }
+
+    /// The curve's relative shift and spread off the sigma frequencies: linear in ln f between
+    /// them (at √(100·200) Hz halfway between their values), held beyond the band's ends.
+    #[test]
+    fn relative_spread_is_interpolated_in_ln_f() {
+        let v = [
+            Some(0.02),
+            Some(0.04),
+            None,
+            Some(0.05),
+            Some(0.05),
+            Some(0.06),
+        ];
+        let mid = interpolate_ln_f(&v, (100.0f64 * 200.0).sqrt()).unwrap();
+        assert!((mid - 0.03).abs() < 1e-12, "{mid}");
+        assert_eq!(interpolate_ln_f(&v, 10.0), Some(0.02));
+        assert_eq!(interpolate_ln_f(&v, 2000.0), Some(0.06));
+        assert_eq!(interpolate_ln_f(&[None; 6], 300.0), None);
     }
 }
