@@ -21,7 +21,7 @@ use std::collections::HashMap;
 use nalgebra::DMatrix;
 use rusqlite::Connection;
 
-use super::model::{dist, Field, Hyper, HyperSource, Sym2};
+use super::model::{dist, Field, Hyper, Sym2};
 use super::Site;
 use crate::db::field as store;
 use crate::db::DbError;
@@ -90,26 +90,10 @@ impl JointField {
     /// The field of the latest update, rebuilt from the stored fits with its stored
     /// hyper-parameters; `None` when there is no update or no measured segment.
     pub fn from_db(conn: &Connection) -> Result<Option<JointField>, DbError> {
-        let Some(run) = store::latest_field_run(conn)? else {
-            return Ok(None);
-        };
-        let Some(hyper) = stored_hyper(&run) else {
-            return Ok(None);
-        };
-        let inputs = store::field_inputs(conn)?;
-        let (sites, obs, names) = super::sites_of(&inputs);
-        drop(inputs);
-        if obs.is_empty() {
-            return Ok(None);
-        }
-        let source = if run.hyper_source == HyperSource::Defaults.as_str() {
-            HyperSource::Defaults
-        } else {
-            HyperSource::MarginalLikelihood
-        };
-        let bounds = super::length_bounds(&sites);
-        let field = Field::with_hyper(obs, names.len(), bounds, hyper, source);
-        Ok(Some(JointField::new(field, sites)))
+        Ok(
+            super::stored_field(conn, &None)?
+                .map(|(_, field, sites)| JointField::new(field, sites)),
+        )
     }
 
     /// From a field and its sites.
@@ -313,7 +297,7 @@ mod tests {
             2,
             (50.0, 2000.0),
             hyper(),
-            HyperSource::MarginalLikelihood,
+            super::super::model::HyperSource::MarginalLikelihood,
         )
     }
 

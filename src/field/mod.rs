@@ -739,3 +739,63 @@ pub fn update_field(
         run,
     })
 }
+
+/// The field of the latest stored update, rebuilt as that update made it (P78–P80): the
+/// inventory read one row at a time (no geometry text kept), the update's hyper-parameters,
+/// class multipliers and information scales; only the class means are estimated again, from
+/// the same fits. Without stored hyper-parameters the field is fitted anew. `None` when there
+/// is no update or no measured segment. `plan` and the joint posteriors of `locate` both use
+/// it, so they see the field the predictions came from.
+pub fn stored_field(
+    conn: &Connection,
+    pool: &Option<rayon::ThreadPool>,
+) -> Result<Option<(crate::db::field::FieldRunRow, Field, Vec<Site>)>, DbError> {
+    use crate::db::field as store;
+    let Some(last) = store::latest_field_run(conn)? else {
+        return Ok(None);
+    };
+    let (mut sites, mut soils) = (Vec::new(), Vec::new());
+    store::for_each_field_input(conn, |i| {
+        let (site, soil) = site_of(&i);
+        sites.push(site);
+        soils.push(soil);
+        Ok(())
+    })?;
+    let (sites, obs, names) = classes_and_members(sites, &soils);
+    if obs.is_empty() {
+        return Ok(None);
+    }
+    let bounds = length_bounds(&sites);
+    let class_scales = match last.id {
+        Some(id) => store::field_class_scales(conn, id)?,
+        None => BTreeMap::new(),
+    };
+    let stored: BTreeMap<String, f64> = store::field_segments(conn)?
+        .into_iter()
+        .filter_map(|r| r.information_scale.map(|s| (r.segment_id, s)))
+        .collect();
+    let mut information = vec![1.0; obs.len()];
+    for s in &sites {
+        if let (Some(m), Some(&v)) = (s.member, stored.get(&s.segment_id)) {
+            information[m] = v;
+        }
+    }
+    let scales = model::Scales {
+        class: names
+            .iter()
+            .map(|n| class_scales.get(n).copied().unwrap_or([1.0, 1.0]))
+            .collect(),
+        information,
+    };
+    let source = if last.hyper_source == model::HyperSource::Defaults.as_str() {
+        model::HyperSource::Defaults
+    } else {
+        model::HyperSource::MarginalLikelihood
+    };
+    let nk = names.len();
+    let field = in_pool(pool, || match joint::stored_hyper(&last) {
+        Some(h) => Field::with_scales(obs, nk, bounds, h, source, scales),
+        None => Field::fit(obs, nk, bounds),
+    });
+    Ok(Some((last, field, sites)))
+}

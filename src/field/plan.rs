@@ -373,68 +373,11 @@ pub fn plan(
     jobs: usize,
 ) -> Result<Vec<crate::db::field::PlanPick>, PlanError> {
     use crate::db::field as store;
-    let last = store::latest_field_run(conn)?.ok_or(PlanError::NoField)?;
-    // The sites, one inventory row at a time (no geometry text is kept).
-    let (mut sites, mut soils) = (Vec::new(), Vec::new());
-    store::for_each_field_input(conn, |i| {
-        let (site, soil) = super::site_of(&i);
-        sites.push(site);
-        soils.push(soil);
-        Ok(())
-    })?;
-    let (sites, obs, names) = super::classes_and_members(sites, &soils);
-    if obs.is_empty() {
-        return Err(PlanError::NoField);
-    }
-    let bounds = super::length_bounds(&sites);
-    let hyper = match (last.correlation_length_m, last.field_cov, last.scatter_var) {
-        (Some(ell), [Some(bp), Some(bps), Some(bs)], [Some(tp), Some(ts)]) => {
-            Some(super::model::Hyper {
-                b: Sym2::new(bp, bps, bs),
-                ell,
-                t: Sym2::new(tp, 0.0, ts),
-            })
-        }
-        _ => None,
-    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.max(1))
         .build()
         .ok();
-    let nk = names.len();
-    // The stored update's class multipliers and information scales: the same field.
-    let class_scales = match last.id {
-        Some(id) => store::field_class_scales(conn, id)?,
-        None => BTreeMap::new(),
-    };
-    let stored: BTreeMap<String, f64> = store::field_segments(conn)?
-        .into_iter()
-        .filter_map(|r| r.information_scale.map(|s| (r.segment_id, s)))
-        .collect();
-    let mut information = vec![1.0; obs.len()];
-    for s in &sites {
-        if let (Some(m), Some(&v)) = (s.member, stored.get(&s.segment_id)) {
-            information[m] = v;
-        }
-    }
-    let scales = super::model::Scales {
-        class: names
-            .iter()
-            .map(|n| class_scales.get(n).copied().unwrap_or([1.0, 1.0]))
-            .collect(),
-        information,
-    };
-    let field = super::in_pool(&pool, || match hyper {
-        Some(h) => Field::with_scales(
-            obs,
-            nk,
-            bounds,
-            h,
-            super::model::HyperSource::MarginalLikelihood,
-            scales,
-        ),
-        None => Field::fit(obs, nk, bounds),
-    });
+    let (last, field, sites) = super::stored_field(conn, &pool)?.ok_or(PlanError::NoField)?;
     let (by_material, overall) = typical_information(&sites, &field);
     let mut inputs = Vec::new();
     let mut current_std = BTreeMap::new();
