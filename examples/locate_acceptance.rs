@@ -456,24 +456,10 @@ fn true_position(
     plain: bool,
     tau: f64,
 ) -> Option<f64> {
-    use pipewave::locate::model::{band_grid, solve, DelayModel, ModelPiece, MODEL_GRID_POINTS};
-    let curves: Vec<_> = case
-        .segments
-        .iter()
-        .map(|s| true_curve(truths.get(s)?, DEFAULT_BAND_HZ))
-        .collect::<Option<_>>()?;
+    use pipewave::locate::model::{band_grid, solve, DelayModel, MODEL_GRID_POINTS};
+    let (curves, pieces) =
+        pipewave::synth::locate::true_delay_model(case, truths, DEFAULT_BAND_HZ)?;
     let refs: Vec<_> = curves.iter().collect();
-    let pieces: Vec<ModelPiece> = case
-        .path
-        .pieces
-        .iter()
-        .map(|p| {
-            Some(ModelPiece {
-                curve: case.segments.iter().position(|&s| s == p.segment)?,
-                length_m: p.length_m(),
-            })
-        })
-        .collect::<Option<_>>()?;
     let grid = band_grid(DEFAULT_BAND_HZ, MODEL_GRID_POINTS);
     let model = DelayModel::new(&grid, &vec![1.0; grid.len()], plain, &refs, pieces);
     solve(&model, tau, SIGMA_TAU_S, 0.0, &[])

@@ -394,22 +394,20 @@ pub fn case_job(
     }
 }
 
-/// The delay a correlator would measure for a case with the segments' TRUE wavenumbers (P85)
-/// over `band_hz`: a plain correlation of a flat leak spectrum (`path_attenuation`) or a
-/// whitened one. `truths` by segment index.
-pub fn true_delay(
+/// The delay model (P85) of a case with the segments' TRUE wavenumbers over `band_hz`: a plain
+/// correlation of a flat leak spectrum (`path_attenuation`) or a whitened one. Returns the
+/// model's curves and pieces; `truths` by segment index.
+pub fn true_delay_model(
     case: &LeakCase,
     truths: &std::collections::HashMap<usize, TruthCurve>,
     band_hz: (f64, f64),
-    path_attenuation: bool,
-) -> Option<f64> {
-    use crate::locate::model::{band_grid, DelayModel, ModelPiece, MODEL_GRID_POINTS};
+) -> Option<(Vec<SpeedCurve>, Vec<crate::locate::model::ModelPiece>)> {
+    use crate::locate::model::ModelPiece;
     let curves: Vec<SpeedCurve> = case
         .segments
         .iter()
         .map(|s| truths.get(s).and_then(|t| true_curve(t, band_hz)))
         .collect::<Option<_>>()?;
-    let refs: Vec<&SpeedCurve> = curves.iter().collect();
     let pieces: Vec<ModelPiece> = case
         .path
         .pieces
@@ -421,6 +419,21 @@ pub fn true_delay(
             })
         })
         .collect::<Option<_>>()?;
+    Some((curves, pieces))
+}
+
+/// The delay a correlator would measure for a case with the segments' TRUE wavenumbers (P85)
+/// over `band_hz`: a plain correlation of a flat leak spectrum (`path_attenuation`) or a
+/// whitened one. `truths` by segment index.
+pub fn true_delay(
+    case: &LeakCase,
+    truths: &std::collections::HashMap<usize, TruthCurve>,
+    band_hz: (f64, f64),
+    path_attenuation: bool,
+) -> Option<f64> {
+    use crate::locate::model::{band_grid, DelayModel, MODEL_GRID_POINTS};
+    let (curves, pieces) = true_delay_model(case, truths, band_hz)?;
+    let refs: Vec<&SpeedCurve> = curves.iter().collect();
     let grid = band_grid(band_hz, MODEL_GRID_POINTS);
     let model = DelayModel::new(
         &grid,
