@@ -300,12 +300,7 @@ fn main() {
                 break;
             };
             fill(&mut truths, &case.segments);
-            let pieces: Vec<(&TruthCurve, f64)> = case
-                .path
-                .pieces
-                .iter()
-                .map(|p| (&truths[&p.segment], p.length_m()))
-                .collect();
+            let pieces = case.truth_pieces(&truths);
             let spec = LeakSpec {
                 sample_rate: DEFAULT_LEAK_SAMPLE_RATE,
                 seconds: 60.0,

@@ -585,12 +585,7 @@ fn known_leaks_are_recovered_with_honest_intervals() {
         let filter = |s: usize| network[s].material.is_plastic() == plastic;
         let case = draw_case(&net, &mut rng, 3, max_span, &filter).unwrap();
         fill(&mut truths, &case);
-        let pieces: Vec<_> = case
-            .path
-            .pieces
-            .iter()
-            .map(|p| (&truths[&p.segment], p.length_m()))
-            .collect();
+        let pieces = case.truth_pieces(&truths);
         let spec = LeakSpec {
             sample_rate: 8000,
             seconds: 60.0,

@@ -190,6 +190,22 @@ pub struct LeakCase {
     pub leak_m: f64,
 }
 
+impl LeakCase {
+    /// The path's pieces from sensor 1 as (the segment's true wavenumbers, metres of it), the
+    /// input of `leak_recording`. Panics if `truths` lacks a segment of the path (a caller's
+    /// bug: every generator fills the truths of a case before it records it).
+    pub fn truth_pieces<'a>(
+        &self,
+        truths: &'a std::collections::HashMap<usize, TruthCurve>,
+    ) -> Vec<(&'a TruthCurve, f64)> {
+        self.path
+            .pieces
+            .iter()
+            .map(|p| (&truths[&p.segment], p.length_m()))
+            .collect()
+    }
+}
+
 /// Draw a path of 1 to `max_segments` segments whose span lies in [`LEAK_SPAN_M`] (at most
 /// `max_span_m`), the sensors and a leak. `filter` says which segments may be used.
 pub fn draw_case<R: Rng + ?Sized>(
@@ -307,12 +323,7 @@ pub fn write_leaks(
                 e.insert(segment_truth(&network[s], opts, DEFAULT_LEAK_SAMPLE_RATE)?);
             }
         }
-        let pieces: Vec<(&TruthCurve, f64)> = case
-            .path
-            .pieces
-            .iter()
-            .map(|p| (&truths[&p.segment], p.length_m()))
-            .collect();
+        let pieces = case.truth_pieces(&truths);
         let spec = LeakSpec {
             sample_rate: DEFAULT_LEAK_SAMPLE_RATE,
             seconds,
