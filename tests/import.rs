@@ -942,3 +942,111 @@ fn layer_problems_name_the_layer_the_feature_and_the_field() {
     );
     assert_eq!(got[0].srid, Some(27700));
 }
+
+// --- risk_weight and soil_class_override -------------------------------------------------------
+
+/// `risk_weight` must be a finite number ≥ 0; each bad cell is named by file, line and column
+/// (CSV) or layer, feature and field (GIS), and nothing is written.
+#[test]
+fn a_bad_risk_weight_is_named_by_file_line_and_column() {
+    let head = "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,risk_weight,soil_class_override";
+    for (cell, reason) in [
+        ("-1", "must be 0 or more"),
+        ("inf", "is not a finite number"),
+        ("high", "expected a number, found 'high'"),
+    ] {
+        let s = Scratch::new();
+        let p = s.write(
+            "segments.csv",
+            format!("{head}\nN-1,CI,150,8,1900,2,\nN-2,PVC,110,5.3,1800,{cell},clay\n").as_bytes(),
+        );
+        let out = s.import(Some(&p), None, &[]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{cell}: {stderr}");
+        let line = stderr
+            .lines()
+            .find(|l| l.contains("segments.csv:3:6: column risk_weight:"))
+            .unwrap_or_else(|| panic!("{cell}: {stderr}"));
+        assert!(line.contains(reason), "{cell}: {line}");
+        assert!(stderr.contains("nothing was written"), "{stderr}");
+    }
+
+    // A GIS layer: the field mapped to risk_weight is named with the feature.
+    let geojson = r#"{"type":"FeatureCollection","name":"mains","crs":{"type":"name","properties":{"name":"urn:ogc:def:crs:EPSG::27700"}},"features":[
+ {"type":"Feature","id":3,"properties":{"ASSET_ID":"A1","MATERIAL":"Cast Iron","DIAM_MM":150,"WALL_MM":8,"SOIL_RHO":1900,"RISK":-0.5,"CHECKED":"clay"},"geometry":{"type":"LineString","coordinates":[[0,0],[10,0]]}},
+ {"type":"Feature","id":4,"properties":{"ASSET_ID":"A2","MATERIAL":"PVC-U","DIAM_MM":110,"WALL_MM":5.3,"SOIL_RHO":1800,"RISK":4,"CHECKED":"sand"},"geometry":{"type":"LineString","coordinates":[[10,0],[20,0]]}}
+]}"#;
+    let s = Scratch::new();
+    let p = s.write("mains.geojson", geojson.as_bytes());
+    let mut args = map_args(&[]);
+    args.extend([
+        "--map",
+        "risk_weight=RISK",
+        "--map",
+        "soil_class_override=CHECKED",
+    ]);
+    let out = s.import(Some(&p), None, &args);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let want = format!(
+        "{}: layer mains: feature 3: field RISK (risk_weight): must be 0 or more",
+        p.display()
+    );
+    assert!(
+        stderr.lines().any(|l| l.starts_with(&want)),
+        "no {want:?} in\n{stderr}"
+    );
+    // The good feature goes in with --skip-invalid, its weight and override stored.
+    args.push("--skip-invalid");
+    let out = s.import(Some(&p), None, &args);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let got = stored(&s.db);
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].risk_weight, Some(4.0));
+    assert_eq!(got[0].soil_class_override.as_deref(), Some("sand"));
+}
+
+/// Both columns are stored; a later file without them keeps them, a blank cell clears them, and
+/// neither changes the segment's inputs hash (they never cause a refit).
+#[test]
+fn risk_weight_and_class_override_are_stored_kept_and_cleared() {
+    let s = Scratch::new();
+    let base = "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3";
+    let p = s.write(
+        "plain.csv",
+        format!("{base}\nN-1,CI,150,8,1900\n").as_bytes(),
+    );
+    let out = s.import(Some(&p), None, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let hash = s.hashes()["N-1"].clone();
+    let p = s.write(
+        "with.csv",
+        format!("{base},risk_weight,soil_class_override\nN-1,CI,150,8,1900,0,clay\n").as_bytes(),
+    );
+    let out = s.import(Some(&p), None, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let got = stored(&s.db);
+    assert_eq!(got[0].risk_weight, Some(0.0));
+    assert_eq!(got[0].soil_class_override.as_deref(), Some("clay"));
+    assert_eq!(s.hashes()["N-1"], hash);
+    // A file without the columns says nothing about them.
+    let p = s.write(
+        "plain2.csv",
+        format!("{base}\nN-1,CI,150,8,1900\n").as_bytes(),
+    );
+    let out = s.import(Some(&p), None, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let got = stored(&s.db);
+    assert_eq!(got[0].risk_weight, Some(0.0));
+    assert_eq!(got[0].soil_class_override.as_deref(), Some("clay"));
+    // Blank cells clear them.
+    let p = s.write(
+        "blank.csv",
+        format!("{base},risk_weight,soil_class_override\nN-1,CI,150,8,1900,,\n").as_bytes(),
+    );
+    let out = s.import(Some(&p), None, &[]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let got = stored(&s.db);
+    assert_eq!(got[0].risk_weight, None);
+    assert_eq!(got[0].soil_class_override, None);
+}

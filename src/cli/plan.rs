@@ -53,11 +53,17 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
     }
     w.flush()
         .with_context(|| format!("cannot write {}", args.out.display()))?;
-    println!(
-        "plan: {} segments -> {} (each valued as a measurement carrying the median information of \
-         the network's fitted pipes of its material; weight: length)",
-        picks.len(),
-        args.out.display()
-    );
+    let risk_weighted = pipewave::db::field::count_risk_weighted(database.conn())
+        .with_context(|| format!("cannot read {}", args.db.display()))?;
+    println!("plan: {} segments -> {}", picks.len(), args.out.display());
+    println!("plan: {}", plan::HYPOTHETICAL_MEASUREMENT);
+    if risk_weighted > 0 {
+        println!(
+            "plan: weight: risk_weight ({risk_weighted} segment{}), length in m elsewhere",
+            if risk_weighted == 1 { "" } else { "s" }
+        );
+    } else {
+        println!("plan: weight: length in m (no risk_weight in the inventory)");
+    }
     Ok(Outcome::Done)
 }

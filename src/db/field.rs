@@ -25,6 +25,10 @@ pub struct FieldInput {
     pub soil_zone: Option<String>,
     /// `length_m`.
     pub length_m: Option<f64>,
+    /// `risk_weight`: the segment's weight in `plan` (P83) where given.
+    pub risk_weight: Option<f64>,
+    /// `soil_class_override`: the class the engineer has checked for the segment.
+    pub soil_class_override: Option<String>,
     /// The inventory row's hash (what a fit depends on).
     pub inputs_hash: String,
     /// Latest fit's row id (None: never fitted).
@@ -58,7 +62,8 @@ pub fn for_each_field_input(
         "SELECT s.segment_id, s.geometry_wkt, s.srid, s.soil_type, s.soil_zone, s.length_m, \
          s.inputs_hash, f.id, f.status, f.soil_p_wave_speed_m_per_s, \
          f.soil_s_wave_speed_m_per_s, f.soil_information_pp, f.soil_information_ps, \
-         f.soil_information_ss, f.leak_band_speed_m_per_s, f.leak_band_speed_std_m_per_s, s.material \
+         f.soil_information_ss, f.leak_band_speed_m_per_s, f.leak_band_speed_std_m_per_s, s.material, \
+         s.risk_weight, s.soil_class_override \
          FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
          ORDER BY s.segment_id",
     )?;
@@ -86,6 +91,8 @@ pub fn for_each_field_input(
             information: info,
             leak_band_speed: pair(r.get(14)?, r.get(15)?),
             material: r.get(16)?,
+            risk_weight: r.get(17)?,
+            soil_class_override: r.get(18)?,
         })
     })?;
     for row in rows {
@@ -171,6 +178,8 @@ pub struct FieldSegmentRow {
     pub soil_class: Option<String>,
     /// Its neighbourhood rejects its label.
     pub label_rejected: bool,
+    /// Its class is the inventory's `soil_class_override` (never rejected).
+    pub class_overridden: bool,
     /// It has a fit the field learned from.
     pub measured: bool,
     /// Its leave-one-out prediction (measured segments), m/s.
@@ -354,7 +363,8 @@ pub fn insert_field_rows(
             "INSERT INTO field_segments (segment_id, field_run_id, label, soil_class, \
              label_rejected, measured, field_leak_band_speed_m_per_s, \
              field_leak_band_speed_std_m_per_s, loo_z, field_outlier, note, information_scale, \
-             screen_chi2) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
+             screen_chi2, class_overridden) \
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)",
         )?;
         for s in segments {
             ins.execute(params![
@@ -371,6 +381,7 @@ pub fn insert_field_rows(
                 s.note,
                 s.information_scale,
                 s.screen_chi2,
+                s.class_overridden,
             ])?;
         }
     }
@@ -556,6 +567,7 @@ fn field_segment_from_row(r: &Row<'_>) -> rusqlite::Result<FieldSegmentRow> {
         label: r.get("label")?,
         soil_class: r.get("soil_class")?,
         label_rejected: r.get("label_rejected")?,
+        class_overridden: r.get("class_overridden")?,
         measured: r.get("measured")?,
         field_leak_band_speed_m_per_s: r.get("field_leak_band_speed_m_per_s")?,
         field_leak_band_speed_std_m_per_s: r.get("field_leak_band_speed_std_m_per_s")?,
@@ -565,6 +577,15 @@ fn field_segment_from_row(r: &Row<'_>) -> rusqlite::Result<FieldSegmentRow> {
         information_scale: r.get("information_scale")?,
         screen_chi2: r.get("screen_chi2")?,
     })
+}
+
+/// How many segments of the inventory have a `risk_weight`.
+pub fn count_risk_weighted(conn: &Connection) -> Result<i64, DbError> {
+    Ok(conn.query_row(
+        "SELECT COUNT(*) FROM segments WHERE risk_weight IS NOT NULL",
+        [],
+        |r| r.get(0),
+    )?)
 }
 
 /// One pick of a measurement plan (P83).

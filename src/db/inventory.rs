@@ -48,6 +48,13 @@ pub struct SegmentRecord {
     /// The soil unit the segment lies in, from a geotechnical map or survey (informational for
     /// the segment's own fit; segments of one zone are also estimated together, model §7.11).
     pub soil_zone: Option<String>,
+    /// How much the segment's speed error matters (finite, ≥ 0): `plan` weights its relative
+    /// speed variance by it (P83) instead of by its length. Informational for its fit.
+    pub risk_weight: Option<f64>,
+    /// The soil class the engineer has checked for this segment: the field uses it as the
+    /// segment's class without the neighbourhood's rejection test (model §7.12).
+    /// Informational for its fit.
+    pub soil_class_override: Option<String>,
     /// `LINESTRING (x y, ...)` in EPSG:`srid`, canonical form.
     pub geometry_wkt: Option<String>,
     /// EPSG code of the geometry.
@@ -178,6 +185,8 @@ impl SegmentRecord {
             && self.soil_type == other.soil_type
             && self.install_year == other.install_year
             && self.soil_zone == other.soil_zone
+            && self.risk_weight == other.risk_weight
+            && self.soil_class_override == other.soil_class_override
             && self.geometry_wkt == other.geometry_wkt
             && self.srid == other.srid
     }
@@ -187,7 +196,8 @@ pub(crate) const SEGMENT_COLUMNS: &str =
     "segment_id, material, outer_diameter_mm, wall_thickness_mm, \
     soil_density_kg_m3, pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, \
     pipe_loss_factor, fluid_density_kg_m3, fluid_bulk_modulus_pa, length_m, soil_type, \
-    install_year, geometry_wkt, srid, inputs_hash, imported_at, soil_zone";
+    install_year, geometry_wkt, srid, inputs_hash, imported_at, soil_zone, risk_weight, \
+    soil_class_override";
 
 pub(crate) const MEASUREMENT_COLUMNS: &str = "omega_rad_s, frequency_hz, k_re_rad_per_m, \
     attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign";
@@ -217,6 +227,8 @@ pub(crate) fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, 
             inputs_hash: r.get(16)?,
             imported_at: r.get(17)?,
             soil_zone: r.get(18)?,
+            risk_weight: r.get(19)?,
+            soil_class_override: r.get(20)?,
             measurements: Vec::new(),
         },
         material,
@@ -329,8 +341,10 @@ pub(crate) fn insert_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
         "INSERT INTO segments (segment_id, material, outer_diameter_mm, wall_thickness_mm, \
          soil_density_kg_m3, pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, \
          pipe_loss_factor, fluid_density_kg_m3, fluid_bulk_modulus_pa, length_m, soil_type, \
-         install_year, geometry_wkt, srid, inputs_hash, soil_zone) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18)",
+         install_year, geometry_wkt, srid, inputs_hash, soil_zone, risk_weight, \
+         soil_class_override) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18, \
+         ?19, ?20)",
     )?
     .execute(params![
         s.segment_id,
@@ -351,15 +365,17 @@ pub(crate) fn insert_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
         s.srid,
         s.inputs_hash,
         s.soil_zone,
+        s.risk_weight,
+        s.soil_class_override,
     ])?;
     Ok(())
 }
 
 /// The inventory columns of `s` as SQL values: segment id, material, outside diameter, wall,
-/// soil density, the pipe and water overrides, length, soil type, install year, geometry, SRID
-/// and soil zone (the order of [`update_segment`]'s parameters ?1–?17 and of the import's staging
-/// table).
-pub(crate) fn inventory_values(s: &SegmentRecord) -> [rusqlite::types::Value; 17] {
+/// soil density, the pipe and water overrides, length, soil type, install year, geometry, SRID,
+/// soil zone, risk weight and soil class override (the order of [`update_segment`]'s parameters
+/// ?1–?19 and of the import's staging table).
+pub(crate) fn inventory_values(s: &SegmentRecord) -> [rusqlite::types::Value; 19] {
     use rusqlite::types::Value;
     [
         Value::from(s.segment_id.clone()),
@@ -379,6 +395,8 @@ pub(crate) fn inventory_values(s: &SegmentRecord) -> [rusqlite::types::Value; 17
         Value::from(s.geometry_wkt.clone()),
         Value::from(s.srid),
         Value::from(s.soil_zone.clone()),
+        Value::from(s.risk_weight),
+        Value::from(s.soil_class_override.clone()),
     ]
 }
 
@@ -389,7 +407,8 @@ pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
          soil_density_kg_m3 = ?5, pipe_youngs_modulus_pa = ?6, pipe_poisson = ?7, \
          pipe_density_kg_m3 = ?8, pipe_loss_factor = ?9, fluid_density_kg_m3 = ?10, \
          fluid_bulk_modulus_pa = ?11, length_m = ?12, soil_type = ?13, install_year = ?14, \
-         geometry_wkt = ?15, srid = ?16, soil_zone = ?17, \
+         geometry_wkt = ?15, srid = ?16, soil_zone = ?17, risk_weight = ?18, \
+         soil_class_override = ?19, \
          imported_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
          WHERE segment_id = ?1",
     )?
@@ -462,6 +481,8 @@ mod tests {
             soil_type: Some("clay".into()),
             install_year: Some(1975),
             soil_zone: Some("Z1".into()),
+            risk_weight: None,
+            soil_class_override: None,
             geometry_wkt: None,
             srid: None,
             inputs_hash: String::new(),

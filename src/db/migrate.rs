@@ -77,6 +77,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0011_field.sql",
         sql: include_str!("../../migrations/0011_field.sql"),
     },
+    Migration {
+        version: 12,
+        name: "0012_risk_weight.sql",
+        sql: include_str!("../../migrations/0012_risk_weight.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

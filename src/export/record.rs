@@ -942,6 +942,26 @@ pub const PROPERTIES: &[Property] = &[
         doc: "1 if |field_z| exceeds 3.29 (p < 0.001): a wrong record, a changed soil or a leak",
         get: |r| Value::int(r.field.as_ref().map(|f| i64::from(f.field_outlier))),
     },
+    Property {
+        name: "soil_class_override",
+        kind: Kind::Text,
+        doc: "the soil class the inventory forces for this segment (the field uses it without \
+              the neighbourhood test that may reject a label), as given",
+        get: |r| Value::text(r.segment.soil_class_override.as_deref()),
+    },
+    Property {
+        name: "class_overridden",
+        kind: Kind::Integer,
+        doc: "1 if the field's last update took soil_class from soil_class_override",
+        get: |r| Value::int(r.field.as_ref().map(|f| i64::from(f.class_overridden))),
+    },
+    Property {
+        name: "risk_weight",
+        kind: Kind::Real,
+        doc: "the inventory's weight of this segment's speed error in plan (P83); blank: its \
+              length is used",
+        get: |r| Value::real(r.segment.risk_weight),
+    },
 ];
 
 #[cfg(test)]

@@ -47,6 +47,21 @@ pub fn smooth(labels: &[Option<usize>], pos: &[Option<[f64; 2]>]) -> Vec<(Option
         .collect()
 }
 
+/// The classes of [`smooth`] with the engineer's overrides applied: a segment whose class is
+/// `forced` (the inventory's `soil_class_override`, given as its label `own`) keeps that class
+/// and is never reported as rejected, whatever its neighbours carry.
+pub fn with_overrides(
+    smoothed: Vec<(Option<usize>, bool)>,
+    own: &[Option<usize>],
+    forced: &[bool],
+) -> Vec<(Option<usize>, bool)> {
+    smoothed
+        .into_iter()
+        .zip(own.iter().zip(forced))
+        .map(|(c, (&o, &f))| if f { (o, false) } else { c })
+        .collect()
+}
+
 /// Bounds of the label error rate used by [`class_probabilities`]: at least one label in a
 /// hundred is taken as possibly wrong, at most three in ten.
 pub const LABEL_ERROR_RANGE: (f64, f64) = (0.01, 0.3);
@@ -138,6 +153,22 @@ mod tests {
         assert_eq!(out[15], (Some(1), false));
         let rejected = out.iter().filter(|o| o.1).count();
         assert_eq!(rejected, 2);
+    }
+
+    /// An override keeps its class inside a unit of the other class (where its label alone
+    /// would be rejected) and is not reported; the others are unchanged.
+    #[test]
+    fn an_overridden_class_is_kept_and_not_reported() {
+        let pos: Vec<Option<[f64; 2]>> = (0..30).map(|i| Some([i as f64 * 50.0, 0.0])).collect();
+        let mut labels: Vec<Option<usize>> = (0..30).map(|i| Some(usize::from(i >= 15))).collect();
+        labels[5] = Some(1);
+        labels[24] = Some(0);
+        let mut forced = vec![false; 30];
+        forced[5] = true;
+        let out = with_overrides(smooth(&labels, &pos), &labels, &forced);
+        assert_eq!(out[5], (Some(1), false));
+        assert_eq!(out[24], (Some(1), true));
+        assert_eq!(out[4], (Some(0), false));
     }
 
     /// Class probabilities: a lone wrong label deep inside a unit leaves the class certain; a

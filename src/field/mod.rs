@@ -148,6 +148,11 @@ pub struct Site {
     pub class: Option<usize>,
     /// Its neighbourhood rejects its label.
     pub label_rejected: bool,
+    /// The inventory's `soil_class_override`: the class the engineer has checked, used as it
+    /// is (no neighbourhood test, no class uncertainty).
+    pub class_override: Option<String>,
+    /// Its weight in `plan` (P83): the inventory's `risk_weight` where given, else its length.
+    pub risk_weight: Option<f64>,
     /// The probabilities of its true class (labels are evidence): its class alone when its
     /// neighbourhood agrees.
     pub classes: Vec<(usize, f64)>,
@@ -234,6 +239,11 @@ impl Fingerprint {
             i.fit_id
         );
         self.0 = fnv1a64_update(self.0, line.as_bytes());
+        // The override changes the segment's class; appended only where given, so a network
+        // without overrides keeps the fingerprint it had before the column existed.
+        if let Some(o) = &i.soil_class_override {
+            self.0 = fnv1a64_update(self.0, format!("override {o:?}\n").as_bytes());
+        }
     }
 
     fn hex(&self) -> String {
@@ -262,6 +272,8 @@ fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
             label: label_of(i.soil_zone.as_deref()).or_else(|| label_of(i.soil_type.as_deref())),
             class: None,
             label_rejected: false,
+            class_override: label_of(i.soil_class_override.as_deref()),
+            risk_weight: i.risk_weight,
             classes: Vec::new(),
             member: None,
             fitted_speed: i.leak_band_speed.filter(|_| usable),
@@ -307,8 +319,13 @@ fn classes_and_members(
     mut sites: Vec<Site>,
     soils: &[FittedSoil],
 ) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
-    // Classes: the labels in sorted order (one "network" class when there are none).
-    let mut names: Vec<String> = sites.iter().filter_map(|s| s.label.clone()).collect();
+    // Classes: the labels and overrides in sorted order (one "network" class when there are
+    // none). An override stands for the segment's label in its neighbours' votes too: it is the
+    // engineer's corrected label.
+    let mut names: Vec<String> = sites
+        .iter()
+        .filter_map(|s| s.class_override.clone().or_else(|| s.label.clone()))
+        .collect();
     names.sort();
     names.dedup();
     let index: BTreeMap<&str, usize> = names
@@ -318,10 +335,16 @@ fn classes_and_members(
         .collect();
     let own: Vec<Option<usize>> = sites
         .iter()
-        .map(|s| s.label.as_deref().map(|l| index[l]))
+        .map(|s| {
+            s.class_override
+                .as_deref()
+                .or(s.label.as_deref())
+                .map(|l| index[l])
+        })
         .collect();
     let pos: Vec<Option<[f64; 2]>> = sites.iter().map(|s| s.pos).collect();
-    let smoothed = labels::smooth(&own, &pos);
+    let forced: Vec<bool> = sites.iter().map(|s| s.class_override.is_some()).collect();
+    let smoothed = labels::with_overrides(labels::smooth(&own, &pos), &own, &forced);
     let fallback = if names.is_empty() {
         NETWORK_CLASS
     } else {
@@ -339,7 +362,11 @@ fn classes_and_members(
     }
     // The network's label error rate, estimated by the share of labels its neighbourhoods
     // reject, sets how much a split neighbourhood leaves a segment's class uncertain.
-    let labelled = own.iter().filter(|l| l.is_some()).count();
+    let labelled = own
+        .iter()
+        .zip(&forced)
+        .filter(|(l, f)| l.is_some() && !**f)
+        .count();
     let rejected = sites.iter().filter(|s| s.label_rejected).count();
     let error_rate = rejected as f64 / labelled.max(1) as f64;
     let classes: Vec<usize> = sites.iter().map(|s| s.class.unwrap_or(0)).collect();
@@ -351,8 +378,13 @@ fn classes_and_members(
         error_rate,
         MIN_CLASS_PROBABILITY,
     );
-    for (s, p) in sites.iter_mut().zip(probabilities) {
-        s.classes = p;
+    for ((s, p), &f) in sites.iter_mut().zip(probabilities).zip(&forced) {
+        // An overridden class is certain: the engineer has checked it.
+        s.classes = if f {
+            vec![(s.class.unwrap_or(0), 1.0)]
+        } else {
+            p
+        };
     }
     let mut obs = Vec::new();
     for (s, i) in sites.iter_mut().zip(soils) {
@@ -420,6 +452,9 @@ fn note_of(site: &Site, post: &Posterior, field: &Field, class: &str) -> String 
             near.iter().copied().fold(0.0, f64::max)
         )
     };
+    if site.class_override.is_some() {
+        note.push_str(" (class set by soil_class_override)");
+    }
     if site.label_rejected {
         let _ = write!(
             note,
@@ -488,6 +523,7 @@ fn site_result(
         label: site.label.clone(),
         soil_class: site.class.map(|k| names[k].clone()),
         label_rejected: site.label_rejected,
+        class_overridden: site.class_override.is_some(),
         measured: site.member.is_some(),
         information_scale: site
             .member
@@ -798,4 +834,100 @@ pub fn stored_field(
         None => Field::fit(obs, nk, bounds),
     });
     Ok(Some((last, field, sites)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A segment on a straight street at `x` m with a label and, optionally, an override.
+    fn input(id: &str, x: f64, label: &str, over: Option<&str>) -> FieldInput {
+        FieldInput {
+            segment_id: id.into(),
+            geometry_wkt: Some(format!("LINESTRING ({x} 0, {} 0)", x + 40.0)),
+            srid: Some(27700),
+            soil_type: Some(label.into()),
+            material: "PVC".into(),
+            soil_zone: None,
+            length_m: None,
+            risk_weight: None,
+            soil_class_override: over.map(str::to_string),
+            inputs_hash: "h".into(),
+            fit_id: None,
+            fit_status: None,
+            speeds: None,
+            information: None,
+            leak_band_speed: None,
+        }
+    }
+
+    /// An override keeps its class (a class no other segment carries) with certainty inside a
+    /// unit whose labels would otherwise overrule it, and is not counted as rejected; the same
+    /// segment without the override takes its neighbourhood's class and is reported.
+    #[test]
+    fn an_override_sets_the_class_with_certainty() {
+        let mk = |over: Option<&str>| -> Vec<FieldInput> {
+            (0..20)
+                .map(|i| {
+                    let o = if i == 10 { over } else { None };
+                    input(&format!("S{i:02}"), 50.0 * i as f64, "clay", o)
+                })
+                .collect()
+        };
+        let (sites, _, names) = sites_of(&mk(Some("peat")));
+        let s = &sites[10];
+        assert_eq!(names[s.class.unwrap()], "peat");
+        assert_eq!(s.classes, vec![(s.class.unwrap(), 1.0)]);
+        assert!(!s.label_rejected);
+        assert!(sites.iter().all(|t| !t.label_rejected));
+        assert_eq!(sites[9].class, sites[11].class);
+        assert_eq!(names[sites[9].class.unwrap()], "clay");
+
+        // Without it, a lone "peat" label is rejected by its clay neighbourhood.
+        let mut plain = mk(None);
+        plain[10].soil_type = Some("peat".into());
+        let (sites, _, names) = sites_of(&plain);
+        assert_eq!(names[sites[10].class.unwrap()], "clay");
+        assert!(sites[10].label_rejected);
+    }
+
+    /// The fingerprint changes with an override and, without one, is what it was before the
+    /// column existed (a network without overrides is not rebuilt after an upgrade).
+    #[test]
+    fn the_fingerprint_follows_the_override_only_where_given() {
+        let settings = FieldSettings {
+            model: Model::Full,
+            contact_mode: ContactMode::Reciprocal,
+            jobs: 1,
+            force: false,
+        };
+        let plain = input("S1", 0.0, "clay", None);
+        let mut fp = Fingerprint::new(&settings);
+        fp.add(&plain);
+        let head = format!(
+            "field v{FIELD_ALGORITHM_VERSION} {} {}\n",
+            settings.model.as_str(),
+            settings.contact_mode.as_str()
+        );
+        let line = format!(
+            "{}|{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n",
+            plain.segment_id,
+            plain.inputs_hash,
+            plain.soil_type,
+            plain.soil_zone,
+            plain.geometry_wkt,
+            plain.srid,
+            plain.length_m,
+            plain.fit_id
+        );
+        assert_eq!(fp.0, fnv1a64(format!("{head}{line}").as_bytes()));
+        let mut over = Fingerprint::new(&settings);
+        over.add(&input("S1", 0.0, "clay", Some("peat")));
+        assert_ne!(over.0, fp.0);
+        let mut weighted = Fingerprint::new(&settings);
+        let mut w = plain.clone();
+        w.risk_weight = Some(3.0);
+        weighted.add(&w);
+        assert_eq!(weighted.0, fp.0);
+    }
 }

@@ -23,6 +23,20 @@ use rayon::prelude::*;
 use super::model::{dist, index_of, Field, Index, Sym2};
 use super::Site;
 
+/// What a candidate's measurement is taken to be, as `plan` states it to the user (the
+/// information of [`typical_information`]).
+pub const HYPOTHETICAL_MEASUREMENT: &str = "each candidate is valued as if measured like the \
+network's fitted pipes of its material: the median information (entrywise) of their fits, \
+i.e. their frequency plans at their noise; of all fitted pipes when none of its material is \
+fitted";
+
+/// A segment's weight w_i in P83: its `risk_weight` where the inventory gives one, else its
+/// length in metres (1 when it has none).
+pub fn weight_of(site: &Site) -> f64 {
+    site.risk_weight
+        .unwrap_or_else(|| site.length.filter(|l| *l > 0.0).unwrap_or(1.0))
+}
+
 /// Unmeasured segments whose variance a measurement can reduce: the nearest this many to it
 /// (the field's posterior correlation falls as e^(−d/ℓ); further pipes gain little).
 pub const AFFECTED: usize = 48;
@@ -40,7 +54,7 @@ pub struct Candidate {
     pub pos: [f64; 2],
     /// Its soil class.
     pub class: usize,
-    /// Its weight (length, m).
+    /// Its weight ([`weight_of`]: risk weight, else length in m).
     pub weight: f64,
     /// Predicted leak-band speed ĉ, m/s.
     pub speed: f64,
@@ -401,7 +415,7 @@ pub fn plan(
             site: i,
             pos,
             class: s.class.unwrap_or(0),
-            weight: s.length.filter(|l| *l > 0.0).unwrap_or(1.0),
+            weight: weight_of(s),
             speed,
             gradient,
             cov,

@@ -73,6 +73,14 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
         required: false,
     },
     ColumnSpec {
+        name: "risk_weight",
+        required: false,
+    },
+    ColumnSpec {
+        name: "soil_class_override",
+        required: false,
+    },
+    ColumnSpec {
         name: "geometry_wkt",
         required: false,
     },
@@ -225,6 +233,21 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
     let soil_type = c.owned_text("soil_type");
     let install_year = c.integer("install_year");
     let soil_zone = c.owned_text("soil_zone");
+    // A weight of P83's sum: any finite value ≥ 0 (0: the segment's error does not matter).
+    let risk_weight = match c.number("risk_weight") {
+        Some(w) if w < 0.0 => {
+            c.err(
+                "risk_weight",
+                format!(
+                    "must be 0 or more (a weight of the segment's speed error), got {}",
+                    short(w)
+                ),
+            );
+            None
+        }
+        w => w,
+    };
+    let soil_class_override = c.owned_text("soil_class_override");
 
     let geometry_wkt = c.text("geometry_wkt").and_then(|t| {
         LineString::parse_wkt(t)
@@ -278,6 +301,8 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
         soil_type,
         install_year,
         soil_zone,
+        risk_weight,
+        soil_class_override,
         geometry_wkt,
         srid,
         inputs_hash: String::new(),
@@ -321,6 +346,8 @@ pub(super) fn keep_stored(rec: &mut SegmentRecord, old: &SegmentRecord, absent: 
             "soil_type" => rec.soil_type.clone_from(&old.soil_type),
             "install_year" => rec.install_year = old.install_year,
             "soil_zone" => rec.soil_zone.clone_from(&old.soil_zone),
+            "risk_weight" => rec.risk_weight = old.risk_weight,
+            "soil_class_override" => rec.soil_class_override.clone_from(&old.soil_class_override),
             "geometry_wkt" => {
                 rec.geometry_wkt.clone_from(&old.geometry_wkt);
                 rec.srid = old.srid;

@@ -42,7 +42,8 @@ impl<'c> Staging<'c> {
                 pipe_density_kg_m3 REAL, pipe_loss_factor REAL, fluid_density_kg_m3 REAL,
                 fluid_bulk_modulus_pa REAL, length_m REAL, soil_type TEXT, install_year INTEGER,
                 geometry_wkt TEXT, srid INTEGER, inputs_hash TEXT NOT NULL DEFAULT '',
-                imported_at TEXT NOT NULL DEFAULT '', soil_zone TEXT);
+                imported_at TEXT NOT NULL DEFAULT '', soil_zone TEXT, risk_weight REAL,
+                soil_class_override TEXT);
             -- Every valid row of the measurements file; `valid` is cleared for a duplicate or a
             -- row of an unknown segment. `omega_given`: the frequency was given as ω.
             CREATE TEMP TABLE import_measurements (
@@ -67,9 +68,9 @@ impl<'c> Staging<'c> {
              outer_diameter_mm, wall_thickness_mm, soil_density_kg_m3, pipe_youngs_modulus_pa, \
              pipe_poisson, pipe_density_kg_m3, pipe_loss_factor, fluid_density_kg_m3, \
              fluid_bulk_modulus_pa, length_m, soil_type, install_year, geometry_wkt, srid, \
-             soil_zone) \
+             soil_zone, risk_weight, soil_class_override) \
              VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, \
-             ?17, ?18, ?19)",
+             ?17, ?18, ?19, ?20, ?21)",
         )?;
         let line = line_sql(line);
         match record {
@@ -92,6 +93,8 @@ impl<'c> Staging<'c> {
                 None::<i64>,
                 None::<String>,
                 None::<i64>,
+                None::<String>,
+                None::<f64>,
                 None::<String>,
             ])?,
             Some(s) => {

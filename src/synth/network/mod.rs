@@ -157,6 +157,8 @@ impl NetworkTables {
                 soil_type: Some(s.soil_label.to_string()),
                 install_year: Some(i64::from(s.install_year)),
                 soil_zone: s.soil_zone.clone(),
+                risk_weight: None,
+                soil_class_override: None,
                 srid: geometry.as_ref().map(|_| i64::from(srid)),
                 geometry_wkt: geometry.map(|g| g.to_wkt()),
                 inputs_hash: String::new(),

@@ -83,6 +83,8 @@ fn published_record(
         soil_type: None,
         install_year: None,
         soil_zone: None,
+        risk_weight: None,
+        soil_class_override: None,
         geometry_wkt: None,
         srid: None,
         inputs_hash: String::new(),
