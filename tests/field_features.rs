@@ -377,6 +377,14 @@ fn every_export_gives_every_segment_a_speed_source_and_its_reason() {
         .unwrap();
     assert_eq!(stored, 1);
     drop(conn);
+    // The audit report says which class came from an override.
+    let report = d.join("audit.html");
+    run(&["audit", "--db", dbs, "--out", report.to_str().unwrap()]);
+    let html = std::fs::read_to_string(&report).unwrap();
+    assert!(
+        html.contains("1 segment takes its class from the inventory's soil_class_override"),
+        "no override line in the audit report"
+    );
 
     // plan: the statement of the hypothetical measurement, once; the weight is the length.
     let next = d.join("next.csv");

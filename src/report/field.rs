@@ -286,7 +286,9 @@ pub(crate) fn section(db: &Database) -> Result<String, ExportError> {
             "<h3>Labels the neighbourhood rejects</h3><p class=\"note\">{} segment{} carry a \
              soil label that most of their nearest neighbours do not; the field uses the \
              neighbourhood's class (a mapping error or imported backfill, or a true small \
-             unit: check the record).</p><table><tr><th>segment</th><th>label</th><th>class \
+             unit: check the record). Where the label is right, give it in the inventory's \
+             column soil_class_override and import again: the field then uses it as it \
+             is.</p><table><tr><th>segment</th><th>label</th><th>class \
              used</th></tr>",
             rejected.len(),
             if rejected.len() == 1 { "" } else { "s" }
@@ -301,6 +303,16 @@ pub(crate) fn section(db: &Database) -> Result<String, ExportError> {
             );
         }
         h.push_str("</table>");
+    }
+    let overridden = rows.iter().filter(|r| r.class_overridden).count();
+    if overridden > 0 {
+        let _ = write!(
+            h,
+            "<p class=\"note\">{overridden} segment{} {} its class from the inventory's \
+             soil_class_override (never rejected by its neighbourhood).</p>",
+            if overridden == 1 { "" } else { "s" },
+            if overridden == 1 { "takes" } else { "take" }
+        );
     }
     let map = z_map(db, &rows)?;
     if !map.is_empty() {
