@@ -36,6 +36,8 @@ segments.csv: one row per pipe segment
   length_m, soil_type, install_year
                         optional  informational (m, text, year)
   soil_zone             optional  text: the soil unit the segment lies in
+  risk_weight           optional  >= 0: the segment's weight in plan (default: its length, m)
+  soil_class_override   optional  text: the soil class the field must use for the segment
   geometry_wkt, srid    optional  LINESTRING (x y, x y, ...) in EPSG:srid (for the maps)
 
 measurements.csv: one row per segment and frequency (field wavenumbers)
