@@ -35,7 +35,7 @@ use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 2;
+pub const FIELD_ALGORITHM_VERSION: u32 = 3;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -343,47 +343,30 @@ fn classes_and_members(
         })
         .collect();
     let pos: Vec<Option<[f64; 2]>> = sites.iter().map(|s| s.pos).collect();
+    // Each segment's class probabilities from its label and its neighbours' (labels are
+    // evidence, model §7.12), under the network's own label error rate; an override is the
+    // engineer's checked class, certain.
     let forced: Vec<bool> = sites.iter().map(|s| s.class_override.is_some()).collect();
-    let smoothed = labels::with_overrides(labels::smooth(&own, &pos), &own, &forced);
+    let (beliefs, _) = labels::classes(&own, &forced, &pos, names.len(), MIN_CLASS_PROBABILITY);
     let fallback = if names.is_empty() {
         NETWORK_CLASS
     } else {
         UNLABELLED_CLASS
     };
     let mut fallback_index = None;
-    for (s, (class, rejected)) in sites.iter_mut().zip(smoothed) {
-        s.class = Some(class.unwrap_or_else(|| {
+    for (s, b) in sites.iter_mut().zip(beliefs) {
+        let class = b.class.unwrap_or_else(|| {
             *fallback_index.get_or_insert_with(|| {
                 names.push(fallback.to_string());
                 names.len() - 1
             })
-        }));
-        s.label_rejected = rejected;
-    }
-    // The network's label error rate, estimated by the share of labels its neighbourhoods
-    // reject, sets how much a split neighbourhood leaves a segment's class uncertain.
-    let labelled = own
-        .iter()
-        .zip(&forced)
-        .filter(|(l, f)| l.is_some() && !**f)
-        .count();
-    let rejected = sites.iter().filter(|s| s.label_rejected).count();
-    let error_rate = rejected as f64 / labelled.max(1) as f64;
-    let classes: Vec<usize> = sites.iter().map(|s| s.class.unwrap_or(0)).collect();
-    let probabilities = labels::class_probabilities(
-        &own,
-        &pos,
-        &classes,
-        names.len(),
-        error_rate,
-        MIN_CLASS_PROBABILITY,
-    );
-    for ((s, p), &f) in sites.iter_mut().zip(probabilities).zip(&forced) {
-        // An overridden class is certain: the engineer has checked it.
-        s.classes = if f {
-            vec![(s.class.unwrap_or(0), 1.0)]
+        });
+        s.class = Some(class);
+        s.label_rejected = b.rejected;
+        s.classes = if b.probabilities.is_empty() {
+            vec![(class, 1.0)]
         } else {
-            p
+            b.probabilities
         };
     }
     let mut obs = Vec::new();
