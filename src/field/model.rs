@@ -237,14 +237,6 @@ impl Hyper {
     pub fn kernel(&self, d: f64) -> Sym2 {
         self.b.scale((-d / self.ell).exp())
     }
-
-    /// Between two points of which either has no position: independent.
-    fn kernel_between(&self, a: Option<[f64; 2]>, b: Option<[f64; 2]>) -> Sym2 {
-        match (a, b) {
-            (Some(a), Some(b)) => self.kernel(dist(a, b)),
-            _ => Sym2::default(),
-        }
-    }
 }
 
 /// Euclidean distance, m.
@@ -286,11 +278,9 @@ struct Terms<'a> {
 }
 
 impl Terms<'_> {
-    /// The field covariance between members i and j (i ≠ j).
-    fn between(&self, i: usize, j: usize) -> Sym2 {
-        self.hyper
-            .kernel_between(self.obs[i].pos, self.obs[j].pos)
-            .scale(self.root_b[i] * self.root_b[j])
+    /// The field covariance between members i and j (i ≠ j) at distance `d` apart.
+    fn between_at(&self, i: usize, j: usize, d: f64) -> Sym2 {
+        self.hyper.kernel(d).scale(self.root_b[i] * self.root_b[j])
     }
 
     /// Member i's own variance: b_i B + its noise.
@@ -302,6 +292,23 @@ impl Terms<'_> {
     }
 }
 
+/// The distances a conditional's covariances take (m): the target's to each neighbour, then
+/// each pair of neighbours (p, q < p) row by row; ∞ where either has no position (then the
+/// kernel e^(−d/ℓ) is 0: independent). They do not depend on θ, so the marginal likelihood's
+/// Vecchia conditionals take them from [`Vecchia`], computed once per field.
+fn distances(obs: &[Observation], pos: Option<[f64; 2]>, nbrs: &[usize]) -> Vec<f64> {
+    let d = |a: Option<[f64; 2]>, b: Option<[f64; 2]>| match (a, b) {
+        (Some(a), Some(b)) => dist(a, b),
+        _ => f64::INFINITY,
+    };
+    let mut out = Vec::with_capacity(nbrs.len() * (nbrs.len() + 1) / 2);
+    out.extend(nbrs.iter().map(|&i| d(pos, obs[i].pos)));
+    for (p, &i) in nbrs.iter().enumerate() {
+        out.extend(nbrs[..p].iter().map(|&j| d(obs[i].pos, obs[j].pos)));
+    }
+    out
+}
+
 /// The conditional of a target at `pos` (√ of its class's multiplier of B `root_b`) with
 /// variance `target_var`, given the members `nbrs`.
 fn conditional(
@@ -310,6 +317,17 @@ fn conditional(
     root_b: f64,
     target_var: Sym2,
     nbrs: &[usize],
+) -> Option<Conditional> {
+    conditional_at(t, root_b, target_var, nbrs, &distances(t.obs, pos, nbrs))
+}
+
+/// [`conditional`] with the target's and neighbours' [`distances`] `d`.
+fn conditional_at(
+    t: &Terms,
+    root_b: f64,
+    target_var: Sym2,
+    nbrs: &[usize],
+    d: &[f64],
 ) -> Option<Conditional> {
     let k = nbrs.len();
     if k == 0 {
@@ -320,9 +338,16 @@ fn conditional(
     }
     let mut c = DMatrix::<f64>::zeros(2 * k, 2 * k);
     let mut ct = DMatrix::<f64>::zeros(2 * k, 2);
+    // Pair (p, q < p) of the neighbours sits at k + p(p − 1)/2 + q of `d`.
+    let mut pair = k;
     for (p, &i) in nbrs.iter().enumerate() {
         for (q, &j) in nbrs.iter().enumerate().take(p + 1) {
-            let s = if p == q { t.own(i) } else { t.between(i, j) };
+            let s = if p == q {
+                t.own(i)
+            } else {
+                pair += 1;
+                t.between_at(i, j, d[pair - 1])
+            };
             for a in 0..2 {
                 for b in 0..2 {
                     c[(2 * p + a, 2 * q + b)] = s.at(a, b);
@@ -330,10 +355,7 @@ fn conditional(
                 }
             }
         }
-        let s = t
-            .hyper
-            .kernel_between(pos, t.obs[i].pos)
-            .scale(root_b * t.root_b[i]);
+        let s = t.hyper.kernel(d[p]).scale(root_b * t.root_b[i]);
         for a in 0..2 {
             for b in 0..2 {
                 ct[(2 * p + a, b)] = s.at(a, b);
@@ -363,6 +385,10 @@ pub struct Vecchia {
     start: Vec<usize>,
     /// Neighbour member indices, flat.
     nbrs: Vec<u32>,
+    /// Offsets into `dists` per position of `order` (length n + 1).
+    dstart: Vec<usize>,
+    /// Each member's [`distances`] to and between its neighbours, flat.
+    dists: Vec<f64>,
 }
 
 impl Vecchia {
@@ -382,7 +408,24 @@ impl Vecchia {
             }
             start.push(nbrs.len());
         }
-        Vecchia { order, start, nbrs }
+        let mut dstart = Vec::with_capacity(obs.len() + 1);
+        let mut dists = Vec::with_capacity(obs.len() * m * (m + 1) / 2);
+        dstart.push(0);
+        for (p, &i) in order.iter().enumerate() {
+            let nb: Vec<usize> = nbrs[start[p]..start[p + 1]]
+                .iter()
+                .map(|&j| j as usize)
+                .collect();
+            dists.extend(distances(obs, obs[i].pos, &nb));
+            dstart.push(dists.len());
+        }
+        Vecchia {
+            order,
+            start,
+            nbrs,
+            dstart,
+            dists,
+        }
     }
 
     fn neighbours(&self, pos: usize) -> Vec<usize> {
@@ -468,7 +511,8 @@ fn pass(t: &Terms, v: &Vecchia, nk: usize) -> Option<Pass> {
                 let i = v.order[pos];
                 let nb = v.neighbours(pos);
                 let o = &obs[i];
-                let cond = conditional(t, o.pos, t.root_b[i], t.own(i), &nb)?;
+                let d = &v.dists[v.dstart[pos]..v.dstart[pos + 1]];
+                let cond = conditional_at(t, t.root_b[i], t.own(i), &nb, d)?;
                 let vinv = cond.v.inverse()?;
                 let mut yt = o.u;
                 for (p, &j) in nb.iter().enumerate() {
