@@ -626,6 +626,8 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                 "(b-Bl) B, ℓ true, T estimated, true labels",
                 "(b-S) θ estimated, screening of (a'), true labels",
                 "(a-S) true θ, screening of (b), true labels",
+                "(b-m) θ estimated, members true labels, targets as today",
+                "(b-t) θ estimated, members as today, targets true labels",
             ];
             let mut rungs: Vec<Rung> = names.iter().map(|_| Rung::default()).collect();
             // Measured plastic pipes: (σ of ln c_S from the information, error of ln c_S).
@@ -750,7 +752,19 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                     HyperSource::MarginalLikelihood,
                     estimated.scales.clone(),
                 );
-                let today = Field::fit(obs, sites_of(&inputs).2.len(), bounds);
+                let today_names = sites_of(&inputs).2;
+                let today = Field::fit(obs, today_names.len(), bounds);
+                let unit_of_name: HashMap<&str, usize> = geo
+                    .units
+                    .iter()
+                    .enumerate()
+                    .map(|(k, u)| (u.class.0, k))
+                    .collect();
+                let name_of_unit: HashMap<usize, usize> = today_names
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, n)| unit_of_name.get(n.as_str()).map(|&u| (u, i)))
+                    .collect();
                 hypers.push(estimated.hyper);
                 let (pred, _) = speeds(&net.db);
                 let site_of: HashMap<&str, usize> = sites
@@ -800,6 +814,26 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                             today.mixture_posterior(site.pos, &site.classes, None)
                         };
                         score(3, post.mean, post.cov);
+                        // Members labelled by their true unit, the target's class as today
+                        // (today's class indices mapped to units by name).
+                        let mapped: Vec<(usize, f64)> = if site.classes.is_empty() {
+                            vec![(site.class.unwrap_or(0), 1.0)]
+                        } else {
+                            site.classes.clone()
+                        }
+                        .into_iter()
+                        .filter_map(|(k, p)| {
+                            unit_of_name.get(today_names[k].as_str()).map(|&u| (u, p))
+                        })
+                        .collect();
+                        if !mapped.is_empty() {
+                            let post = estimated.mixture_posterior(site.pos, &mapped, None);
+                            score(10, post.mean, post.cov);
+                        }
+                        if let Some(&k) = name_of_unit.get(&unit) {
+                            let post = today.posterior(site.pos, k, None);
+                            score(11, post.mean, post.cov);
+                        }
                         score(5, true_u(s), Sym2::default());
                         let post = t_true.posterior(site.pos, unit, None);
                         score(6, post.mean, post.cov);

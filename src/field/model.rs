@@ -1541,6 +1541,67 @@ mod tests {
         assert!(bad.iter().all(|&i| field.screened[i].chi2 > SCREEN_CHI2));
     }
 
+    /// Masking: 30 of 300 members (about a metal fit's share of second-basin fits) seeing
+    /// only ln c_P with a claimed σ 0.05 and moved by +1.2 (24σ). Taken as Gaussian scatter
+    /// they raise T_PP to about 30/300 × 1.2² ≈ 0.15, and against that T their χ² is about
+    /// 1.44 / 0.16 ≈ 9 < 13.8: a screening against the likelihood's T misses them all. Against
+    /// the robustly scaled T (the bulk's median χ² typical) most are caught at once, and the
+    /// fitted field screens them all and keeps T_PP near the truth (0.002).
+    #[test]
+    fn masked_fits_are_screened_against_the_robust_scatter() {
+        let (t, mu) = truth();
+        let mut obs = draw(23, 300, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let bad: Vec<usize> = (0..30).map(|j| 3 + 10 * j).collect();
+        for &i in &bad {
+            obs[i].u[0] += 1.2;
+            obs[i].info = Sym2::new(400.0, 0.0, 0.0);
+        }
+        let inflated = Field::with_hyper(
+            obs.clone(),
+            2,
+            (50.0, 4243.0),
+            Hyper {
+                t: Sym2::new(0.15, 0.0, t.t.ss),
+                ..t
+            },
+            HyperSource::MarginalLikelihood,
+        );
+        let missed = inflated
+            .screen()
+            .iter()
+            .enumerate()
+            .filter(|(i, s)| bad.contains(i) && s.scale == 1.0)
+            .count();
+        assert!(
+            missed >= 25,
+            "only {missed} of 30 missed against the inflated T"
+        );
+        let (robust, tau) = inflated.robust_screen();
+        assert!(tau < 0.5, "robust factor of T {tau}");
+        let caught = bad.iter().filter(|&&i| robust[i].scale < 1.0).count();
+        assert!(caught >= 20, "{caught} of 30 caught against the robust T");
+        // The fitted field: all screened, and T no longer inflated.
+        let field = Field::fit(obs, 2, (50.0, 4243.0));
+        let s = &field.scales.information;
+        let caught = bad.iter().filter(|&&i| s[i] < 0.2).count();
+        assert!(caught >= 28, "{caught} of 30 screened by the fitted field");
+        let clean_kept = (0..300)
+            .filter(|i| !bad.contains(i) && s[*i] == 1.0)
+            .count();
+        assert!(clean_kept >= 255, "{clean_kept} of 270 clean members kept");
+        assert!(field.hyper.t.pp < 0.01, "T_PP {}", field.hyper.t.pp);
+    }
+
+    /// One degree of freedom per direction the fit pins to within the class prior's width.
+    #[test]
+    fn seen_directions_count_informative_eigenvalues() {
+        assert_eq!(seen_directions(&Sym2::new(2500.0, 500.0, 900.0)), 2);
+        assert_eq!(seen_directions(&Sym2::new(400.0, 0.0, 0.0)), 1);
+        // Rank one along (1, 1)/√2 with eigenvalue 200: one direction.
+        assert_eq!(seen_directions(&Sym2::new(100.0, 100.0, 100.0)), 1);
+        assert_eq!(seen_directions(&Sym2::new(0.5, 0.0, 0.2)), 0);
+    }
+
     /// Class multipliers: a class whose field spread is 4× the other's (in variance) gets a
     /// multiplier of B 2–8× the other's; the common B alone would give both the same.
     #[test]
