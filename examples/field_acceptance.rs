@@ -26,6 +26,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use pipewave::field::model::{Hyper, Sym2};
 use pipewave::invert::fit::leak_band_speed_of;
 use pipewave::physics::{Fluid, Soil, System};
 use pipewave::synth::field::moduli;
@@ -540,6 +541,370 @@ fn plan_check(networks: u64, segments: usize, seed0: u64, jobs: usize) {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// The generator's hyper-parameters θ of P78 at correlation length `ell`: B from the unit
+/// spreads and their correlation, T the per-pipe scatter (correlated as the field).
+fn true_hyper(ell: f64) -> Hyper {
+    use pipewave::synth::field::{
+        PIPE_SCATTER_LN, UNIT_SPREAD_CORRELATION, UNIT_SPREAD_LN_CP, UNIT_SPREAD_LN_CS,
+    };
+    let (p, s, r) = (
+        UNIT_SPREAD_LN_CP,
+        UNIT_SPREAD_LN_CS,
+        UNIT_SPREAD_CORRELATION,
+    );
+    let t = PIPE_SCATTER_LN * PIPE_SCATTER_LN;
+    Hyper {
+        b: Sym2::new(p * p, r * p * s, s * s),
+        ell,
+        t: Sym2::new(t, r * t, t),
+    }
+}
+
+/// Plastic relative errors of one rung of the oracle ladder: all, and in the stiffest unit.
+#[derive(Default)]
+struct Rung {
+    /// (u_true − m*)_S / √S*_SS of the posterior of ln c_S.
+    zu: Vec<f64>,
+    all: Vec<f64>,
+    stiff: Vec<f64>,
+    covered: usize,
+}
+
+impl Rung {
+    fn push(&mut self, e: f64, stiff: bool, covered: bool) {
+        self.all.push(e);
+        if stiff {
+            self.stiff.push(e);
+        }
+        self.covered += usize::from(covered);
+    }
+
+    fn report(&self, name: &str) {
+        let rms = (self.zu.iter().map(|z| z * z).sum::<f64>() / self.zu.len().max(1) as f64).sqrt();
+        println!(
+            "  {name:46} plastic {}; stiffest unit {}; within 2σ {:.1} %; rms z(ln c_S) {rms:.2}",
+            med_p90(&self.all),
+            med_p90(&self.stiff),
+            100.0 * self.covered as f64 / self.all.len().max(1) as f64
+        );
+    }
+}
+
+/// The oracle ladder of the judged cells: where the plastic p90 of the unmeasured segments is
+/// lost. Every rung predicts from the same measured segments' stored fits (û, I):
+/// (a) the generator's θ, true labels and the true unit means; (a′) the generator's θ and true
+/// labels, class means estimated; (b) θ estimated by marginal likelihood (with screening and
+/// class multipliers), true labels; (c) the stored predictions (labels as given, 10 % wrong).
+/// The floor: the true soil with the contact unknown. Also how well the measured plastic pipes
+/// pin their own u: the fit's σ(ln c_S) from its information and its actual error.
+fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) {
+    use pipewave::db::field::field_inputs;
+    use pipewave::db::pages::segments_page;
+    use pipewave::field::model::{Field, HyperSource, Scales};
+    use pipewave::field::predict::predict_speed;
+    use pipewave::field::{length_bounds, sites_of};
+    use pipewave::synth::field::wave_speeds;
+    let root = std::env::temp_dir().join(format!("pipewave-field-oracle-{}", std::process::id()));
+    let cells = if cells.is_empty() {
+        "15:350,15:1000"
+    } else {
+        cells
+    };
+    for (a, &frac) in MEASURED_FRACTIONS.iter().enumerate() {
+        for (b, &ell) in CORRELATION_LENGTHS_M.iter().enumerate() {
+            if !selected(cells, frac, ell) {
+                continue;
+            }
+            let names = [
+                "(a) true θ, true labels, true unit means",
+                "(a') true θ, true labels, means estimated",
+                "(b) θ estimated, true labels",
+                "(b') θ estimated, labels as today",
+                "(c) today's field (stored predictions)",
+                "floor: true soil, contact unknown",
+                "(b-T) θ estimated but T true, true labels",
+                "(b-Bl) B, ℓ true, T estimated, true labels",
+                "(b-S) θ estimated, screening of (a'), true labels",
+                "(a-S) true θ, screening of (b), true labels",
+                "(b-m) θ estimated, members true labels, targets as today",
+                "(b-t) θ estimated, members as today, targets true labels",
+            ];
+            let mut rungs: Vec<Rung> = names.iter().map(|_| Rung::default()).collect();
+            // Measured plastic pipes: (σ of ln c_S from the information, error of ln c_S).
+            let mut pinned: Vec<(f64, f64)> = Vec::new();
+            let mut hypers = Vec::new();
+            // χ² = dᵀ I d of each measured fit's error d = û − u_true: [plastic, metal].
+            let mut fit_chi2: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
+            for n in 0..networks {
+                let seed = seed0 + 100 * (3 * a + b) as u64 + n;
+                let opts = options(segments, seed, ell, frac);
+                let geo = geology(&opts).expect("units");
+                let stiffest = (0..geo.units.len())
+                    .max_by(|&i, &j| geo.units[i].mean[1].total_cmp(&geo.units[j].mean[1]))
+                    .expect("a unit");
+                let net = Network::build(&opts, root.join(format!("n{seed}")), jobs);
+                let conn = rusqlite::Connection::open(&net.db).expect("database opens");
+                let inputs = field_inputs(&conn).expect("field inputs");
+                let (sites, obs, _) = sites_of(&inputs);
+                let bounds = length_bounds(&sites);
+                let by_id: HashMap<&str, &SynthSegment> =
+                    net.segments.iter().map(|s| (s.id.as_str(), s)).collect();
+                let true_u = |s: &SynthSegment| {
+                    let (p, q) = wave_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
+                    [p.ln(), q.ln()]
+                };
+                let mut obs_true = obs.clone();
+                for site in &sites {
+                    let Some(m) = site.member else { continue };
+                    let s = by_id[site.segment_id.as_str()];
+                    obs_true[m].class = s.unit.expect("unit");
+                    {
+                        let tu = true_u(s);
+                        let d = [obs[m].u[0] - tu[0], obs[m].u[1] - tu[1]];
+                        let chi2 = obs[m].info.quad(d);
+                        fit_chi2[usize::from(!s.material.is_plastic())].push(chi2);
+                    }
+                    if s.material.is_plastic() {
+                        let sd = obs[m].noise().ss.sqrt();
+                        pinned.push((sd, obs[m].u[1] - true_u(s)[1]));
+                    }
+                }
+                let nk = geo.units.len();
+                // The generator's θ, with the same screening of the fits the field cannot
+                // explain as the fitted field does (two rounds), so that only θ differs.
+                let screened_with = |means: bool| {
+                    let mut scales = Scales::unit(nk, obs_true.len());
+                    let mut f = None;
+                    for _ in 0..=pipewave::field::model::SCREEN_ROUNDS {
+                        let mut field = Field::with_scales(
+                            obs_true.clone(),
+                            nk,
+                            bounds,
+                            true_hyper(ell),
+                            HyperSource::MarginalLikelihood,
+                            scales.clone(),
+                        );
+                        if means {
+                            for (k, u) in geo.units.iter().enumerate() {
+                                field.class_mean[2 * k] = u.mean[0];
+                                field.class_mean[2 * k + 1] = u.mean[1];
+                            }
+                            field.class_cov.fill(0.0);
+                        }
+                        scales.information = field.screen().iter().map(|x| x.scale).collect();
+                        f = Some(field);
+                    }
+                    f.expect("a field")
+                };
+                let oracle = screened_with(true);
+                let oracle_means = screened_with(false);
+                let estimated = Field::fit(obs_true.clone(), nk, bounds);
+                let t_true = Field::with_scales(
+                    obs_true.clone(),
+                    nk,
+                    bounds,
+                    Hyper {
+                        t: true_hyper(ell).t,
+                        ..estimated.hyper
+                    },
+                    HyperSource::MarginalLikelihood,
+                    estimated.scales.clone(),
+                );
+                let b_s = Field::with_scales(
+                    obs_true.clone(),
+                    nk,
+                    bounds,
+                    estimated.hyper,
+                    HyperSource::MarginalLikelihood,
+                    Scales {
+                        class: estimated.scales.class.clone(),
+                        information: oracle_means.scales.information.clone(),
+                    },
+                );
+                let a_s = Field::with_scales(
+                    obs_true.clone(),
+                    nk,
+                    bounds,
+                    true_hyper(ell),
+                    HyperSource::MarginalLikelihood,
+                    Scales {
+                        class: vec![[1.0, 1.0]; nk],
+                        information: estimated.scales.information.clone(),
+                    },
+                );
+                let n_screened =
+                    |f: &Field| f.scales.information.iter().filter(|&&x| x < 1.0).count();
+                println!(
+                    "  network {seed}: screened with true θ {}, with estimated θ {} of {}; class multipliers {:?}",
+                    n_screened(&oracle_means),
+                    n_screened(&estimated),
+                    obs_true.len(),
+                    estimated.scales.class
+                );
+                let bl_true = Field::with_scales(
+                    obs_true,
+                    nk,
+                    bounds,
+                    Hyper {
+                        t: estimated.hyper.t,
+                        ..true_hyper(ell)
+                    },
+                    HyperSource::MarginalLikelihood,
+                    estimated.scales.clone(),
+                );
+                let today_names = sites_of(&inputs).2;
+                let today = Field::fit(obs, today_names.len(), bounds);
+                let unit_of_name: HashMap<&str, usize> = geo
+                    .units
+                    .iter()
+                    .enumerate()
+                    .map(|(k, u)| (u.class.0, k))
+                    .collect();
+                let name_of_unit: HashMap<usize, usize> = today_names
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, n)| unit_of_name.get(n.as_str()).map(|&u| (u, i)))
+                    .collect();
+                hypers.push(estimated.hyper);
+                let (pred, _) = speeds(&net.db);
+                let site_of: HashMap<&str, usize> = sites
+                    .iter()
+                    .enumerate()
+                    .map(|(i, s)| (s.segment_id.as_str(), i))
+                    .collect();
+                let mut after: Option<String> = None;
+                loop {
+                    let page = segments_page(&conn, after.as_deref(), 256).expect("page");
+                    let Some(last) = page.last() else { break };
+                    after = Some(last.segment_id.clone());
+                    for rec in &page {
+                        let s = by_id[rec.segment_id.as_str()];
+                        let site = &sites[site_of[rec.segment_id.as_str()]];
+                        if s.measured || !s.material.is_plastic() {
+                            continue;
+                        }
+                        let Some(truth) = s.leak_band_speed else {
+                            continue;
+                        };
+                        let Ok(data) = pipewave::rows::segment_data(rec) else {
+                            continue;
+                        };
+                        let unit = s.unit.expect("unit");
+                        let stiff = unit == stiffest;
+                        let tu = true_u(s);
+                        let mut score = |r: usize, mean: [f64; 2], cov: Sym2| {
+                            if cov.ss > 0.0 {
+                                rungs[r].zu.push((tu[1] - mean[1]) / cov.ss.sqrt());
+                            }
+                            let p = predict_speed(&data, opts.model, opts.contact_mode, mean, cov);
+                            if let Some(b) = p.band {
+                                let e = b.value / truth - 1.0;
+                                rungs[r].push(e, stiff, (b.value - truth).abs() <= 2.0 * b.std);
+                            }
+                        };
+                        let post = oracle.posterior(site.pos, unit, None);
+                        score(0, post.mean, post.cov);
+                        let post = oracle_means.posterior(site.pos, unit, None);
+                        score(1, post.mean, post.cov);
+                        let post = estimated.posterior(site.pos, unit, None);
+                        score(2, post.mean, post.cov);
+                        let post = if site.classes.is_empty() {
+                            today.posterior(site.pos, site.class.unwrap_or(0), None)
+                        } else {
+                            today.mixture_posterior(site.pos, &site.classes, None)
+                        };
+                        score(3, post.mean, post.cov);
+                        // Members labelled by their true unit, the target's class as today
+                        // (today's class indices mapped to units by name).
+                        let mapped: Vec<(usize, f64)> = if site.classes.is_empty() {
+                            vec![(site.class.unwrap_or(0), 1.0)]
+                        } else {
+                            site.classes.clone()
+                        }
+                        .into_iter()
+                        .filter_map(|(k, p)| {
+                            unit_of_name.get(today_names[k].as_str()).map(|&u| (u, p))
+                        })
+                        .collect();
+                        if !mapped.is_empty() {
+                            let post = estimated.mixture_posterior(site.pos, &mapped, None);
+                            score(10, post.mean, post.cov);
+                        }
+                        if let Some(&k) = name_of_unit.get(&unit) {
+                            let post = today.posterior(site.pos, k, None);
+                            score(11, post.mean, post.cov);
+                        }
+                        score(5, true_u(s), Sym2::default());
+                        let post = t_true.posterior(site.pos, unit, None);
+                        score(6, post.mean, post.cov);
+                        let post = bl_true.posterior(site.pos, unit, None);
+                        score(7, post.mean, post.cov);
+                        let post = b_s.posterior(site.pos, unit, None);
+                        score(8, post.mean, post.cov);
+                        let post = a_s.posterior(site.pos, unit, None);
+                        score(9, post.mean, post.cov);
+                        if let Some(&(Some(c), Some(sd))) = pred.get(&s.id) {
+                            rungs[4].push(c / truth - 1.0, stiff, (c - truth).abs() <= 2.0 * sd);
+                        }
+                    }
+                    if page.len() < 256 {
+                        break;
+                    }
+                }
+                let _ = std::fs::remove_dir_all(&net.dir);
+            }
+            println!(
+                "oracle ladder, measured {:.0} % ℓ {ell} m ({networks} networks):",
+                100.0 * frac
+            );
+            for (r, name) in rungs.iter().zip(names) {
+                r.report(name);
+            }
+            let mut sd: Vec<f64> = pinned.iter().map(|p| p.0).collect();
+            let mut err: Vec<f64> = pinned.iter().map(|p| p.1.abs()).collect();
+            sd.sort_by(f64::total_cmp);
+            err.sort_by(f64::total_cmp);
+            let rms = (pinned.iter().map(|p| (p.1 / p.0).powi(2)).sum::<f64>()
+                / pinned.len().max(1) as f64)
+                .sqrt();
+            println!(
+                "  measured plastic pipes (n {}): fit σ(ln c_S) median {:.3} p90 {:.3}; |fit − true| \
+                 ln c_S median {:.3} p90 {:.3}; rms error/σ {:.2} (generator: field σ {:.2}, pipe \
+                 scatter {:.2})",
+                pinned.len(),
+                quantile(&sd, 0.5),
+                quantile(&sd, 0.9),
+                quantile(&err, 0.5),
+                quantile(&err, 0.9),
+                rms,
+                pipewave::synth::field::UNIT_SPREAD_LN_CS,
+                pipewave::synth::field::PIPE_SCATTER_LN
+            );
+            for (k, name) in ["plastic", "metal"].iter().enumerate() {
+                let mut c = fit_chi2[k].clone();
+                c.sort_by(f64::total_cmp);
+                let over = |t: f64| {
+                    100.0 * c.iter().filter(|&&x| x > t).count() as f64 / c.len().max(1) as f64
+                };
+                println!(
+                    "  measured {name} fits: χ² of (û − u_true) in their information: median {:.2}                      p90 {:.1} (χ²₂: 1.39, 4.6); beyond 13.8: {:.1} % (χ²₂: 0.1 %), beyond 4.6: {:.1} %",
+                    quantile(&c, 0.5),
+                    quantile(&c, 0.9),
+                    over(13.8),
+                    over(4.6)
+                );
+            }
+            for h in &hypers {
+                println!(
+                    "  estimated θ: ℓ {:.0} m, B ({:.4}, {:.4}, {:.4}), T ({:.5}, {:.5})",
+                    h.ell, h.b.pp, h.b.ps, h.b.ss, h.t.pp, h.t.ss
+                );
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 fn arg<T: std::str::FromStr>(args: &[String], i: usize, default: T) -> T {
     args.get(i).and_then(|a| a.parse().ok()).unwrap_or(default)
 }
@@ -565,8 +930,15 @@ fn main() {
             arg(&args, 3, 395_001),
             arg(&args, 4, 2),
         ),
+        Some("oracle") => oracle(
+            arg(&args, 1, 5),
+            arg(&args, 2, 600),
+            arg(&args, 3, 392_001),
+            arg(&args, 4, 2),
+            args.get(5).map_or("", String::as_str),
+        ),
         Some(other) => {
-            eprintln!("unknown mode '{other}' (baseline, grid or plan)");
+            eprintln!("unknown mode '{other}' (baseline, grid, plan or oracle)");
             std::process::exit(2);
         }
     }

@@ -83,6 +83,18 @@ pub const SCREEN_TARGET_CHI2: f64 = 2.0;
 /// previous round's field, whose per-pipe scatter the screened fits no longer inflate).
 pub const SCREEN_ROUNDS: usize = 2;
 
+/// Smallest factor the screening may shrink the per-pipe scatter T by (see
+/// [`Field::robust_scatter_factor`]): a factor 1000 reaches from an inflated T of a few tenths
+/// down to a trench scatter of one per cent.
+pub const MIN_SCREEN_SCATTER_FACTOR: f64 = 1e-3;
+
+/// A direction of a fit's information counts as seen when its eigenvalue is at least this (ln
+/// units⁻²): the fit pins that direction to within a factor e, the width of the class prior.
+/// Along an unseen direction the fitted value does not scatter as its noise claims (the fit
+/// reports wherever its search stopped), so it adds nothing to the χ² and the member's χ² has
+/// one degree of freedom per seen direction.
+pub const SEEN_INFORMATION: f64 = 1.0 / (CLASS_PRIOR_SD * CLASS_PRIOR_SD);
+
 /// Standard deviation of the prior of each class's ln multiplier of B and of T: a factor 1.65
 /// either way at one sigma. It holds the multipliers near 1 where a class has few members and
 /// breaks the degeneracy between the common B, T and the multipliers.
@@ -808,6 +820,16 @@ impl HyperSource {
     }
 }
 
+/// The number of directions of `info` with an eigenvalue of at least [`SEEN_INFORMATION`].
+pub fn seen_directions(info: &Sym2) -> usize {
+    let half_trace = 0.5 * (info.pp + info.ss);
+    let root = (0.25 * (info.pp - info.ss).powi(2) + info.ps * info.ps).sqrt();
+    [half_trace + root, half_trace - root]
+        .iter()
+        .filter(|&&l| l >= SEEN_INFORMATION)
+        .count()
+}
+
 /// The fitted field: hyper-parameters, class means, and the members it conditions on.
 #[derive(Debug)]
 pub struct Field {
@@ -931,7 +953,7 @@ impl Field {
             );
             let mut screened = Vec::new();
             for _ in 0..SCREEN_ROUNDS {
-                screened = field.screen();
+                screened = field.robust_screen().0;
                 scales.information = screened.iter().map(|s| s.scale).collect();
                 let obs = field.obs;
                 let search = HyperSearch {
@@ -1045,6 +1067,91 @@ impl Field {
                 }
             })
             .collect()
+    }
+
+    /// The factor τ ≤ 1 of the per-pipe scatter T at which the members' leave-one-out χ² are
+    /// typical in their bulk: the median over the members of F_k(χ²_i) equals ½, F_k the χ²
+    /// distribution of k = the member's seen directions ([`SEEN_INFORMATION`]). A few failed fits
+    /// (a metal fit in a second basin of its misfit, ln c_P off by 1–3) inflate the marginal
+    /// likelihood's T until their own χ² looks ordinary and the screening misses them (masking);
+    /// the median is untouched by them as long as they are fewer than half, so the screening
+    /// against the field with τT sees them. τ = 1 when the bulk is not narrower than the field
+    /// says (the likelihood's T is then not inflated by outliers). Found by bisection in ln τ
+    /// (the χ² grow as T shrinks).
+    pub fn robust_scatter_factor(&self) -> f64 {
+        let dof: Vec<usize> = self
+            .obs
+            .iter()
+            .zip(&self.scales.information)
+            .map(|(o, &s)| seen_directions(&o.info.scale(s)))
+            .collect();
+        if dof.iter().all(|&k| k == 0) {
+            return 1.0;
+        }
+        let median_cdf = |tau: f64| -> f64 {
+            let field = self.with_scatter_factor(tau);
+            let mut p: Vec<f64> = (0..self.obs.len())
+                .into_par_iter()
+                .with_min_len(PASS_CHUNK)
+                .filter(|&i| dof[i] > 0)
+                .map(|i| {
+                    let o = &self.obs[i];
+                    let post = field.posterior(o.pos, o.class, Some(i));
+                    let d = [o.u[0] - post.mean[0], o.u[1] - post.mean[1]];
+                    let noise = o.noise_scaled(field.scales.information[i]);
+                    let chi2 = post
+                        .cov
+                        .add(&noise)
+                        .inverse()
+                        .map_or(0.0, |inv| inv.quad(d));
+                    1.0 - crate::stats::chi2_upper_tail(chi2, dof[i] as f64)
+                })
+                .collect();
+            p.sort_by(f64::total_cmp);
+            crate::stats::quantile(&p, 0.5).unwrap_or(0.5)
+        };
+        if median_cdf(1.0) >= 0.5 {
+            return 1.0;
+        }
+        let (mut lo, mut hi) = (MIN_SCREEN_SCATTER_FACTOR.ln(), 0.0f64);
+        if median_cdf(lo.exp()) < 0.5 {
+            return MIN_SCREEN_SCATTER_FACTOR;
+        }
+        for _ in 0..24 {
+            let mid = 0.5 * (lo + hi);
+            if median_cdf(mid.exp()) < 0.5 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        (0.5 * (lo + hi)).exp()
+    }
+
+    /// This field with its per-pipe scatter T multiplied by `tau` (class means re-estimated).
+    fn with_scatter_factor(&self, tau: f64) -> Field {
+        let hyper = Hyper {
+            t: self.hyper.t.scale(tau),
+            ..self.hyper
+        };
+        Self::with_scales(
+            self.obs.clone(),
+            self.n_classes(),
+            self.ell_bounds,
+            hyper,
+            self.source,
+            self.scales.clone(),
+        )
+    }
+
+    /// The screening against the field with its per-pipe scatter at its robust size
+    /// ([`Self::robust_scatter_factor`], [`Self::screen`]), with the factor used.
+    pub fn robust_screen(&self) -> (Vec<Screened>, f64) {
+        let tau = self.robust_scatter_factor();
+        if tau >= 1.0 {
+            return (self.screen(), 1.0);
+        }
+        (self.with_scatter_factor(tau).screen(), tau)
     }
 
     /// Number of classes.
@@ -1476,6 +1583,67 @@ mod tests {
         // The screening that set the scales is stored with the field, beyond the threshold.
         assert_eq!(field.screened.len(), 300);
         assert!(bad.iter().all(|&i| field.screened[i].chi2 > SCREEN_CHI2));
+    }
+
+    /// Masking: 30 of 300 members (about a metal fit's share of second-basin fits) seeing
+    /// only ln c_P with a claimed σ 0.05 and moved by +1.2 (24σ). Taken as Gaussian scatter
+    /// they raise T_PP to about 30/300 × 1.2² ≈ 0.15, and against that T their χ² is about
+    /// 1.44 / 0.16 ≈ 9 < 13.8: a screening against the likelihood's T misses them all. Against
+    /// the robustly scaled T (the bulk's median χ² typical) most are caught at once, and the
+    /// fitted field screens them all and keeps T_PP near the truth (0.002).
+    #[test]
+    fn masked_fits_are_screened_against_the_robust_scatter() {
+        let (t, mu) = truth();
+        let mut obs = draw(23, 300, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let bad: Vec<usize> = (0..30).map(|j| 3 + 10 * j).collect();
+        for &i in &bad {
+            obs[i].u[0] += 1.2;
+            obs[i].info = Sym2::new(400.0, 0.0, 0.0);
+        }
+        let inflated = Field::with_hyper(
+            obs.clone(),
+            2,
+            (50.0, 4243.0),
+            Hyper {
+                t: Sym2::new(0.15, 0.0, t.t.ss),
+                ..t
+            },
+            HyperSource::MarginalLikelihood,
+        );
+        let missed = inflated
+            .screen()
+            .iter()
+            .enumerate()
+            .filter(|(i, s)| bad.contains(i) && s.scale == 1.0)
+            .count();
+        assert!(
+            missed >= 25,
+            "only {missed} of 30 missed against the inflated T"
+        );
+        let (robust, tau) = inflated.robust_screen();
+        assert!(tau < 0.5, "robust factor of T {tau}");
+        let caught = bad.iter().filter(|&&i| robust[i].scale < 1.0).count();
+        assert!(caught >= 20, "{caught} of 30 caught against the robust T");
+        // The fitted field: all screened, and T no longer inflated.
+        let field = Field::fit(obs, 2, (50.0, 4243.0));
+        let s = &field.scales.information;
+        let caught = bad.iter().filter(|&&i| s[i] < 0.2).count();
+        assert!(caught >= 28, "{caught} of 30 screened by the fitted field");
+        let clean_kept = (0..300)
+            .filter(|i| !bad.contains(i) && s[*i] == 1.0)
+            .count();
+        assert!(clean_kept >= 255, "{clean_kept} of 270 clean members kept");
+        assert!(field.hyper.t.pp < 0.01, "T_PP {}", field.hyper.t.pp);
+    }
+
+    /// One degree of freedom per direction the fit pins to within the class prior's width.
+    #[test]
+    fn seen_directions_count_informative_eigenvalues() {
+        assert_eq!(seen_directions(&Sym2::new(2500.0, 500.0, 900.0)), 2);
+        assert_eq!(seen_directions(&Sym2::new(400.0, 0.0, 0.0)), 1);
+        // Rank one along (1, 1)/√2 with eigenvalue 200: one direction.
+        assert_eq!(seen_directions(&Sym2::new(100.0, 100.0, 100.0)), 1);
+        assert_eq!(seen_directions(&Sym2::new(0.5, 0.0, 0.2)), 0);
     }
 
     /// Class multipliers: a class whose field spread is 4× the other's (in variance) gets a
