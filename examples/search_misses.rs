@@ -210,6 +210,11 @@ fn main() {
             swept.iter().map(|(_, s)| s.1).collect(),
             swept.iter().map(|(_, s)| s.2).collect(),
         );
+        let mut stages = StageStatistics::default();
+        for (_, s) in &swept {
+            stages.observe(&s.3);
+        }
+        print!("  the sweep's {stages}");
         let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
         let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
         println!(

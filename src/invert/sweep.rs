@@ -1,15 +1,28 @@
 //! A prototype global stage in the coordinates the data determine (not the default; selected by
-//! [`GlobalStage::SpeedSweep`]): a deterministic sweep over the soil's c_P, with the intervals
-//! between the measured phase speeds sampled apart, then a polish of the best few.
+//! [`GlobalStage::SpeedSweep`]): a deterministic grid over (ln c_P, r = c_S/c_P, ξ), dense
+//! where the misfit surface falls into pieces, then Levenberg–Marquardt from the grid's best
+//! minima, from the best node of each of the best gaps with c_P held, and from both ends of
+//! the best's valley.
 //!
 //! χ² jumps where c_P crosses a model phase speed (the cliffs of P44), so at a fixed c_P the
-//! misfit is smooth in (r = c_S/c_P, ξ) but across c_P it falls into pieces. The sweep takes
-//! ln c_P every [`SWEEP_LN_CP_STEP`] over the image of the search box (P51, [`SpeedBox`]), plus
-//! ⅛, ½ and ⅞ of each gap between consecutive measured phase speeds and 3 % outside their
-//! range; at each value of ln c_P the best of a small grid in (r, ξ), [`SWEEP_R_POINTS`] by
-//! [`SWEEP_XI`], on the search's lower-precision roots. The local minima of that profile over
-//! ln c_P, best [`SWEEP_STARTS`] first, are polished by Levenberg–Marquardt in the search
-//! coordinates. Its cost is fixed by the number of measurements, not by conditional retries.
+//! misfit is smooth in (r, ξ) but across c_P it falls into pieces, narrow where the measured
+//! phase speeds lie close together. Three stages, each of a cost fixed by the number of
+//! measurements, not by conditional retries:
+//!
+//! 1. [`sweep`]: ln c_P every [`SWEEP_LN_CP_STEP`] within a factor [`SWEEP_NEAR`] of the
+//!    measured phase speeds and every [`SWEEP_LN_CP_FAR_STEP`] over the rest of the image of
+//!    the search box (P51, [`SpeedBox`]), plus [`SWEEP_GAP_FRACTIONS`] of each gap between
+//!    consecutive measured phase speeds, each phase speed times 1 ∓ [`SWEEP_CLIFF_OFFSET`] and
+//!    c_P just outside their range ([`SWEEP_OUTSIDE`]); by [`SWEEP_R_POINTS`] values of r and
+//!    [`SWEEP_XI`], rated on the search's lower-precision roots. The grid's [`SWEEP_STARTS`]
+//!    best local minima (below all of their up to 26 neighbours) are polished in the search
+//!    coordinates.
+//! 2. [`gaps`]: in each gap between measured phase speeds (and just outside their range) the
+//!    best grid node; from the [`SWEEP_GAPS`] best, LM in (r, ξ) with c_P held, then the full
+//!    polish. Within a piece the misfit changes little along c_P, while r and ξ set it.
+//! 3. [`valley_ends`]: at the best optimum's c_P, LM in (r, ξ) from the corners (r_max,
+//!    ξ_min) and (r_min, ξ_max), then the full polish: the two ends of a valley along which
+//!    ξ trades off against c_S.
 
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, Objective};
 
@@ -142,34 +155,35 @@ impl HeldCp<'_, '_> {
     fn x(&self, y: &[f64]) -> Option<Vec<f64>> {
         coordinates(self.problem, &self.region, self.l, y[0], y[1])
     }
+}
 
-    /// The range of r inside the search box at this c_P: E_m = ρ_m c_P² r²(3 − 4r²)/(1 − r²)
-    /// (P63–P64) grows with r, so the box's E_m range is an interval of r, found by bisection.
-    fn r_range(&self) -> Option<(f64, f64)> {
-        let (lo, hi) = self.region.r_range();
-        let e = |r: f64| soil_of(self.l, r, self.region.rho).map_or(f64::NAN, |s| s.0);
-        let (e_min, e_max) = self.region.e;
-        if e(hi) < e_min || e(lo) > e_max {
-            return None;
-        }
-        let root = |target: f64| {
-            let (mut a, mut b) = (lo, hi);
-            for _ in 0..60 {
-                let m = 0.5 * (a + b);
-                if e(m) < target {
-                    a = m;
-                } else {
-                    b = m;
-                }
-            }
-            b
-        };
-        let a = if e(lo) >= e_min { lo } else { root(e_min) };
-        let b = if e(hi) <= e_max { hi } else { root(e_max) };
-        // Just inside, so that the soil at either end lies in the box.
-        let shrink = 1e-9 * (b - a);
-        (b > a).then_some((a + shrink, b - shrink))
+/// The range of r inside the search box at c_P = exp(`l`): E_m = ρ_m c_P² r²(3 − 4r²)/(1 − r²)
+/// (P63–P64) grows with r, so the box's E_m range is an interval of r, found by bisection;
+/// `None` when no soil of that c_P lies in the box.
+fn r_range_at(region: &SpeedBox, l: f64) -> Option<(f64, f64)> {
+    let (lo, hi) = region.r_range();
+    let e = |r: f64| soil_of(l, r, region.rho).map_or(f64::NAN, |s| s.0);
+    let (e_min, e_max) = region.e;
+    if e(hi) < e_min || e(lo) > e_max {
+        return None;
     }
+    let root = |target: f64| {
+        let (mut a, mut b) = (lo, hi);
+        for _ in 0..60 {
+            let m = 0.5 * (a + b);
+            if e(m) < target {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        b
+    };
+    let a = if e(lo) >= e_min { lo } else { root(e_min) };
+    let b = if e(hi) <= e_max { hi } else { root(e_max) };
+    // Just inside, so that the soil at either end lies in the box.
+    let shrink = 1e-9 * (b - a);
+    (b > a).then_some((a + shrink, b - shrink))
 }
 
 impl LeastSquares for HeldCp<'_, '_> {
@@ -338,7 +352,7 @@ fn held_then_polished(
 ) -> Option<(Optimum, bool)> {
     let s = &problem.specs;
     let held = HeldCp { problem, region, l };
-    let (a, b) = held.r_range()?;
+    let (a, b) = r_range_at(&region, l)?;
     let yb = Bounds::new(vec![a, s[2].lower], vec![b, s[2].upper]).ok()?;
     let lm = LevenbergMarquardt::new()
         .max_iterations(SWEEP_HELD_ITERATIONS)
@@ -414,4 +428,64 @@ pub(super) fn valley_ends(
         .into_iter()
         .filter_map(|y0| held_then_polished(problem, bounds, region, l, y0))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::invert::problem::E_BOUNDS;
+    use crate::physics::inputs::MAX_SOIL_POISSON;
+
+    /// The samples hold both sides of each measured phase speed, the gaps' fractions and the
+    /// soils just outside the range; none lie closer than [`SWEEP_MERGE`]; the fine spacing
+    /// holds near the range and the coarse one far from it.
+    #[test]
+    fn the_samples_are_dense_at_the_cliffs_and_sparse_far_from_them() {
+        let v = [400.0, 500.0, 502.0];
+        let (l_lo, l_hi) = (-0.32, 10.3);
+        let s = ln_cp_samples(&v, l_lo, l_hi);
+        assert!(s.windows(2).all(|w| w[1] - w[0] >= SWEEP_MERGE), "{s:?}");
+        let has = |c: f64| s.iter().any(|l| (l - c.ln()).abs() < SWEEP_MERGE);
+        for c in v {
+            assert!(has(c * (1.0 - SWEEP_CLIFF_OFFSET)) && has(c * (1.0 + SWEEP_CLIFF_OFFSET)));
+        }
+        assert!(has(450.0) && has(412.5) && has(487.5));
+        assert!(has(400.0 * 0.97) && has(502.0 * 1.03) && has(502.0 * 1.01));
+        // 200 to 1,004 m/s is near; 10 m/s and 20,000 m/s are far.
+        let spacing = |c: f64| {
+            let l = c.ln();
+            let above = s.iter().copied().find(|&x| x > l).unwrap();
+            let below = s.iter().copied().rev().find(|&x| x <= l).unwrap();
+            above - below
+        };
+        assert!(spacing(300.0) <= SWEEP_LN_CP_STEP + 1e-12);
+        assert!(spacing(10.0) > SWEEP_LN_CP_STEP + 1e-12);
+        assert!(spacing(20_000.0) > SWEEP_LN_CP_STEP + 1e-12);
+        assert!(s[0] >= l_lo && *s.last().unwrap() <= l_hi);
+    }
+
+    /// At a held c_P the range of r gives soils inside the box at both ends, and the box's
+    /// E_m limits where it cuts r's range; a c_P no soil of the box has gives none.
+    #[test]
+    fn the_range_of_r_at_a_held_c_p_is_the_box_s() {
+        let rho = 1_900.0;
+        let b = SpeedBox::new(E_BOUNDS, (0.0, MAX_SOIL_POISSON), rho);
+        let (r_lo, r_hi) = b.r_range();
+        // c_P 5 m/s: E_m at ν_m = 0 is 4.75e4 Pa, in the box; at r_lo it is 284 Pa, below
+        // E_min.
+        let l = 5f64.ln();
+        let (a, c) = r_range_at(&b, l).expect("a range");
+        assert!(a > r_lo && (c - r_hi).abs() < 1e-6, "{a} {c}");
+        let (e_a, _) = soil_of(l, a, rho).unwrap();
+        assert!((e_a / E_BOUNDS.0 - 1.0).abs() < 1e-6, "{e_a}");
+        assert!(b.contains(l, a) && b.contains(l, c));
+        // c_P 20,000 m/s: E_m at ν_m = 0 is 7.6e11 Pa, above E_max; at r_lo 4.6e9 Pa, inside.
+        let l = 20_000f64.ln();
+        let (a, c) = r_range_at(&b, l).expect("a range");
+        assert!((a - r_lo).abs() < 1e-6 && c < r_hi, "{a} {c}");
+        let (e_c, _) = soil_of(l, c, rho).unwrap();
+        assert!((e_c / E_BOUNDS.1 - 1.0).abs() < 1e-6, "{e_c}");
+        assert!(r_range_at(&b, 0.1f64.ln()).is_none());
+        assert!(r_range_at(&b, 50_000f64.ln()).is_none());
+    }
 }
