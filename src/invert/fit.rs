@@ -641,11 +641,7 @@ fn search(
         let found = sweep::gaps(problem, bounds, &grid);
         stage(Stage::SpeedGaps, found, before, &mut optima);
         let before = (problem.evaluations(), best_cost(&optima));
-        let best = optima
-            .iter()
-            .min_by(|a, b| a.cost.total_cmp(&b.cost))
-            .cloned();
-        let ends = best.map_or_else(Vec::new, |b| sweep::valley_ends(problem, bounds, &b));
+        let ends = sweep::valley_ends(problem, bounds, &optima);
         stage(Stage::SpeedValleyEnds, ends, before, &mut optima);
     }
     for r in (0..restarts).filter(|_| !sweeping) {

@@ -20,9 +20,9 @@
 //! 2. [`gaps`]: in each gap between measured phase speeds (and just outside their range) the
 //!    best grid node; from the [`SWEEP_GAPS`] best, LM in (r, ξ) with c_P held, then the full
 //!    polish. Within a piece the misfit changes little along c_P, while r and ξ set it.
-//! 3. [`valley_ends`]: at the best optimum's c_P, LM in (r, ξ) from the corners (r_max,
-//!    ξ_min) and (r_min, ξ_max), then the full polish: the two ends of a valley along which
-//!    ξ trades off against c_S.
+//! 3. [`valley_ends`]: at the c_P of each of the [`SWEEP_VALLEYS`] best optima, LM in (r, ξ)
+//!    from the corners (r_max, ξ_min) and (r_min, ξ_max), then the full polish: the two ends
+//!    of a valley along which ξ trades off against c_S.
 
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, Objective};
 
@@ -64,7 +64,9 @@ pub const SWEEP_OUTSIDE: [f64; 2] = [0.01, 0.03];
 /// Local minima of the grid polished.
 pub const SWEEP_STARTS: usize = 6;
 /// Gaps between the measured phase speeds whose best grid node starts a polish with c_P held.
-pub const SWEEP_GAPS: usize = 4;
+pub const SWEEP_GAPS: usize = 9;
+/// Optima of distinct c_P whose valleys' ends [`valley_ends`] polishes.
+pub const SWEEP_VALLEYS: usize = 2;
 /// Relative spacing below which two sampled values of c_P count as one.
 pub const SWEEP_MERGE: f64 = 2e-3;
 /// Levenberg–Marquardt iterations with c_P held, from the best grid point of each gap.
@@ -410,23 +412,34 @@ pub(super) fn gaps(problem: &Problem<'_>, bounds: &Bounds, grid: &Grid) -> Vec<(
         .collect()
 }
 
-/// The ends of the best optimum's valley in (r, ξ): where the data fix c_P and nearly only a
-/// product of ξ and c_S (a stiff pipe), the valley runs from small r at large ξ to large r at
-/// small ξ, and a polish creeps along it and stops short of the end that holds the optimum.
-/// With c_P held at the best's, Levenberg–Marquardt from both corners, (r_max, ξ_min) and
-/// (r_min, ξ_max), then the full polish.
+/// The ends of the valleys in (r, ξ) of the [`SWEEP_VALLEYS`] best optima of distinct c_P:
+/// where the data fix c_P and nearly only a product of ξ and c_S (a stiff pipe), the valley
+/// runs from small r at large ξ to large r at small ξ, and a polish creeps along it and stops
+/// short of the end that holds the optimum. With c_P held at each optimum's, Levenberg–Marquardt
+/// from both corners, (r_max, ξ_min) and (r_min, ξ_max), then the full polish.
 pub(super) fn valley_ends(
     problem: &Problem<'_>,
     bounds: &Bounds,
-    best: &Optimum,
+    optima: &[Optimum],
 ) -> Vec<(Optimum, bool)> {
     let s = &problem.specs;
     let region = region_of(problem);
-    let (l, _) = super::speed::speeds_of(s[0].value(best.x[0]), best.x[1], region.rho);
     let (r_lo, r_hi) = region.r_range();
-    [[r_hi, s[2].lower], [r_lo, s[2].upper]]
-        .into_iter()
-        .filter_map(|y0| held_then_polished(problem, bounds, region, l, y0))
+    let mut order: Vec<&Optimum> = optima.iter().filter(|o| o.cost.is_finite()).collect();
+    order.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let mut held: Vec<f64> = Vec::new();
+    for o in order {
+        let (l, _) = super::speed::speeds_of(s[0].value(o.x[0]), o.x[1], region.rho);
+        if held.len() < SWEEP_VALLEYS && held.iter().all(|h| (h - l).abs() > SWEEP_MERGE) {
+            held.push(l);
+        }
+    }
+    held.into_iter()
+        .flat_map(|l| {
+            [[r_hi, s[2].lower], [r_lo, s[2].upper]]
+                .into_iter()
+                .filter_map(move |y0| held_then_polished(problem, bounds, region, l, y0))
+        })
         .collect()
 }
 
