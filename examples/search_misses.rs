@@ -20,8 +20,9 @@ use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
 use pipewave::synth::bench::{bench_network, MaterialMix};
 use rayon::prelude::*;
 
-/// The sweep's fit of a segment: χ², CPU ms, evaluations and provenance.
-type Swept = (f64, f64, usize, pipewave::invert::Provenance);
+/// The sweep's fit of a segment: χ², CPU ms, evaluations, provenance and where its optimum
+/// lies in (c_P, c_S/c_P, ξ).
+type Swept = (f64, f64, usize, pipewave::invert::Provenance, String);
 
 /// One segment's figures.
 struct Row {
@@ -32,6 +33,8 @@ struct Row {
     exhaustive: Option<f64>,
     /// Where the exhaustive search's and the yardstick's optima lie, in the speed coordinates.
     places: String,
+    /// Where today's fit lies.
+    today_place: String,
     yard_evaluations: usize,
     provenance: pipewave::invert::Provenance,
     /// Today's fit: CPU ms and evaluations.
@@ -109,9 +112,13 @@ fn main() {
                         yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
                         exhaustive: ex.as_ref().map(|e| e.misfit),
                         places: places(&seg.data, ex.as_ref(), yard.as_ref().ok()),
+                        today_place: place_of(&seg.data, &fit),
                         cost: (ms, fit.evaluations),
                         provenance: fit.provenance,
-                        sweep: swept.map(|(ms, r)| (r.misfit, ms, r.evaluations, r.provenance)),
+                        sweep: swept.map(|(ms, r)| {
+                            let place = place_of(&seg.data, &r);
+                            (r.misfit, ms, r.evaluations, r.provenance, place)
+                        }),
                     }
                 })
                 .collect::<Vec<_>>()
@@ -203,6 +210,11 @@ fn main() {
             swept.iter().map(|(_, s)| s.1).collect(),
             swept.iter().map(|(_, s)| s.2).collect(),
         );
+        let mut stages = StageStatistics::default();
+        for (_, s) in &swept {
+            stages.observe(&s.3);
+        }
+        print!("  the sweep's {stages}");
         let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
         let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
         println!(
@@ -220,11 +232,34 @@ fn main() {
         );
         for (r, s) in misses {
             println!(
-                "    {} ({:?}) sweep {:.4} today {:.4} yardstick {:.4}",
-                r.id, r.material, s.0, r.fit, r.yard
+                "    {} ({:?}) sweep {:.4} today {:.4} yardstick {:.4}\n{}\n      sweep:      {}\n      today:      {}",
+                r.id, r.material, s.0, r.fit, r.yard, r.places, s.4, r.today_place
             );
         }
     }
+}
+
+/// A fit's optimum in (c_P, c_S/c_P, ξ) and its model phase speeds, m/s.
+fn place_of(data: &pipewave::invert::SegmentData, f: &pipewave::invert::FitResult) -> String {
+    use pipewave::invert::speed::speeds_of;
+    let (l, r) = speeds_of(
+        f.soil_modulus().unwrap_or(f64::NAN),
+        f.soil_poisson().unwrap_or(f64::NAN),
+        data.soil_density,
+    );
+    let model: Vec<String> = data
+        .measurements
+        .iter()
+        .zip(&f.predicted)
+        .map(|(m, k)| format!("{:.1}", m.omega / k.re))
+        .collect();
+    format!(
+        "c_P {:.2} r {:.4} xi {:.3}; model phase speeds {}",
+        l.exp(),
+        r,
+        f.contact().unwrap_or(f64::NAN),
+        model.join(" ")
+    )
 }
 
 /// The exhaustive optimum and the yardstick's in (c_P, c_S/c_P, ξ), with the measured and the

@@ -612,23 +612,37 @@ fn search(
         && settings.method == Method::Default
         && sweep::applies(problem);
     if sweeping {
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
-        let found = sweep::sweep(problem, bounds);
-        let n = found.len();
-        for (o, c) in found {
-            optima.push(o);
-            capped.push(c);
-            found_by.push(Stage::SpeedSweep);
-        }
-        let stop = if n > 0 {
-            StageStop::Polished {
-                starts: n,
-                optima: n,
+        // The grid and its minima, the pieces between the cliffs, the ends of the best's
+        // valley: three stages of fixed cost, recorded apart.
+        let mut stage = |stage: Stage,
+                         found: Vec<(Optimum, bool)>,
+                         (e0, b0): (usize, f64),
+                         optima: &mut Vec<Optimum>| {
+            let n = found.len();
+            for (o, c) in found {
+                optima.push(o);
+                capped.push(c);
+                found_by.push(stage);
             }
-        } else {
-            StageStop::NoFiniteOptimum
+            let stop = if n > 0 {
+                StageStop::Polished {
+                    starts: n,
+                    optima: n,
+                }
+            } else {
+                StageStop::NoFiniteOptimum
+            };
+            stages.push(record(problem, stage, stop, e0, b0, optima));
         };
-        stages.push(record(problem, Stage::SpeedSweep, stop, e0, b0, &optima));
+        let before = (problem.evaluations(), f64::INFINITY);
+        let (grid, found) = sweep::sweep(problem, bounds);
+        stage(Stage::SpeedSweep, found, before, &mut optima);
+        let before = (problem.evaluations(), best_cost(&optima));
+        let found = sweep::gaps(problem, bounds, &grid);
+        stage(Stage::SpeedGaps, found, before, &mut optima);
+        let before = (problem.evaluations(), best_cost(&optima));
+        let ends = sweep::valley_ends(problem, bounds, &optima);
+        stage(Stage::SpeedValleyEnds, ends, before, &mut optima);
     }
     for r in (0..restarts).filter(|_| !sweeping) {
         let (e0, b0) = (problem.evaluations(), best_cost(&optima));

@@ -31,13 +31,18 @@ pub enum Stage {
     GrazingRescan,
     /// The answer's continued polish (it refines an optimum another stage found).
     ContinuedPolish,
-    /// The prototype sweep over c_P in the speed coordinates ([`super::sweep`]), polished.
+    /// The prototype sweep over c_P in the speed coordinates ([`super::sweep`]): its grid's
+    /// minima, polished.
     SpeedSweep,
+    /// The sweep's pieces between cliffs: polished with c_P held, then fully.
+    SpeedGaps,
+    /// The ends of the best's valley in (r, ξ) at its c_P, polished.
+    SpeedValleyEnds,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 10] = [
+    pub const ALL: [Stage; 12] = [
         Stage::Global,
         Stage::NestedStart,
         Stage::Contact,
@@ -48,6 +53,8 @@ impl Stage {
         Stage::GrazingRescan,
         Stage::ContinuedPolish,
         Stage::SpeedSweep,
+        Stage::SpeedGaps,
+        Stage::SpeedValleyEnds,
     ];
 
     /// Name used in reports.
@@ -63,6 +70,8 @@ impl Stage {
             Stage::GrazingRescan => "grazing rescan",
             Stage::ContinuedPolish => "continued polish",
             Stage::SpeedSweep => "speed sweep",
+            Stage::SpeedGaps => "speed gaps",
+            Stage::SpeedValleyEnds => "speed valley ends",
         }
     }
 

@@ -1,17 +1,30 @@
 //! A prototype global stage in the coordinates the data determine (not the default; selected by
-//! [`GlobalStage::SpeedSweep`]): a deterministic sweep over the soil's c_P, with the intervals
-//! between the measured phase speeds sampled apart, then a polish of the best few.
+//! [`GlobalStage::SpeedSweep`]): a deterministic grid over (ln c_P, r = c_S/c_P, ξ), dense
+//! where the misfit surface falls into pieces, then Levenberg–Marquardt from the grid's best
+//! minima, from the best node of each of the best gaps with c_P held, and from both ends of
+//! the best's valley.
 //!
 //! χ² jumps where c_P crosses a model phase speed (the cliffs of P44), so at a fixed c_P the
-//! misfit is smooth in (r = c_S/c_P, ξ) but across c_P it falls into pieces. The sweep takes
-//! ln c_P every [`SWEEP_LN_CP_STEP`] over the image of the search box (P51, [`SpeedBox`]), plus
-//! ⅛, ½ and ⅞ of each gap between consecutive measured phase speeds and 3 % outside their
-//! range; at each value of ln c_P the best of a small grid in (r, ξ), [`SWEEP_R_POINTS`] by
-//! [`SWEEP_XI`], on the search's lower-precision roots. The local minima of that profile over
-//! ln c_P, best [`SWEEP_STARTS`] first, are polished by Levenberg–Marquardt in the search
-//! coordinates. Its cost is fixed by the number of measurements, not by conditional retries.
+//! misfit is smooth in (r, ξ) but across c_P it falls into pieces, narrow where the measured
+//! phase speeds lie close together. Three stages, each of a cost fixed by the number of
+//! measurements, not by conditional retries:
+//!
+//! 1. [`sweep`]: ln c_P every [`SWEEP_LN_CP_STEP`] within a factor [`SWEEP_NEAR`] of the
+//!    measured phase speeds and every [`SWEEP_LN_CP_FAR_STEP`] over the rest of the image of
+//!    the search box (P51, [`SpeedBox`]), plus [`SWEEP_GAP_FRACTIONS`] of each gap between
+//!    consecutive measured phase speeds, each phase speed times 1 ∓ [`SWEEP_CLIFF_OFFSET`] and
+//!    c_P just outside their range ([`SWEEP_OUTSIDE`]); by [`SWEEP_R_POINTS`] values of r and
+//!    [`SWEEP_XI`], rated on the search's lower-precision roots. The grid's [`SWEEP_STARTS`]
+//!    best local minima (below all of their up to 26 neighbours) are polished in the search
+//!    coordinates.
+//! 2. [`gaps`]: in each gap between measured phase speeds (and just outside their range) the
+//!    best grid node; from the [`SWEEP_GAPS`] best, LM in (r, ξ) with c_P held, then the full
+//!    polish. Within a piece the misfit changes little along c_P, while r and ξ set it.
+//! 3. [`valley_ends`]: at the c_P of each of the [`SWEEP_VALLEYS`] best optima, LM in (r, ξ)
+//!    from the corners (r_max, ξ_min) and (r_min, ξ_max), then the full polish: the two ends
+//!    of a valley along which ξ trades off against c_S.
 
-use crate::optimize::{Bounds, Objective};
+use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, Objective};
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem, Scale};
@@ -28,16 +41,38 @@ pub enum GlobalStage {
     SpeedSweep,
 }
 
-/// Spacing of the sweep in ln c_P (22 % in c_P).
+/// Spacing of the sweep in ln c_P (22 % in c_P) within [`SWEEP_NEAR`] of the measured phase
+/// speeds' range.
 pub const SWEEP_LN_CP_STEP: f64 = 0.2;
+/// Spacing of the sweep in ln c_P farther out, where no cliff lies (P44) and the misfit
+/// changes slowly with c_P.
+pub const SWEEP_LN_CP_FAR_STEP: f64 = 0.5;
+/// The factor around the measured phase speeds' range within which the sweep takes its finer
+/// spacing.
+pub const SWEEP_NEAR: f64 = 2.0;
 /// Values of r = c_S/c_P at each c_P, evenly from r(ν_m = 0.499) to 1/√2.
 pub const SWEEP_R_POINTS: usize = 6;
 /// Values of ξ at each c_P.
 pub const SWEEP_XI: [f64; 3] = [0.0, 0.5, 1.0];
-/// Local minima of the profile over ln c_P polished.
-pub const SWEEP_STARTS: usize = 6;
+/// Fractions of each gap between consecutive measured phase speeds the sweep samples.
+pub const SWEEP_GAP_FRACTIONS: [f64; 3] = [0.125, 0.5, 0.875];
+/// c_P just beside each measured phase speed, both sides (relative): the pieces next to a
+/// cliff of P44.
+pub const SWEEP_CLIFF_OFFSET: f64 = 0.004;
 /// How far outside the range of the measured phase speeds the sweep also samples c_P.
-pub const SWEEP_OUTSIDE: f64 = 0.03;
+pub const SWEEP_OUTSIDE: [f64; 2] = [0.01, 0.03];
+/// Local minima of the grid polished.
+pub const SWEEP_STARTS: usize = 6;
+/// Gaps between the measured phase speeds whose best grid node starts a polish with c_P held.
+pub const SWEEP_GAPS: usize = 9;
+/// Optima of distinct c_P whose valleys' ends [`valley_ends`] polishes.
+pub const SWEEP_VALLEYS: usize = 2;
+/// Relative spacing below which two sampled values of c_P count as one.
+pub const SWEEP_MERGE: f64 = 2e-3;
+/// Levenberg–Marquardt iterations with c_P held, from the best grid point of each gap.
+pub const SWEEP_HELD_ITERATIONS: usize = 20;
+/// Relative tolerance of the held polish.
+pub const SWEEP_HELD_RTOL: f64 = 1e-4;
 
 /// Whether the sweep can run on this problem: log10 E_m, ν_m and ξ only.
 pub(super) fn applies(problem: &Problem<'_>) -> bool {
@@ -47,14 +82,219 @@ pub(super) fn applies(problem: &Problem<'_>) -> bool {
         && problem.specs[0].scale == Scale::Log10
 }
 
-/// The sweep's polished optima, with whether each polish was capped.
-pub(super) fn sweep(problem: &Problem<'_>, bounds: &Bounds) -> Vec<(Optimum, bool)> {
+/// The values of ln c_P the sweep samples, ascending, inside [`l_lo`, `l_hi`]: every
+/// [`SWEEP_LN_CP_STEP`] within a factor [`SWEEP_NEAR`] of the range of the sorted measured
+/// phase speeds `v`, every [`SWEEP_LN_CP_FAR_STEP`] beyond; the gaps' fractions; each phase
+/// speed's two sides; and c_P just outside their range.
+fn ln_cp_samples(v: &[f64], l_lo: f64, l_hi: f64) -> Vec<f64> {
+    let (near_lo, near_hi) = match (v.first(), v.last()) {
+        (Some(lo), Some(hi)) => ((lo / SWEEP_NEAR).ln(), (hi * SWEEP_NEAR).ln()),
+        _ => (l_hi, l_hi),
+    };
+    let mut ln_cp = Vec::new();
+    let mut l = l_lo;
+    while l <= l_hi {
+        ln_cp.push(l);
+        let near = (near_lo..near_hi).contains(&l);
+        l += if near {
+            SWEEP_LN_CP_STEP
+        } else {
+            SWEEP_LN_CP_FAR_STEP
+        };
+    }
+    for w in v.windows(2) {
+        ln_cp.extend(SWEEP_GAP_FRACTIONS.map(|f| (w[0] + f * (w[1] - w[0])).ln()));
+    }
+    for &c in v {
+        ln_cp.extend([
+            (c * (1.0 - SWEEP_CLIFF_OFFSET)).ln(),
+            (c * (1.0 + SWEEP_CLIFF_OFFSET)).ln(),
+        ]);
+    }
+    if let (Some(lo), Some(hi)) = (v.first(), v.last()) {
+        for o in SWEEP_OUTSIDE {
+            ln_cp.push((lo * (1.0 - o)).ln());
+            ln_cp.push((hi * (1.0 + o)).ln());
+        }
+    }
+    ln_cp.retain(|l| (l_lo..=l_hi).contains(l));
+    ln_cp.sort_by(f64::total_cmp);
+    ln_cp.dedup_by(|b, a| *b - *a < SWEEP_MERGE);
+    ln_cp
+}
+
+/// The search coordinates (log10 E_m, ν_m, ξ) of the soil (ln c_P, r) at contact ξ, `None`
+/// outside the search box.
+fn coordinates(
+    problem: &Problem<'_>,
+    region: &SpeedBox,
+    l: f64,
+    r: f64,
+    xi: f64,
+) -> Option<Vec<f64>> {
     let s = &problem.specs;
-    let region = SpeedBox::new(
+    if !region.contains(l, r) {
+        return None;
+    }
+    let (e, nu) = soil_of(l, r, region.rho)?;
+    Some(vec![
+        s[0].coordinate(e).clamp(s[0].lower, s[0].upper),
+        nu.clamp(s[1].lower, s[1].upper),
+        xi.clamp(s[2].lower, s[2].upper),
+    ])
+}
+
+/// The problem with the soil's c_P held at exp(`l`): parameters (r, ξ). Within one piece of
+/// the misfit surface (between two cliffs of P44) the misfit changes little along c_P, while
+/// r and ξ, which move the model phase speeds, set it.
+struct HeldCp<'q, 'a> {
+    problem: &'q Problem<'a>,
+    region: SpeedBox,
+    l: f64,
+}
+
+impl HeldCp<'_, '_> {
+    fn x(&self, y: &[f64]) -> Option<Vec<f64>> {
+        coordinates(self.problem, &self.region, self.l, y[0], y[1])
+    }
+}
+
+/// The range of r inside the search box at c_P = exp(`l`): E_m = ρ_m c_P² r²(3 − 4r²)/(1 − r²)
+/// (P63–P64) grows with r, so the box's E_m range is an interval of r, found by bisection;
+/// `None` when no soil of that c_P lies in the box.
+fn r_range_at(region: &SpeedBox, l: f64) -> Option<(f64, f64)> {
+    let (lo, hi) = region.r_range();
+    let e = |r: f64| soil_of(l, r, region.rho).map_or(f64::NAN, |s| s.0);
+    let (e_min, e_max) = region.e;
+    if e(hi) < e_min || e(lo) > e_max {
+        return None;
+    }
+    let root = |target: f64| {
+        let (mut a, mut b) = (lo, hi);
+        for _ in 0..60 {
+            let m = 0.5 * (a + b);
+            if e(m) < target {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        b
+    };
+    let a = if e(lo) >= e_min { lo } else { root(e_min) };
+    let b = if e(hi) <= e_max { hi } else { root(e_max) };
+    // Just inside, so that the soil at either end lies in the box.
+    let shrink = 1e-9 * (b - a);
+    (b > a).then_some((a + shrink, b - shrink))
+}
+
+impl LeastSquares for HeldCp<'_, '_> {
+    fn n_params(&self) -> usize {
+        2
+    }
+    fn n_residuals(&self) -> usize {
+        self.problem.n_residuals()
+    }
+    fn residuals(&self, y: &[f64], out: &mut [f64]) -> bool {
+        self.x(y)
+            .is_some_and(|x| LeastSquares::residuals(self.problem, &x, out))
+    }
+    fn residuals_near(&self, base: &[f64], y: &[f64], out: &mut [f64]) -> bool {
+        match (self.x(base), self.x(y)) {
+            (Some(b), Some(x)) => self.problem.residuals_near(&b, &x, out),
+            _ => false,
+        }
+    }
+    fn near_at(&self, base: &[f64]) -> bool {
+        self.x(base).is_some_and(|b| self.problem.near_at(&b))
+    }
+}
+
+/// The region of the search box in (ln c_P, r) for this problem.
+fn region_of(problem: &Problem<'_>) -> SpeedBox {
+    let s = &problem.specs;
+    SpeedBox::new(
         (s[0].value(s[0].lower), s[0].value(s[0].upper)),
         (s[1].lower, s[1].upper),
         problem.data.soil_density,
-    );
+    )
+}
+
+/// The sweep's grid in (ln c_P, r, ξ) and its misfits (+∞ outside the box or without a root).
+pub(super) struct Grid {
+    region: SpeedBox,
+    /// The sorted distinct measured phase speeds, m/s.
+    v: Vec<f64>,
+    ln_cp: Vec<f64>,
+    rs: Vec<f64>,
+    f: Vec<f64>,
+}
+
+impl Grid {
+    fn index(&self, c: usize, i: usize, k: usize) -> usize {
+        (c * self.rs.len() + i) * SWEEP_XI.len() + k
+    }
+
+    fn value(&self, (c, i, k): (usize, usize, usize)) -> f64 {
+        self.f[self.index(c, i, k)]
+    }
+
+    /// Every grid node, as (ln c_P index, r index, ξ index).
+    fn nodes(&self) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        let (nr, nx) = (self.rs.len(), SWEEP_XI.len());
+        (0..self.ln_cp.len() * nr * nx).map(move |n| (n / (nr * nx), (n / nx) % nr, n % nx))
+    }
+
+    /// The search coordinates of a node, inside `bounds`.
+    fn point(
+        &self,
+        problem: &Problem<'_>,
+        bounds: &Bounds,
+        (c, i, k): (usize, usize, usize),
+    ) -> Option<Vec<f64>> {
+        coordinates(
+            problem,
+            &self.region,
+            self.ln_cp[c],
+            self.rs[i],
+            SWEEP_XI[k],
+        )
+        .map(|mut x| {
+            bounds.clamp(&mut x);
+            x
+        })
+    }
+
+    /// The local minima of the grid (no lower value among the up to 26 neighbours), best
+    /// first.
+    fn minima(&self) -> Vec<(usize, usize, usize)> {
+        let dims = [self.ln_cp.len(), self.rs.len(), SWEEP_XI.len()];
+        let mut minima: Vec<(usize, usize, usize)> = self
+            .nodes()
+            .filter(|&(c, i, k)| {
+                let f = self.value((c, i, k));
+                f.is_finite()
+                    && !(0..27).any(|d: i64| {
+                        let n = [
+                            c as i64 + d / 9 - 1,
+                            i as i64 + (d / 3) % 3 - 1,
+                            k as i64 + d % 3 - 1,
+                        ];
+                        n.iter().zip(dims).all(|(&a, d)| a >= 0 && a < d as i64)
+                            && self.value((n[0] as usize, n[1] as usize, n[2] as usize)) < f
+                    })
+            })
+            .collect();
+        minima.sort_by(|&a, &b| self.value(a).total_cmp(&self.value(b)));
+        minima
+    }
+}
+
+/// The grid of the sweep: ln c_P from [`ln_cp_samples`], r evenly ([`SWEEP_R_POINTS`]), ξ at
+/// [`SWEEP_XI`], each rated on the search's lower-precision roots; and the polish of its best
+/// [`SWEEP_STARTS`] local minima. `None` when the measurements give no phase speed.
+pub(super) fn sweep(problem: &Problem<'_>, bounds: &Bounds) -> (Grid, Vec<(Optimum, bool)>) {
+    let region = region_of(problem);
     let (l_lo, l_hi) = region.ln_cp_range();
     let (r_lo, r_hi) = region.r_range();
     let mut v: Vec<f64> = problem
@@ -62,68 +302,203 @@ pub(super) fn sweep(problem: &Problem<'_>, bounds: &Bounds) -> Vec<(Optimum, boo
         .measurements
         .iter()
         .map(|m| m.phase_speed())
+        .filter(|c| c.is_finite() && *c > 0.0)
         .collect();
     v.sort_by(f64::total_cmp);
     v.dedup();
-    let steps = ((l_hi - l_lo) / SWEEP_LN_CP_STEP).floor() as usize;
-    let mut ln_cp: Vec<f64> = (0..=steps)
-        .map(|i| l_lo + SWEEP_LN_CP_STEP * i as f64)
+    let ln_cp = ln_cp_samples(&v, l_lo, l_hi);
+    let rs: Vec<f64> = (0..SWEEP_R_POINTS)
+        .map(|i| r_lo + (r_hi - r_lo) * i as f64 / (SWEEP_R_POINTS - 1) as f64)
         .collect();
-    for w in v.windows(2) {
-        ln_cp.extend([0.125, 0.5, 0.875].map(|f| (w[0] + f * (w[1] - w[0])).ln()));
-    }
-    if let (Some(lo), Some(hi)) = (v.first(), v.last()) {
-        ln_cp.push((lo * (1.0 - SWEEP_OUTSIDE)).ln());
-        ln_cp.push((hi * (1.0 + SWEEP_OUTSIDE)).ln());
-    }
-    ln_cp.retain(|l| (l_lo..=l_hi).contains(l));
-    ln_cp.sort_by(f64::total_cmp);
-    ln_cp.dedup();
-    // The profile: at each ln c_P the best point of the (r, ξ) grid inside the box.
-    let profile: Vec<Option<(f64, Vec<f64>)>> = ln_cp
-        .iter()
-        .map(|&l| {
-            let mut best: Option<(f64, Vec<f64>)> = None;
-            for i in 0..SWEEP_R_POINTS {
-                let r = r_lo + (r_hi - r_lo) * i as f64 / (SWEEP_R_POINTS - 1) as f64;
-                if !region.contains(l, r) {
-                    continue;
-                }
-                let Some((e, nu)) = soil_of(l, r, region.rho) else {
-                    continue;
-                };
-                for xi in SWEEP_XI {
-                    let mut x = vec![
-                        e.log10().clamp(s[0].lower, s[0].upper),
-                        nu.clamp(s[1].lower, s[1].upper),
-                        xi.clamp(s[2].lower, s[2].upper),
-                    ];
-                    bounds.clamp(&mut x);
-                    let f = problem.search_value(&x);
-                    if f.is_finite() && best.as_ref().is_none_or(|(b, _)| f < *b) {
-                        best = Some((f, x));
-                    }
-                }
+    let mut grid = Grid {
+        region,
+        v,
+        f: vec![f64::INFINITY; ln_cp.len() * rs.len() * SWEEP_XI.len()],
+        ln_cp,
+        rs,
+    };
+    let nodes: Vec<_> = grid.nodes().collect();
+    for node in nodes {
+        if let Some(x) = grid.point(problem, bounds, node) {
+            let f = problem.search_value(&x);
+            if f.is_finite() {
+                let n = grid.index(node.0, node.1, node.2);
+                grid.f[n] = f;
             }
-            best
-        })
-        .collect();
-    let value = |i: usize| profile[i].as_ref().map_or(f64::INFINITY, |p| p.0);
-    let mut minima: Vec<usize> = (0..profile.len())
-        .filter(|&i| {
-            let f = value(i);
-            f.is_finite()
-                && (i == 0 || f <= value(i - 1))
-                && (i + 1 == profile.len() || f < value(i + 1))
-        })
-        .collect();
-    minima.sort_by(|&a, &b| value(a).total_cmp(&value(b)));
+        }
+    }
+    let mut minima = grid.minima();
     minima.truncate(SWEEP_STARTS);
-    minima
+    let out = minima
         .into_iter()
-        .filter_map(|i| {
-            let (_, x) = profile[i].as_ref()?;
-            polish(problem, x, bounds, POLISH_ITERATIONS)
+        .filter_map(|n| {
+            polish(
+                problem,
+                &grid.point(problem, bounds, n)?,
+                bounds,
+                POLISH_ITERATIONS,
+            )
+        })
+        .collect();
+    (grid, out)
+}
+
+/// Levenberg–Marquardt with c_P held at exp(`l`) from (r, ξ) = `y0`, then the full polish;
+/// `None` where the box holds no soil of that c_P or the fit gives no finite misfit.
+fn held_then_polished(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    region: SpeedBox,
+    l: f64,
+    y0: [f64; 2],
+) -> Option<(Optimum, bool)> {
+    let s = &problem.specs;
+    let held = HeldCp { problem, region, l };
+    let (a, b) = r_range_at(&region, l)?;
+    let yb = Bounds::new(vec![a, s[2].lower], vec![b, s[2].upper]).ok()?;
+    let lm = LevenbergMarquardt::new()
+        .max_iterations(SWEEP_HELD_ITERATIONS)
+        .and_then(|l| l.ftol(SWEEP_HELD_RTOL))
+        .and_then(|l| l.xtol(SWEEP_HELD_RTOL))
+        .map(|l| l.final_jacobian(false))
+        .ok()?;
+    let mut y = y0.to_vec();
+    yb.clamp(&mut y);
+    let r = lm.minimize(&held, &y, Some(&yb)).ok()?;
+    let mut x = held.x(&r.x).filter(|_| r.cost.is_finite())?;
+    bounds.clamp(&mut x);
+    Some(
+        polish(problem, &x, bounds, POLISH_ITERATIONS)
+            .unwrap_or((Optimum { x, cost: r.cost }, false)),
+    )
+}
+
+/// The pieces between the cliffs (P44): in each gap between consecutive measured phase speeds
+/// and just outside their range, the grid's best node; at the [`SWEEP_GAPS`] best of these,
+/// r and ξ moved to the bottom of that piece's valley with c_P held, then polished. A polish
+/// from the grid node itself often leaves a narrow piece downhill.
+pub(super) fn gaps(problem: &Problem<'_>, bounds: &Bounds, grid: &Grid) -> Vec<(Optimum, bool)> {
+    let (Some(&lo), Some(&hi)) = (grid.v.first(), grid.v.last()) else {
+        return Vec::new();
+    };
+    let widest = SWEEP_OUTSIDE.iter().fold(0.0f64, |a, &b| a.max(b));
+    let (near_lo, near_hi) = ((lo * (1.0 - widest)).ln(), (hi * (1.0 + widest)).ln());
+    let mut best_in: Vec<Option<(usize, usize, usize)>> = vec![None; grid.v.len() + 1];
+    for node in grid.nodes() {
+        let l = grid.ln_cp[node.0];
+        let f = grid.value(node);
+        if l < near_lo - 1e-12 || l > near_hi + 1e-12 || !f.is_finite() {
+            continue;
+        }
+        let gap = grid.v.partition_point(|&p| p.ln() < l);
+        if best_in[gap].is_none_or(|b| f < grid.value(b)) {
+            best_in[gap] = Some(node);
+        }
+    }
+    let mut starts: Vec<(usize, usize, usize)> = best_in.into_iter().flatten().collect();
+    starts.sort_by(|&a, &b| grid.value(a).total_cmp(&grid.value(b)));
+    starts.truncate(SWEEP_GAPS);
+    starts
+        .into_iter()
+        .filter_map(|(c, i, k)| {
+            held_then_polished(
+                problem,
+                bounds,
+                grid.region,
+                grid.ln_cp[c],
+                [grid.rs[i], SWEEP_XI[k]],
+            )
         })
         .collect()
+}
+
+/// The ends of the valleys in (r, ξ) of the [`SWEEP_VALLEYS`] best optima of distinct c_P:
+/// where the data fix c_P and nearly only a product of ξ and c_S (a stiff pipe), the valley
+/// runs from small r at large ξ to large r at small ξ, and a polish creeps along it and stops
+/// short of the end that holds the optimum. With c_P held at each optimum's, Levenberg–Marquardt
+/// from both corners, (r_max, ξ_min) and (r_min, ξ_max), then the full polish.
+pub(super) fn valley_ends(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    optima: &[Optimum],
+) -> Vec<(Optimum, bool)> {
+    let s = &problem.specs;
+    let region = region_of(problem);
+    let (r_lo, r_hi) = region.r_range();
+    let mut order: Vec<&Optimum> = optima.iter().filter(|o| o.cost.is_finite()).collect();
+    order.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let mut held: Vec<f64> = Vec::new();
+    for o in order {
+        let (l, _) = super::speed::speeds_of(s[0].value(o.x[0]), o.x[1], region.rho);
+        if held.len() < SWEEP_VALLEYS && held.iter().all(|h| (h - l).abs() > SWEEP_MERGE) {
+            held.push(l);
+        }
+    }
+    held.into_iter()
+        .flat_map(|l| {
+            [[r_hi, s[2].lower], [r_lo, s[2].upper]]
+                .into_iter()
+                .filter_map(move |y0| held_then_polished(problem, bounds, region, l, y0))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::invert::problem::E_BOUNDS;
+    use crate::physics::inputs::MAX_SOIL_POISSON;
+
+    /// The samples hold both sides of each measured phase speed, the gaps' fractions and the
+    /// soils just outside the range; none lie closer than [`SWEEP_MERGE`]; the fine spacing
+    /// holds near the range and the coarse one far from it.
+    #[test]
+    fn the_samples_are_dense_at_the_cliffs_and_sparse_far_from_them() {
+        let v = [400.0, 500.0, 502.0];
+        let (l_lo, l_hi) = (-0.32, 10.3);
+        let s = ln_cp_samples(&v, l_lo, l_hi);
+        assert!(s.windows(2).all(|w| w[1] - w[0] >= SWEEP_MERGE), "{s:?}");
+        let has = |c: f64| s.iter().any(|l| (l - c.ln()).abs() < SWEEP_MERGE);
+        for c in v {
+            assert!(has(c * (1.0 - SWEEP_CLIFF_OFFSET)) && has(c * (1.0 + SWEEP_CLIFF_OFFSET)));
+        }
+        assert!(has(450.0) && has(412.5) && has(487.5));
+        assert!(has(400.0 * 0.97) && has(502.0 * 1.03) && has(502.0 * 1.01));
+        // 200 to 1,004 m/s is near; 10 m/s and 20,000 m/s are far.
+        let spacing = |c: f64| {
+            let l = c.ln();
+            let above = s.iter().copied().find(|&x| x > l).unwrap();
+            let below = s.iter().copied().rev().find(|&x| x <= l).unwrap();
+            above - below
+        };
+        assert!(spacing(300.0) <= SWEEP_LN_CP_STEP + 1e-12);
+        assert!(spacing(10.0) > SWEEP_LN_CP_STEP + 1e-12);
+        assert!(spacing(20_000.0) > SWEEP_LN_CP_STEP + 1e-12);
+        assert!(s[0] >= l_lo && *s.last().unwrap() <= l_hi);
+    }
+
+    /// At a held c_P the range of r gives soils inside the box at both ends, and the box's
+    /// E_m limits where it cuts r's range; a c_P no soil of the box has gives none.
+    #[test]
+    fn the_range_of_r_at_a_held_c_p_is_the_box_s() {
+        let rho = 1_900.0;
+        let b = SpeedBox::new(E_BOUNDS, (0.0, MAX_SOIL_POISSON), rho);
+        let (r_lo, r_hi) = b.r_range();
+        // c_P 5 m/s: E_m at ν_m = 0 is 4.75e4 Pa, in the box; at r_lo it is 284 Pa, below
+        // E_min.
+        let l = 5f64.ln();
+        let (a, c) = r_range_at(&b, l).expect("a range");
+        assert!(a > r_lo && (c - r_hi).abs() < 1e-6, "{a} {c}");
+        let (e_a, _) = soil_of(l, a, rho).unwrap();
+        assert!((e_a / E_BOUNDS.0 - 1.0).abs() < 1e-6, "{e_a}");
+        assert!(b.contains(l, a) && b.contains(l, c));
+        // c_P 20,000 m/s: E_m at ν_m = 0 is 7.6e11 Pa, above E_max; at r_lo 4.6e9 Pa, inside.
+        let l = 20_000f64.ln();
+        let (a, c) = r_range_at(&b, l).expect("a range");
+        assert!((a - r_lo).abs() < 1e-6 && c < r_hi, "{a} {c}");
+        let (e_c, _) = soil_of(l, c, rho).unwrap();
+        assert!((e_c / E_BOUNDS.1 - 1.0).abs() < 1e-6, "{e_c}");
+        assert!(r_range_at(&b, 0.1f64.ln()).is_none());
+        assert!(r_range_at(&b, 50_000f64.ln()).is_none());
+    }
 }
