@@ -666,6 +666,23 @@ pub fn rank_twins_with(
     };
     let sum = |e: Effect| -> f64 { rows.iter().filter_map(|r| gain(r.0, e)).sum() };
     let (ga, gb) = (sum(a) - pen_a, sum(b) - pen_b);
+    // A twin whose best common size is the end of its range has its members pinned there by
+    // the range, not by the data: one size costs it nothing and says nothing (soil damping at
+    // its largest loss factor under an iron pipe, where the soil radiates and its loss is almost
+    // invisible, mimics a lossier wall). The comparison is then not made: the member gains
+    // rank the pair.
+    let at_range_end = |e: Effect, k: usize, c: f64| {
+        let (Some(p), Some(n)) = (e.parameter(), fits.neutral(rows[0].0, e)) else {
+            return true;
+        };
+        value_at_deviation(e, n, c * COMMON_GRID[k]).is_none_or(|v| {
+            let tol = 1e-9 * p.upper.abs().max(1.0);
+            (v - p.upper).abs() <= tol || (v - p.lower).abs() <= tol
+        })
+    };
+    if (gb > ga && at_range_end(b, kb[ib], cb)) || (gb <= ga && at_range_end(a, ka[ia], ca)) {
+        return;
+    }
     let (first, second, first_gain, second_gain, first_deviation, first_penalty, second_penalty) =
         if gb > ga {
             (b, a, gb, ga, cb * COMMON_GRID[kb[ib]], pen_b, pen_a)
