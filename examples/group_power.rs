@@ -272,11 +272,11 @@ fn member(settings: &DiagnoseSettings, t: &Trial) -> (Vec<(Effect, f64)>, bool) 
     (g, own)
 }
 
+/// A member's gains, whether its own diagnosis named the hidden effect, and the diagnosis.
+type Member = (Vec<(Effect, f64)>, bool, Diagnosis);
+
 /// [`member`] with the member's diagnosis kept (for the group-level twin refit).
-fn member_diagnosed(
-    settings: &DiagnoseSettings,
-    t: &Trial,
-) -> (Vec<(Effect, f64)>, bool, Diagnosis) {
+fn member_diagnosed(settings: &DiagnoseSettings, t: &Trial) -> Member {
     let d = diagnose_segment(&t.data, None, settings);
     let own = t.hidden.is_some_and(|(h, _)| d.named == Some(h));
     (member_gains(&d, settings), own, d)
@@ -427,7 +427,7 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
                     draw_trial(&mut rng, material, hidden)
                 })
                 .collect();
-            let res: Vec<(Vec<(Effect, f64)>, bool, Diagnosis)> = trials
+            let res: Vec<Member> = trials
                 .par_iter()
                 .map(|t| member_diagnosed(&settings, t))
                 .collect();
