@@ -16,8 +16,8 @@
 //! already bent its soil parameters towards the effect, and the score captures only part of
 //! what the refit removes; summing scores then loses most of the power.
 //!
-//! Three refinements make the sum name the right effect on refitted members
-//! ([`member_gains`], [`less_shared`], [`vuong_z`]):
+//! Four refinements make the sum name the right effect on refitted members
+//! ([`member_gains`], [`less_shared`], [`vuong_z`], [`rank_twins`]):
 //!
 //! * **What every candidate removes is no evidence for any one of them.** A base fit that missed
 //!   the soil optimum (or a noise draw the base fits badly) gives every candidate the same part
@@ -34,6 +34,9 @@
 //!   non-nested extensions of the base: the members' gain differences g_A − g_B are twice their
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
 //!   one-sided 5 % ([`VUONG_Z`]).
+//! * **Detected twins are ranked by one common size** ([`rank_twins`]): the members carrying
+//!   either twin are refitted with each held at one size common to them all; the twin whose
+//!   members' gains lose less to that size goes first, unless its size is the end of its range.
 //!
 //! Correction: every candidate effect of every tested group is one test, at level
 //! [`GROUP_ALPHA`] / (effects × groups) (Bonferroni), so the chance of any false detection in a
@@ -1067,7 +1070,14 @@ mod tests {
             self.curves.get(i).map(|_| 100.0)
         }
         fn neutral(&self, _: usize, e: Effect) -> Option<f64> {
-            e.parameter().map(|p| p.neutral)
+            // A pipe's own loss factor: an iron pipe's typical 0.01.
+            e.parameter().map(|p| {
+                if e == Effect::PipeLoss {
+                    0.01
+                } else {
+                    p.neutral
+                }
+            })
         }
         fn own_deviation(&self, i: usize, e: Effect) -> Option<f64> {
             self.curves[i].get(&e).map(|c| c.1)
@@ -1137,6 +1147,47 @@ mod tests {
         rank_twins_with(&mut g, &sc, &q);
         assert_eq!(g.effect, Some(a), "{:?}", g.twins);
         assert_eq!(g.twins.as_ref().map(|c| c.first), Some(a));
+    }
+
+    #[test]
+    fn a_twin_pinned_at_its_range_end_does_not_win_by_one_common_size() {
+        // Pipe loss in 12 of 40 members at sizes spread over a factor 8 (gains 1.1·s); soil
+        // damping gains s in each, every member at 0.3, the end of its range. One size costs
+        // soil damping nothing only because the range pins it: the member gains keep pipe loss
+        // first and no comparison is reported.
+        let (sd, pl) = (Effect::SoilDamping, Effect::PipeLoss);
+        let q = Quadratic {
+            curves: (0..40)
+                .map(|i| {
+                    let s = 8.0 + i as f64;
+                    let r = 0.004 * 2f64.powf((i % 4) as f64);
+                    BTreeMap::from([(sd, (s, 0.3)), (pl, (1.1 * s, r))])
+                })
+                .collect(),
+        };
+        let sc: Vec<Vec<(Effect, f64)>> = (0..40)
+            .map(|i| {
+                let w = (Effect::AirInWater, 0.0);
+                if i < 12 {
+                    vec![(sd, q.curves[i][&sd].0), (pl, q.curves[i][&pl].0), w]
+                } else {
+                    vec![(sd, 0.0), (pl, 0.0), w]
+                }
+            })
+            .collect();
+        let members: Vec<usize> = (0..40).collect();
+        let mut g = pooled_test("CI", &members, &sc, 1);
+        assert_eq!(g.effect, Some(pl));
+        assert!(g.pooled[1].p_value < g.level, "{:?}", g.pooled);
+        rank_twins_with(&mut g, &sc, &q);
+        assert_eq!(g.effect, Some(pl));
+        assert_eq!(g.twins, None);
+        assert_eq!(value_at_deviation(sd, 0.0, 0.3), Some(0.3));
+        assert_eq!(value_at_deviation(sd, 0.0, 0.31), None);
+        assert_eq!(
+            value_at_deviation(Effect::WallThinning, 1.0, 0.2),
+            Some(0.8)
+        );
     }
 
     #[test]
