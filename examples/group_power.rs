@@ -34,9 +34,9 @@
 
 use std::collections::BTreeMap;
 
-use pipewave::diagnose::group::{member_gains, pooled_test};
+use pipewave::diagnose::group::{member_gains, pooled_test, rank_twins_with, DiagnosedMembers};
 use pipewave::diagnose::stats::sum_chibar_sf;
-use pipewave::diagnose::{diagnose_segment, DiagnoseSettings};
+use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, Diagnosis};
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::stats::normal;
@@ -268,9 +268,18 @@ fn floor_of(e: Effect, material: Material) -> Option<f64> {
 /// The members' gains of one segment's diagnosis, as `diagnose` makes them, and whether its
 /// own diagnosis named `hidden`.
 fn member(settings: &DiagnoseSettings, t: &Trial) -> (Vec<(Effect, f64)>, bool) {
+    let (g, own, _) = member_diagnosed(settings, t);
+    (g, own)
+}
+
+/// A member's gains, whether its own diagnosis named the hidden effect, and the diagnosis.
+type Member = (Vec<(Effect, f64)>, bool, Diagnosis);
+
+/// [`member`] with the member's diagnosis kept (for the group-level twin refit).
+fn member_diagnosed(settings: &DiagnoseSettings, t: &Trial) -> Member {
     let d = diagnose_segment(&t.data, None, settings);
     let own = t.hidden.is_some_and(|(h, _)| d.named == Some(h));
-    (member_gains(&d, settings), own)
+    (member_gains(&d, settings), own, d)
 }
 
 fn settings() -> DiagnoseSettings {
@@ -396,6 +405,7 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
     let mut cells: BTreeMap<(String, String), [usize; 6]> = BTreeMap::new();
     let (mut det, mut n_eff, mut fa, mut n_clean, mut in_set) = (0, 0, 0, 0, 0);
     let (mut own_hit, mut own_n) = (0, 0);
+    let mut before_det = 0;
     let mut clean_p: Vec<f64> = Vec::new();
     for s in 0..seeds {
         for (k, e) in kinds.iter().copied().enumerate() {
@@ -417,13 +427,33 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
                     draw_trial(&mut rng, material, hidden)
                 })
                 .collect();
-            let res: Vec<(Vec<(Effect, f64)>, bool)> =
-                trials.par_iter().map(|t| member(&settings, t)).collect();
+            let res: Vec<Member> = trials
+                .par_iter()
+                .map(|t| member_diagnosed(&settings, t))
+                .collect();
             let scores: Vec<_> = res.iter().map(|r| r.0.clone()).collect();
             let named = res[..n_aff].iter().filter(|r| r.1).count();
             own_hit += named;
             own_n += n_aff;
-            let g = pooled_test("g", &(0..N).collect::<Vec<_>>(), &scores, 8);
+            let mut g = pooled_test("g", &(0..N).collect::<Vec<_>>(), &scores, 8);
+            let before = g.effect;
+            let fits = DiagnosedMembers(res.iter().map(|r| (&r.2, &settings)).collect());
+            rank_twins_with(&mut g, &scores, &fits);
+            if let Some(t) = &g.twins {
+                println!(
+                    "  twins: {} {:.2} (penalty {:.2}, deviation {:.3e}) vs {} {:.2} (penalty {:.2}) over {} members; member-gain first {}",
+                    t.first.name(),
+                    t.first_gain,
+                    t.first_penalty,
+                    t.first_deviation,
+                    t.second.name(),
+                    t.second_gain,
+                    t.second_penalty,
+                    t.members,
+                    before.map(|e| e.name()).unwrap_or("none")
+                );
+            }
+            before_det += (e.is_some() && before == e) as usize;
             let rank = e.and_then(|e| g.pooled.iter().position(|p| p.effect == e));
             let key = (
                 e.map(|e| e.name()).unwrap_or("clean").to_string(),
@@ -471,6 +501,7 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
         );
     }
     clean_p.sort_by(|a, b| a.total_cmp(b));
+    println!("right effect first and significant before the twins' common-magnitude refit: {before_det}/{n_eff}");
     println!(
         "groups with an effect: detected (right effect first, p below level) {det}/{n_eff}, right effect detected or in the reported set {in_set}/{n_eff}; clean groups: false alarms {fa}/{n_clean} (smallest p {:.2e}); affected members named by their own diagnosis {own_hit}/{own_n}",
         clean_p.first().copied().unwrap_or(f64::NAN)

@@ -16,8 +16,8 @@
 //! already bent its soil parameters towards the effect, and the score captures only part of
 //! what the refit removes; summing scores then loses most of the power.
 //!
-//! Three refinements make the sum name the right effect on refitted members
-//! ([`member_gains`], [`less_shared`], [`vuong_z`]):
+//! Four refinements make the sum name the right effect on refitted members
+//! ([`member_gains`], [`less_shared`], [`vuong_z`], [`rank_twins`]):
 //!
 //! * **What every candidate removes is no evidence for any one of them.** A base fit that missed
 //!   the soil optimum (or a noise draw the base fits badly) gives every candidate the same part
@@ -34,6 +34,9 @@
 //!   non-nested extensions of the base: the members' gain differences g_A − g_B are twice their
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
 //!   one-sided 5 % ([`VUONG_Z`]).
+//! * **Detected twins are ranked by one common size** ([`rank_twins`]): the members carrying
+//!   either twin are refitted with each held at one size common to them all; the twin whose
+//!   members' gains lose less to that size goes first, unless its size is the end of its range.
 //!
 //! Correction: every candidate effect of every tested group is one test, at level
 //! [`GROUP_ALPHA`] / (effects × groups) (Bonferroni), so the chance of any false detection in a
@@ -71,6 +74,28 @@ pub const VUONG_Z: f64 = 1.644_853_626_951_472_2;
 /// pipe–fluid system): where a member's diagnosis refitted one and not the other, the other is
 /// refitted for the pooled test.
 pub const TWINS: [(Effect, Effect); 1] = [(Effect::AirInWater, Effect::WallThinning)];
+/// Pairs of effects whose members' gains can rank the wrong one first when both are detected:
+/// the compliance twins (air P60, thinning P62 in P10: both slow the wave) and the loss twins
+/// (soil damping, complex Lamé moduli of the soil, and the pipe wall's loss factor: both add
+/// attenuation rising with frequency). They are ranked by a refit of the group with one common
+/// magnitude ([`rank_twins`]).
+pub const GROUP_TWINS: [(Effect, Effect); 2] = [
+    (Effect::AirInWater, Effect::WallThinning),
+    (Effect::SoilDamping, Effect::PipeLoss),
+];
+/// Multiples of the compared members' median own deviation at which the common deviation of a
+/// twin is tried (steps of 2^¼ from ½ to 2 times it).
+pub const COMMON_GRID: [f64; 9] = [
+    0.5,
+    0.594_603_557_501_360_5,
+    std::f64::consts::FRAC_1_SQRT_2,
+    0.840_896_415_253_714_5,
+    1.0,
+    1.189_207_115_002_721,
+    std::f64::consts::SQRT_2,
+    1.681_792_830_507_429,
+    2.0,
+];
 
 /// How segments are grouped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -173,6 +198,32 @@ pub struct GroupTest {
     pub carrying: Vec<usize>,
     /// Per-test level: [`GROUP_ALPHA`] / (effects × groups).
     pub level: f64,
+    /// The group-level comparison of the detected effect with its twin, when both were
+    /// detected ([`rank_twins`]).
+    pub twins: Option<TwinComparison>,
+}
+
+/// The group-level comparison of two detected twins ([`GROUP_TWINS`]): each refitted on the
+/// members that carry either, with one magnitude common to all of them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TwinComparison {
+    /// The twin ranked first (the larger common-magnitude gain).
+    pub first: Effect,
+    /// The other twin.
+    pub second: Effect,
+    /// The group-level evidence for `first`: the sum of the compared members' own gains less
+    /// what one common size costs them ([`common_penalty`]).
+    pub first_gain: f64,
+    /// The same for `second`.
+    pub second_gain: f64,
+    /// What one common size costs `first` ([`common_penalty`]).
+    pub first_penalty: f64,
+    /// The same for `second`.
+    pub second_penalty: f64,
+    /// The common deviation of `first` from its neutral value at that minimum.
+    pub first_deviation: f64,
+    /// Members compared.
+    pub members: usize,
 }
 
 impl GroupTest {
@@ -385,6 +436,303 @@ pub fn pooled_test(
         n_refitted: 0,
         carrying,
         level,
+        twins: None,
+    }
+}
+
+/// The twin of `e` in [`GROUP_TWINS`].
+pub fn twin_of(e: Effect) -> Option<Effect> {
+    GROUP_TWINS.iter().find_map(|&(a, b)| {
+        if a == e {
+            Some(b)
+        } else if b == e {
+            Some(a)
+        } else {
+            None
+        }
+    })
+}
+
+/// The value of `e`'s parameter at deviation `delta` ≥ 0 from its neutral value `neutral`,
+/// towards the inside of its range (a thinner wall: the ratio below 1; more air, more loss: above
+/// the neutral value). `None` outside the range.
+pub fn value_at_deviation(e: Effect, neutral: f64, delta: f64) -> Option<f64> {
+    let p = e.parameter()?;
+    let v = if neutral >= p.upper {
+        neutral - delta
+    } else {
+        neutral + delta
+    };
+    (v.is_finite() && v >= p.lower && v <= p.upper).then_some(v)
+}
+
+/// The largest pooled gain at one deviation common to the members: with `chi2_base[i]` member
+/// i's base χ² and `profiles[i][k]` its χ² with the effect at the k-th common deviation,
+/// max over k of Σ_i (χ²_base,i − χ²_i,k), and that k. Under "the group carries one effect at
+/// a similar size" this is the likelihood-ratio gain of the group's model with one common
+/// parameter, as each member's gain is that of a model with its own. `None` when a profile
+/// lacks a value or there is no member.
+pub fn common_gain(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f64)> {
+    let n_grid = profiles.first()?.len();
+    if profiles
+        .iter()
+        .any(|p| p.len() != n_grid || p.iter().any(|v| !v.is_finite()))
+        || chi2_base.len() != profiles.len()
+        || chi2_base.iter().any(|c| !c.is_finite())
+    {
+        return None;
+    }
+    (0..n_grid)
+        .map(|k| {
+            let g: f64 = chi2_base.iter().zip(profiles).map(|(b, p)| b - p[k]).sum();
+            (k, g)
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
+}
+
+/// What one common size costs the members: with their profiles as in [`common_gain`], the sum
+/// of each member's best gain over the grid less the best common gain, and the common grid
+/// index. It is ≥ 0, near 0 when one size suits every member, and large when the members need
+/// different sizes. Both terms come from the same profile fits, so an optimum the profile
+/// minimisation misses costs both alike.
+pub fn common_penalty(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f64)> {
+    let (k, common) = common_gain(chi2_base, profiles)?;
+    let free: f64 = chi2_base
+        .iter()
+        .zip(profiles)
+        .map(|(b, p)| p.iter().map(|v| b - v).fold(f64::NEG_INFINITY, f64::max))
+        .sum();
+    Some((k, (free - common).max(0.0)))
+}
+
+/// What [`rank_twins_with`] needs to know of the members beyond their gains.
+pub trait MemberProfile: Sync {
+    /// Member i's base χ² (`None`: not available).
+    fn chi2_base(&self, i: usize) -> Option<f64>;
+    /// The neutral value of `e`'s parameter for member i (the pipe's own loss factor for
+    /// pipe loss).
+    fn neutral(&self, i: usize, e: Effect) -> Option<f64>;
+    /// The deviation from the neutral value of member i's own refit of `e`, if it has one.
+    fn own_deviation(&self, i: usize, e: Effect) -> Option<f64>;
+    /// Member i's χ² with `e`'s parameter held at `value`, the others refitted.
+    fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64>;
+}
+
+/// The diagnosed members of a run: member i is `fits[i]`.
+pub struct DiagnosedMembers<'a>(pub Vec<(&'a super::Diagnosis, &'a super::DiagnoseSettings)>);
+
+impl MemberProfile for DiagnosedMembers<'_> {
+    fn chi2_base(&self, i: usize) -> Option<f64> {
+        let d = self.0.get(i)?.0;
+        (!d.base_failed())
+            .then(|| d.before.chi2())
+            .filter(|c| c.is_finite())
+    }
+    fn neutral(&self, i: usize, e: Effect) -> Option<f64> {
+        e.neutral_value(self.0.get(i)?.0.base.system.as_ref()?)
+    }
+    fn own_deviation(&self, i: usize, e: Effect) -> Option<f64> {
+        let neutral = self.neutral(i, e)?;
+        let v = self
+            .0
+            .get(i)?
+            .0
+            .refit_of(e)?
+            .fit
+            .estimates
+            .iter()
+            .find(|x| x.param == crate::invert::problem::Param::Effect(e))?
+            .value;
+        Some((v - neutral).abs()).filter(|d| d.is_finite())
+    }
+    fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64> {
+        let (d, s) = *self.0.get(i)?;
+        super::chi2_with_effect_at(d, s, e, value)
+    }
+}
+
+/// Rank a detected effect and its detected twin ([`GROUP_TWINS`]) by the group's data at one
+/// common magnitude. Each member's gain lets the twin's parameter take whatever value suits that
+/// member, so a twin can mimic the other member by member and sum a larger gain. The group's
+/// hypothesis is one effect at a similar size: the compared members (those whose larger gain of
+/// the two exceeds [`CARRY_GAIN`]) are refitted with each twin at a deviation common to all of
+/// them, on [`COMMON_GRID`] around their median own deviation, and the twin with the larger
+/// common-magnitude gain ([`common_gain`]) is ranked first. How one deviation of either twin
+/// changes the wave depends on each member's pipe, water pressure and soil (P60, P62 in P10),
+/// differently for the two: a common size suits the true one across members and not its twin.
+/// The other detected effects and the level are unchanged; `ambiguous_with` and `carrying`
+/// follow the effect ranked first.
+pub fn rank_twins_with(
+    test: &mut GroupTest,
+    scores: &[Vec<(Effect, f64)>],
+    fits: &impl MemberProfile,
+) {
+    use rayon::prelude::*;
+    let Some(a) = test.effect else { return };
+    let Some(b) = twin_of(a) else { return };
+    let detected = |e: Effect| {
+        test.pooled
+            .iter()
+            .any(|p| p.effect == e && p.p_value < test.level)
+    };
+    if !detected(b) {
+        return;
+    }
+    let gain = |i: usize, e: Effect| {
+        scores[i]
+            .iter()
+            .find(|p| p.0 == e)
+            .map(|p| p.1)
+            .filter(|g| g.is_finite())
+    };
+    let compared: Vec<usize> = test
+        .members
+        .iter()
+        .copied()
+        .filter(|&i| match (gain(i, a), gain(i, b)) {
+            (Some(ga), Some(gb)) => ga.max(gb) > CARRY_GAIN && fits.chi2_base(i).is_some(),
+            _ => false,
+        })
+        .collect();
+    if compared.is_empty() {
+        return;
+    }
+    let center = |e: Effect| {
+        let mut d: Vec<f64> = compared
+            .iter()
+            .filter_map(|&i| fits.own_deviation(i, e))
+            .filter(|d| *d > 0.0)
+            .collect();
+        d.sort_by(|x, y| x.total_cmp(y));
+        (!d.is_empty()).then(|| d[d.len() / 2])
+    };
+    let (Some(ca), Some(cb)) = (center(a), center(b)) else {
+        return;
+    };
+    // Per member, its χ² along each twin's grid (NaN where the value leaves the range or
+    // the model gives no prediction).
+    let profile = |i: usize, e: Effect, c: f64| -> Vec<f64> {
+        COMMON_GRID
+            .iter()
+            .map(|m| {
+                fits.neutral(i, e)
+                    .and_then(|n| value_at_deviation(e, n, m * c))
+                    .and_then(|v| fits.chi2_at(i, e, v))
+                    .unwrap_or(f64::NAN)
+            })
+            .collect()
+    };
+    let rows: Vec<(usize, f64, Vec<f64>, Vec<f64>)> = compared
+        .par_iter()
+        .map(|&i| {
+            (
+                i,
+                fits.chi2_base(i).unwrap_or(f64::NAN),
+                profile(i, a, ca),
+                profile(i, b, cb),
+            )
+        })
+        .collect();
+    // Both twins on the same members: those with every value of both profiles, after the
+    // grid's columns that most members lack (values the range excludes) are dropped.
+    let keep = |col: usize| -> Vec<usize> {
+        (0..COMMON_GRID.len())
+            .filter(|&k| {
+                let have = rows
+                    .iter()
+                    .filter(|r| if col == 0 { r.2[k] } else { r.3[k] }.is_finite())
+                    .count();
+                2 * have >= rows.len()
+            })
+            .collect()
+    };
+    let (ka, kb) = (keep(0), keep(1));
+    let rows: Vec<&(usize, f64, Vec<f64>, Vec<f64>)> = rows
+        .iter()
+        .filter(|r| {
+            ka.iter().all(|&k| r.2[k].is_finite()) && kb.iter().all(|&k| r.3[k].is_finite())
+        })
+        .collect();
+    let base: Vec<f64> = rows.iter().map(|r| r.1).collect();
+    let pa: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| ka.iter().map(|&k| r.2[k]).collect())
+        .collect();
+    let pb: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| kb.iter().map(|&k| r.3[k]).collect())
+        .collect();
+    let (Some((ia, pen_a)), Some((ib, pen_b))) =
+        (common_penalty(&base, &pa), common_penalty(&base, &pb))
+    else {
+        return;
+    };
+    let sum = |e: Effect| -> f64 { rows.iter().filter_map(|r| gain(r.0, e)).sum() };
+    let (ga, gb) = (sum(a) - pen_a, sum(b) - pen_b);
+    // A twin whose best common size is the end of its range has its members pinned there by
+    // the range, not by the data: one size costs it nothing and says nothing (soil damping at
+    // its largest loss factor under an iron pipe, where the soil radiates and its loss is almost
+    // invisible, mimics a lossier wall). The comparison is then not made: the member gains
+    // rank the pair.
+    let at_range_end = |e: Effect, k: usize, c: f64| {
+        let (Some(p), Some(n)) = (e.parameter(), fits.neutral(rows[0].0, e)) else {
+            return true;
+        };
+        value_at_deviation(e, n, c * COMMON_GRID[k]).is_none_or(|v| {
+            let tol = 1e-9 * p.upper.abs().max(1.0);
+            (v - p.upper).abs() <= tol || (v - p.lower).abs() <= tol
+        })
+    };
+    if (gb > ga && at_range_end(b, kb[ib], cb)) || (gb <= ga && at_range_end(a, ka[ia], ca)) {
+        return;
+    }
+    let (first, second, first_gain, second_gain, first_deviation, first_penalty, second_penalty) =
+        if gb > ga {
+            (b, a, gb, ga, cb * COMMON_GRID[kb[ib]], pen_b, pen_a)
+        } else {
+            (a, b, ga, gb, ca * COMMON_GRID[ka[ia]], pen_a, pen_b)
+        };
+    test.twins = Some(TwinComparison {
+        first,
+        second,
+        first_gain,
+        second_gain,
+        first_penalty,
+        second_penalty,
+        first_deviation,
+        members: rows.len(),
+    });
+    if first == a {
+        return;
+    }
+    // The twin goes first; the rest keep their order.
+    let at = test
+        .pooled
+        .iter()
+        .position(|p| p.effect == b)
+        .expect("the twin is detected");
+    let moved = test.pooled.remove(at);
+    test.pooled.insert(0, moved);
+    test.effect = Some(b);
+    let members = test.members.clone();
+    test.ambiguous_with = test
+        .pooled
+        .iter()
+        .skip(1)
+        .filter(|p| p.p_value < test.level && vuong_z(b, p.effect, &members, scores) <= VUONG_Z)
+        .map(|p| p.effect)
+        .collect();
+    test.carrying = carriers(&members, scores, b);
+}
+
+/// [`rank_twins_with`] for every group of a run, from the members' diagnoses.
+pub fn rank_twins(
+    groups: &mut [GroupTest],
+    scores: &[Vec<(Effect, f64)>],
+    fits: &DiagnosedMembers<'_>,
+) {
+    for g in groups.iter_mut() {
+        rank_twins_with(g, scores, fits);
     }
 }
 
@@ -708,6 +1056,138 @@ mod tests {
         let t = pooled_test("g", &members, &mixed, 1);
         assert_eq!(t.effect, Some(Effect::WallThinning));
         assert_eq!(t.ambiguous_with, vec![Effect::AirInWater]);
+    }
+
+    /// Members whose χ² with each twin at a deviation δ is base − s·(1 − (δ/r − 1)²): the own
+    /// gain s at the own deviation r, falling quadratically away from it.
+    struct Quadratic {
+        /// Per member and twin: (s, r).
+        curves: Vec<BTreeMap<Effect, (f64, f64)>>,
+    }
+
+    impl MemberProfile for Quadratic {
+        fn chi2_base(&self, i: usize) -> Option<f64> {
+            self.curves.get(i).map(|_| 100.0)
+        }
+        fn neutral(&self, _: usize, e: Effect) -> Option<f64> {
+            // A pipe's own loss factor: an iron pipe's typical 0.01.
+            e.parameter().map(|p| {
+                if e == Effect::PipeLoss {
+                    0.01
+                } else {
+                    p.neutral
+                }
+            })
+        }
+        fn own_deviation(&self, i: usize, e: Effect) -> Option<f64> {
+            self.curves[i].get(&e).map(|c| c.1)
+        }
+        fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64> {
+            let (s, r) = *self.curves[i].get(&e)?;
+            let delta = (value - self.neutral(i, e)?).abs();
+            Some(100.0 - s * (1.0 - (delta / r - 1.0).powi(2)))
+        }
+    }
+
+    #[test]
+    fn one_common_size_ranks_the_twin_that_needs_it_first() {
+        // 12 of 40 members carry thinning at one deviation, 0.12, with own gains 8–19; each
+        // gains 10 % more from air, but at air fractions spread over a factor 8 from member to
+        // member (as a twin that mimics the other member by member must). The member gains rank
+        // air first; one common size costs air a great deal and thinning nothing, so thinning
+        // goes first. The other 28 members are clean.
+        let (t, a) = (Effect::WallThinning, Effect::AirInWater);
+        let members: Vec<usize> = (0..40).collect();
+        let carriers = |spread: bool| -> Quadratic {
+            Quadratic {
+                curves: (0..40)
+                    .map(|i| {
+                        let s = 8.0 + i as f64;
+                        let r_air = if spread {
+                            2e-6 * 2f64.powf((i % 4) as f64)
+                        } else {
+                            5e-6
+                        };
+                        BTreeMap::from([(t, (s, 0.12)), (a, (1.1 * s, r_air))])
+                    })
+                    .collect(),
+            }
+        };
+        let scores = |q: &Quadratic| -> Vec<Vec<(Effect, f64)>> {
+            (0..40)
+                .map(|i| {
+                    let p = (Effect::PipeLoss, 0.0);
+                    if i < 12 {
+                        vec![(t, q.curves[i][&t].0), (a, q.curves[i][&a].0), p]
+                    } else {
+                        vec![(t, 0.0), (a, 0.0), p]
+                    }
+                })
+                .collect()
+        };
+        let q = carriers(true);
+        let sc = scores(&q);
+        let mut g = pooled_test("CI", &members, &sc, 1);
+        assert_eq!(g.effect, Some(a), "{:?}", g.pooled);
+        assert!(g.pooled[1].p_value < g.level);
+        rank_twins_with(&mut g, &sc, &q);
+        assert_eq!(g.effect, Some(t), "{:?}", g.twins);
+        assert_eq!(g.pooled[0].effect, t);
+        let c = g.twins.as_ref().expect("compared");
+        assert_eq!(c.members, 12);
+        // One size at the grid point on thinning's own deviation: no cost.
+        assert!(c.first_penalty.abs() < 1e-9, "{c:?}");
+        assert!((c.first_deviation - 0.12).abs() < 1e-12);
+        assert!(c.second_penalty > 0.1 * c.second_gain.abs(), "{c:?}");
+        // Air at one size for every member: nothing to choose against the member gains, air
+        // stays first.
+        let q = carriers(false);
+        let sc = scores(&q);
+        let mut g = pooled_test("CI", &members, &sc, 1);
+        rank_twins_with(&mut g, &sc, &q);
+        assert_eq!(g.effect, Some(a), "{:?}", g.twins);
+        assert_eq!(g.twins.as_ref().map(|c| c.first), Some(a));
+    }
+
+    #[test]
+    fn a_twin_pinned_at_its_range_end_does_not_win_by_one_common_size() {
+        // Pipe loss in 12 of 40 members at sizes spread over a factor 8 (gains 1.1·s); soil
+        // damping gains s in each, every member at 0.3, the end of its range. One size costs
+        // soil damping nothing only because the range pins it: the member gains keep pipe loss
+        // first and no comparison is reported.
+        let (sd, pl) = (Effect::SoilDamping, Effect::PipeLoss);
+        let q = Quadratic {
+            curves: (0..40)
+                .map(|i| {
+                    let s = 8.0 + i as f64;
+                    let r = 0.004 * 2f64.powf((i % 4) as f64);
+                    BTreeMap::from([(sd, (s, 0.3)), (pl, (1.1 * s, r))])
+                })
+                .collect(),
+        };
+        let sc: Vec<Vec<(Effect, f64)>> = (0..40)
+            .map(|i| {
+                let w = (Effect::AirInWater, 0.0);
+                if i < 12 {
+                    vec![(sd, q.curves[i][&sd].0), (pl, q.curves[i][&pl].0), w]
+                } else {
+                    vec![(sd, 0.0), (pl, 0.0), w]
+                }
+            })
+            .collect();
+        let members: Vec<usize> = (0..40).collect();
+        let mut g = pooled_test("CI", &members, &sc, 1);
+        assert_eq!(g.effect, Some(pl));
+        assert!(g.pooled[1].p_value < g.level, "{:?}", g.pooled);
+        rank_twins_with(&mut g, &sc, &q);
+        assert_eq!(g.effect, Some(pl));
+        assert_eq!(g.twins, None);
+        assert_eq!(value_at_deviation(sd, 0.0, 0.3), Some(0.3));
+        assert_eq!(value_at_deviation(sd, 0.0, 0.31), None);
+        assert_eq!(
+            value_at_deviation(Effect::WallThinning, 1.0, 0.2),
+            Some(0.8)
+        );
     }
 
     #[test]

@@ -599,6 +599,37 @@ pub fn extended_fit(
     crate::invert::fit::fit_extended(data, &fit_settings(settings, effects), settings.seed, base)
 }
 
+/// χ² of a diagnosed segment's data under its base model with `e` added and its parameter
+/// held at `value` (physical units), every other parameter minimised
+/// ([`crate::invert::fit::predicted_with_effect_at`]) from the segment's own refit with `e`
+/// where it has one (the nearest optimum), else from the base. `None` when the base failed,
+/// the value is outside the effect's range, or the model gives no prediction.
+pub fn chi2_with_effect_at(
+    diag: &Diagnosis,
+    settings: &DiagnoseSettings,
+    e: Effect,
+    value: f64,
+) -> Option<f64> {
+    if diag.base_failed() {
+        return None;
+    }
+    let mut effects = settings.base_effects.clone();
+    effects.push(e);
+    effects.sort();
+    effects.dedup();
+    let k = crate::invert::fit::predicted_with_effect_at(
+        &diag.data,
+        &fit_settings(settings, effects),
+        diag.refit_of(e)
+            .map(|r| &r.fit)
+            .filter(|f| f.status != FitStatus::Failed)
+            .unwrap_or(&diag.base),
+        e,
+        value,
+    )?;
+    Some(Residuals::of(&diag.data, &k).chi2()).filter(|c| c.is_finite())
+}
+
 /// Step 2b (name, by refitting): refit the planned candidates and test each against the base.
 pub fn refit_candidates(diag: &mut Diagnosis, settings: &DiagnoseSettings) {
     let tried = refit_plan(diag);

@@ -37,7 +37,7 @@ pub const CSV_COLUMNS: [&str; 22] = [
 ];
 
 /// Columns of `groups.csv` (docs/interface.md).
-pub const GROUP_CSV_COLUMNS: [&str; 11] = [
+pub const GROUP_CSV_COLUMNS: [&str; 12] = [
     "group",
     "n_segments",
     "named_effect",
@@ -49,6 +49,7 @@ pub const GROUP_CSV_COLUMNS: [&str; 11] = [
     "statistic_kind",
     "members_carrying",
     "members",
+    "twin_comparison",
 ];
 
 /// A segment's place in the pooled test: the key of its group when that group detected an
@@ -288,10 +289,27 @@ pub fn write_groups_csv(
                     .join(";"),
             )
             .into_owned(),
+            g.twins.as_ref().map(twin_text).unwrap_or_default(),
         ])?;
     }
     w.flush()?;
     Ok(())
+}
+
+/// The `twin_comparison` column: the two detected twins' group-level evidence at one common
+/// size, the winner first (empty when no twins were both detected).
+pub fn twin_text(t: &super::group::TwinComparison) -> String {
+    format!(
+        "{} {} (common-size cost {}, deviation {}) over {} {} (cost {}); {} members",
+        t.first.name(),
+        sig(t.first_gain, 4),
+        sig(t.first_penalty, 3),
+        sig(t.first_deviation, 3),
+        t.second.name(),
+        sig(t.second_gain, 4),
+        sig(t.second_penalty, 3),
+        t.members
+    )
 }
 
 /// The evidence column: the statistic used and its value.
@@ -886,5 +904,21 @@ mod tests {
         assert_eq!(col("members"), "'=S1;=S3");
         assert_eq!(col("named_effect"), "wall_thinning");
         assert_eq!(col("n_segments"), "4");
+        // No twin pair detected: no comparison.
+        assert_eq!(col("twin_comparison"), "");
+        let c = super::super::group::TwinComparison {
+            first: Effect::WallThinning,
+            second: Effect::AirInWater,
+            first_gain: 209.62,
+            second_gain: 192.72,
+            first_penalty: 51.45,
+            second_penalty: 73.81,
+            first_deviation: 0.1234,
+            members: 12,
+        };
+        assert_eq!(
+            twin_text(&c),
+            "wall_thinning 209.6 (common-size cost 51.5, deviation 0.123) over air_in_water 192.7 (cost 73.8); 12 members"
+        );
     }
 }

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use rusqlite::Connection;
 
-use super::group::{group_key, member_gains, test_groups, GroupBy, GroupTest};
+use super::group::{
+    group_key, member_gains, rank_twins, test_groups, DiagnosedMembers, GroupBy, GroupTest,
+};
 use super::inventory::{InventoryPipe, InventoryProfile};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
 use super::units::{convert_measurements, UnitMixUp};
@@ -330,6 +332,9 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
             .collect()
     });
     let mut groups = test_groups(&keys, &scores);
+    // Detected twins ranked by a refit of the group with one common magnitude.
+    let members = DiagnosedMembers(diags.iter().map(|d| (&d.diagnosis, &d.settings)).collect());
+    pool.install(|| rank_twins(&mut groups, &scores, &members));
     let rows = pool.install(|| refit_groups(&diags, &mut groups));
     summary.groups_detected = groups.iter().filter(|g| g.effect.is_some()).count();
     if opts.apply {

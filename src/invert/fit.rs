@@ -1370,6 +1370,62 @@ fn profile_misfit(
         .or_else(at_x)
 }
 
+/// Levenberg–Marquardt iterations of [`predicted_with_effect_at`].
+pub const EFFECT_AT_LM_ITERATIONS: usize = 40;
+
+/// The prediction of `data` by the model with `settings.effects`, `effect`'s parameter held at
+/// `value` (physical units) and every other coordinate minimising the misfit: a profile point
+/// of the nested fit. The minimisation (Levenberg–Marquardt, at most
+/// [`EFFECT_AT_LM_ITERATIONS`]) starts from `start`, a fit of the same data (with or without
+/// the effect), with the effect set to `value`. `None` when `start` failed, `effect` is not among
+/// `settings.effects`, `value` lies outside the effect's range, or no prediction exists.
+pub fn predicted_with_effect_at(
+    data: &SegmentData,
+    settings: &FitSettings,
+    start: &FitResult,
+    effect: Effect,
+    value: f64,
+) -> Option<Vec<Complex64>> {
+    let problem = problem_for(data, settings);
+    let at = problem
+        .specs
+        .iter()
+        .position(|s| s.param == Param::Effect(effect))?;
+    let mut x = nested_start(&problem, &BaseOptimum::of(start)?)?;
+    let c = problem.specs[at].coordinate(value);
+    if !(c >= problem.specs[at].lower && c <= problem.specs[at].upper) {
+        return None;
+    }
+    x[at] = c;
+    let bounds = problem.bounds().ok()?;
+    let free: Vec<usize> = (0..x.len()).filter(|&i| i != at).collect();
+    let at_x = || problem.predict(&x);
+    if free.is_empty() {
+        return at_x();
+    }
+    let restricted = Restricted {
+        problem: &problem,
+        base: x.clone(),
+        free: free.clone(),
+    };
+    let sub_bounds = crate::optimize::Bounds::new(
+        free.iter().map(|&i| bounds.lower()[i]).collect(),
+        free.iter().map(|&i| bounds.upper()[i]).collect(),
+    )
+    .ok()?;
+    let x0: Vec<f64> = free.iter().map(|&i| x[i]).collect();
+    let lm = LevenbergMarquardt::new()
+        .max_iterations(EFFECT_AT_LM_ITERATIONS)
+        .ok()?
+        .finite_difference(FiniteDifference::Forward)
+        .fd_rel_step(1e-6)
+        .ok()?;
+    match lm.minimize(&restricted, &x0, Some(&sub_bounds)) {
+        Ok(r) if r.cost.is_finite() => problem.predict(&restricted.full(&r.x)).or_else(at_x),
+        _ => at_x(),
+    }
+}
+
 /// The problem with some coordinates held fixed.
 struct Restricted<'p> {
     problem: &'p Problem<'p>,
