@@ -334,6 +334,15 @@ pub fn less_shared(gains: &[(Effect, f64)]) -> Vec<(Effect, f64)> {
         .collect()
 }
 
+/// Member `i`'s likelihood-ratio gain for effect `e` in `scores`, when it has a finite one.
+fn member_gain(scores: &[Vec<(Effect, f64)>], i: usize, e: Effect) -> Option<f64> {
+    scores[i]
+        .iter()
+        .find(|p| p.0 == e)
+        .map(|p| p.1)
+        .filter(|g| g.is_finite())
+}
+
 /// Vuong's (1989) statistic of extension `a` over extension `b` of the members' base fits:
 /// with d_i = g_a,i − g_b,i over the members that have both gains (twice the log-likelihood
 /// ratio of the two non-nested fits of member i), z = Σ d_i / (√n ω̂), ω̂² = (1/n) Σ (d_i − d̄)².
@@ -341,13 +350,7 @@ pub fn less_shared(gains: &[(Effect, f64)]) -> Vec<(Effect, f64)> {
 /// +∞ when every member favours `a` by the same amount, 0 when there is no member to compare
 /// or no difference at all.
 pub fn vuong_z(a: Effect, b: Effect, members: &[usize], scores: &[Vec<(Effect, f64)>]) -> f64 {
-    let gain = |i: usize, e: Effect| {
-        scores[i]
-            .iter()
-            .find(|p| p.0 == e)
-            .map(|p| p.1)
-            .filter(|g| g.is_finite())
-    };
+    let gain = |i: usize, e: Effect| member_gain(scores, i, e);
     let d: Vec<f64> = members
         .iter()
         .filter_map(|&i| Some(gain(i, a)? - gain(i, b)?))
@@ -578,13 +581,7 @@ pub fn rank_twins_with(
     if !detected(b) {
         return;
     }
-    let gain = |i: usize, e: Effect| {
-        scores[i]
-            .iter()
-            .find(|p| p.0 == e)
-            .map(|p| p.1)
-            .filter(|g| g.is_finite())
-    };
+    let gain = |i: usize, e: Effect| member_gain(scores, i, e);
     let compared: Vec<usize> = test
         .members
         .iter()

@@ -1338,36 +1338,41 @@ fn profile_misfit(
     if free.is_empty() {
         return at_x();
     }
-    let restricted = Restricted {
-        problem,
-        base: x.to_vec(),
-        free: free.clone(),
-    };
+    minimize_restricted(problem, bounds, x, free, PROFILE_LM_ITERATIONS).or_else(at_x)
+}
+
+/// The misfit minimised over the coordinates `free` by Levenberg–Marquardt (at most
+/// `iterations`, forward differences) from `x`, the others held at `x`'s values: the cost and
+/// the full coordinates reached. Levenberg–Marquardt accepts only steps that lower the misfit,
+/// so its cost is never above the start's. `None` when the minimisation fails.
+fn minimize_restricted(
+    problem: &Problem<'_>,
+    bounds: &crate::optimize::Bounds,
+    x: &[f64],
+    free: Vec<usize>,
+    iterations: usize,
+) -> Option<(f64, Vec<f64>)> {
     let sub_bounds = crate::optimize::Bounds::new(
         free.iter().map(|&i| bounds.lower()[i]).collect(),
         free.iter().map(|&i| bounds.upper()[i]).collect(),
     )
     .ok()?;
     let x0: Vec<f64> = free.iter().map(|&i| x[i]).collect();
+    let restricted = Restricted {
+        problem,
+        base: x.to_vec(),
+        free,
+    };
     let lm = LevenbergMarquardt::new()
-        .max_iterations(PROFILE_LM_ITERATIONS)
+        .max_iterations(iterations)
         .ok()?
         .finite_difference(FiniteDifference::Forward)
         .fd_rel_step(1e-6)
         .ok()?;
-    // Levenberg–Marquardt accepts only steps that lower the misfit, so its cost is never above
-    // the start's: the start is evaluated on its own only when the minimisation fails.
     lm.minimize(&restricted, &x0, Some(&sub_bounds))
         .ok()
         .filter(|r| r.cost.is_finite())
-        .map(|r| {
-            let mut at = x.to_vec();
-            for (&i, &v) in free.iter().zip(&r.x) {
-                at[i] = v;
-            }
-            (r.cost, at)
-        })
-        .or_else(at_x)
+        .map(|r| (r.cost, restricted.full(&r.x)))
 }
 
 /// Levenberg–Marquardt iterations of [`predicted_with_effect_at`].
@@ -1403,27 +1408,9 @@ pub fn predicted_with_effect_at(
     if free.is_empty() {
         return at_x();
     }
-    let restricted = Restricted {
-        problem: &problem,
-        base: x.clone(),
-        free: free.clone(),
-    };
-    let sub_bounds = crate::optimize::Bounds::new(
-        free.iter().map(|&i| bounds.lower()[i]).collect(),
-        free.iter().map(|&i| bounds.upper()[i]).collect(),
-    )
-    .ok()?;
-    let x0: Vec<f64> = free.iter().map(|&i| x[i]).collect();
-    let lm = LevenbergMarquardt::new()
-        .max_iterations(EFFECT_AT_LM_ITERATIONS)
-        .ok()?
-        .finite_difference(FiniteDifference::Forward)
-        .fd_rel_step(1e-6)
-        .ok()?;
-    match lm.minimize(&restricted, &x0, Some(&sub_bounds)) {
-        Ok(r) if r.cost.is_finite() => problem.predict(&restricted.full(&r.x)).or_else(at_x),
-        _ => at_x(),
-    }
+    minimize_restricted(&problem, &bounds, &x, free, EFFECT_AT_LM_ITERATIONS)
+        .and_then(|(_, full)| problem.predict(&full))
+        .or_else(at_x)
 }
 
 /// The problem with some coordinates held fixed.
