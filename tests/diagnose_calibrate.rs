@@ -4,27 +4,14 @@
 
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::{Command, Output};
 
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::synth::trial::{trial, Trial};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-fn ok(args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_pipewave"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+mod common;
+use common::cli::ok;
 
 fn make(seed: u64, material: Material, size: (f64, f64), hidden: Option<(Effect, f64)>) -> Trial {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);

@@ -4,24 +4,10 @@
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::{Command, Output};
 
 use pipewave::field::plan::HYPOTHETICAL_MEASUREMENT;
-
-fn pipewave() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pipewave"))
-}
-
-fn run(args: &[&str]) -> Output {
-    let out = pipewave().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "pipewave {args:?}\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+mod common;
+use common::cli::ok as run;
 
 /// One exported row: speed_source, its reason, the speed and its error, and the class columns.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,7 +5,6 @@
 //! are `cargo run --release --example record_trials`.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use pipewave::diagnose::inventory::{InventoryPipe, InventoryProfile};
 use pipewave::diagnose::report::candidates_chi2;
@@ -17,6 +16,8 @@ use pipewave::synth::trial::{effect_trial, trial};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+mod common;
+use common::cli::ok;
 
 #[test]
 fn unit_mix_ups_are_named_with_their_factor() {
@@ -153,21 +154,6 @@ fn a_plastic_wall_in_the_wrong_sdr_is_a_record_not_thinning() {
             .any(|r| r == "material=HDPE; OD 180 mm; wall 10.7 mm"),
         "{set}"
     );
-}
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_pipewave"))
-}
-
-fn ok(args: &[&str]) -> Output {
-    let out = bin().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "pipewave {args:?} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 fn row(path: &Path, id: &str) -> std::collections::BTreeMap<String, String> {
