@@ -12,7 +12,8 @@
 //!
 //! Run: `cargo run --release --example locate_acceptance -- [--cases 200] [--recordings 40]
 //! [--seed 11] [--segments 160] [--measured 0.15] [--units 3] [--plastic-band LO,HI]
-//! [--independent-speeds] [--verbose]`
+//! [--independent-speeds] [--verbose] [--cases-csv FILE]` (`--cases-csv` appends one line per
+//! given-delay case, for figures pooled over several seeds)
 //!
 //! On spans with a plastic segment it also splits the error: the position from the same noisy
 //! delay with the TRUE curves (the delay's share), the position from the noise-free delay with
@@ -256,6 +257,32 @@ fn main() {
         }
     }
     report("from a given delay (σ_τ = 0.1 ms)", &given, &failed);
+    // One line per case, for figures pooled over several networks (seeds).
+    let cases_csv: String = arg("--cases-csv", String::new());
+    if !cases_csv.is_empty() {
+        use std::io::Write as _;
+        let new = !Path::new(&cases_csv).exists();
+        let mut f = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&cases_csv)
+            .expect("cases CSV");
+        if new {
+            writeln!(f, "seed,case,plastic,error_m,table_error_m,covered,width_m").expect("write");
+        }
+        for (c, o) in given.iter().enumerate() {
+            writeln!(
+                f,
+                "{seed},{c},{},{},{},{},{}",
+                u8::from(o.plastic),
+                o.err,
+                o.table_err,
+                u8::from(o.covered),
+                o.width
+            )
+            .expect("write");
+        }
+    }
     let mut pl: Vec<f64> = given.iter().filter(|o| o.plastic).map(|o| o.err).collect();
     let mut pt: Vec<f64> = given
         .iter()

@@ -52,6 +52,11 @@ const SPEED_E: f64 = 1000.0;
 /// Relative one-sigma error of the flat curves.
 const REL_STD: f64 = 0.01;
 
+/// The expected slowness E[1/c] ≈ (1 + (σ/c)²)/c of a stored speed `c` ± REL_STD (model §11).
+fn slowness(c: f64) -> f64 {
+    (1.0 + REL_STD * REL_STD) / c
+}
+
 fn street() -> Street {
     let dir = tempfile::tempdir().unwrap();
     let segs = "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,length_m,geometry_wkt,srid\n\
@@ -140,7 +145,7 @@ fn num(row: &std::collections::HashMap<String, String>, col: &str) -> f64 {
 fn single_pipe_is_the_correlators_formula_through_the_binary() {
     let s = street();
     let (d, x) = (80.0, 25.0);
-    let tau = (d - 2.0 * x) / SPEED_A;
+    let tau = (d - 2.0 * x) * slowness(SPEED_A);
     let out = s.dir.join("one.csv");
     let o = run(&[
         "locate",
@@ -200,8 +205,8 @@ fn multi_segment_delay_is_consistent_and_routed_along_the_geometry() {
     // Sensor 1 at A:20 (80 m to the junction), sensor 2 at C:30; leak 70 m into B from A.
     let lb = 149.6;
     let (t1, t2) = (
-        80.0 / SPEED_A + 70.0 / SPEED_B,
-        (lb - 70.0) / SPEED_B + 30.0 / SPEED_C,
+        80.0 * slowness(SPEED_A) + 70.0 * slowness(SPEED_B),
+        (lb - 70.0) * slowness(SPEED_B) + 30.0 * slowness(SPEED_C),
     );
     let tau = t2 - t1;
     let out = s.dir.join("multi.csv");
@@ -252,7 +257,7 @@ fn multi_segment_delay_is_consistent_and_routed_along_the_geometry() {
     // sensor 1, a faster C towards it.
     assert!(terms["A"] > 0.0 && terms["C"] < 0.0, "{terms:?}");
     // Closed form of A's term: δx = −δT/(∂T/∂x) with δT = 80 (1/c − 1/c') and ∂T/∂x = −2/c_B.
-    let dt = 80.0 * (1.0 / SPEED_A - 1.0 / (SPEED_A * (1.0 + REL_STD)));
+    let dt = 80.0 * (slowness(SPEED_A) - slowness(SPEED_A) / (1.0 + REL_STD));
     assert!(
         (terms["A"] - dt * SPEED_B / 2.0).abs() < 0.01,
         "{} {}",

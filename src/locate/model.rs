@@ -214,8 +214,11 @@ impl DelayModel {
             let mut kf = Vec::with_capacity(freqs_hz.len());
             for (&f, &w) in freqs_hz.iter().zip(&omega) {
                 let (c, rel, att) = c.at(f);
-                ks.push(Complex64::new(w / c, -att));
-                kf.push(w / (c * (1.0 + rel)));
+                // The expected wavenumber ω E[1/c] ≈ (ω/ĉ)(1 + (σ/ĉ)²) of a speed ĉ ± σ
+                // (model §11, under P85).
+                let k_mean = w / c * (1.0 + rel * rel);
+                ks.push(Complex64::new(k_mean, -att));
+                kf.push(k_mean / (1.0 + rel));
             }
             k.push(ks);
             k_fast.push(kf);
@@ -695,11 +698,13 @@ mod tests {
                     length_m: 200.0,
                 }],
             );
+            // The expected slowness of 1200 ± 1 %: (1 + 0.01²)/1200.
+            let slowness = 1.0001 / 1200.0;
             for x in [0.0, 37.2, 100.0, 163.0, 200.0] {
                 let t = m.delay(x);
-                assert!((t - (200.0 - 2.0 * x) / 1200.0).abs() < 1e-9, "{x}: {t}");
+                assert!((t - (200.0 - 2.0 * x) * slowness).abs() < 1e-9, "{x}: {t}");
             }
-            let tau = (200.0 - 2.0 * 37.2) / 1200.0;
+            let tau = (200.0 - 2.0 * 37.2) * slowness;
             let p = solve(&m, tau, 1e-4, 2.0, &[0]).unwrap();
             assert!((p.x_m - 37.2).abs() < 1e-5, "{}", p.x_m);
             // δx = τ δc / 2 for the speed; σ_D / 2 for the span; c σ_τ / 2 for the delay.
@@ -711,7 +716,8 @@ mod tests {
                 "{speed} {expect}"
             );
             assert!((shift(TermKind::Span) - 1.0).abs() < 1e-6);
-            assert!((shift(TermKind::Delay) - 0.06).abs() < 1e-6);
+            // σ_τ / (2 × slowness) = 1200 m/s × 0.1 ms / 2 / 1.0001.
+            assert!((shift(TermKind::Delay) - 0.06 / 1.0001).abs() < 1e-6);
         }
     }
 
@@ -738,7 +744,9 @@ mod tests {
             ],
         );
         let x = 25.0;
-        let expect = (35.0 / 400.0 + 140.0 / 1250.0) - 25.0 / 400.0;
+        // Expected slownesses of 400 ± 2 % and 1250 ± 0.2 %.
+        let (sa, sb) = (1.0004 / 400.0, 1.000_004 / 1250.0);
+        let expect = (35.0 * sa + 140.0 * sb) - 25.0 * sa;
         assert!((m.delay(x) - expect).abs() < 1e-9);
         let p = solve(&m, expect, 1e-4, 0.0, &[0, 1]).unwrap();
         assert!((p.x_m - x).abs() < 1e-5);
@@ -831,5 +839,43 @@ mod tests {
         }
         let mid = s.at(300.0).0;
         assert!(mid > 320.0 && mid < 330.0, "{mid}");
+    }
+
+    /// An uncertain speed enters the delay by its expected slowness: a uniform 400 m/s pipe
+    /// known to ±10 % gives the delay of one at 400/1.01 m/s, a known one that of 400 m/s.
+    #[test]
+    fn an_uncertain_speed_enters_by_its_expected_slowness() {
+        let curve = |std: Option<f64>| {
+            let pts: Vec<CurvePoint> = [100.0, 300.0, 600.0]
+                .iter()
+                .map(|&f| CurvePoint {
+                    frequency_hz: f,
+                    phase_speed_m_per_s: Some(400.0),
+                    attenuation_db_per_m: Some(0.0),
+                    phase_speed_std_m_per_s: std,
+                    attenuation_std_db_per_m: None,
+                    model_phase_speed_m_per_s: None,
+                    model_attenuation_db_per_m: None,
+                })
+                .collect();
+            SpeedCurve::from_points(&pts).unwrap()
+        };
+        let pieces = vec![ModelPiece {
+            length_m: 100.0,
+            curve: 0,
+        }];
+        let grid: Vec<f64> = (0..=100).map(|i| 200.0 + 2.0 * f64::from(i)).collect();
+        let ones = vec![1.0; grid.len()];
+        let delay =
+            |c: &SpeedCurve| DelayModel::new(&grid, &ones, false, &[c], pieces.clone()).delay(20.0);
+        let (known, uncertain) = (curve(None), curve(Some(40.0)));
+        // A leak 20 m from sensor 1 of 100 m: T = (80 − 20) s = 60 m × slowness.
+        let t_known = delay(&known);
+        let t_uncertain = delay(&uncertain);
+        assert!((t_known - 60.0 / 400.0).abs() < 1e-6, "{t_known}");
+        assert!(
+            (t_uncertain - 60.0 * 1.01 / 400.0).abs() < 1e-6,
+            "{t_uncertain}"
+        );
     }
 }
