@@ -282,9 +282,12 @@ pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
         params![run.run_id, run.fingerprint, run.hyper_source],
     )?;
     let id = tx.last_insert_rowid();
-    // Only the latest update's classes, segments and predictions are kept.
+    // Only the latest update's classes, segments and predictions are kept. The curves are
+    // emptied first, in one statement: deleting the predictions would otherwise cascade to
+    // them one prediction at a time (about half the cost of the deletion).
     tx.execute("DELETE FROM field_classes", [])?;
     tx.execute("DELETE FROM field_segments", [])?;
+    tx.execute("DELETE FROM prediction_curves", [])?;
     tx.execute("DELETE FROM predictions", [])?;
     Ok(id)
 }
