@@ -61,11 +61,9 @@ pub const LIKELIHOOD_NEIGHBOURS: usize = 10;
 pub const HYPER_EVALUATIONS: usize = 250;
 
 /// The search stops when the log-likelihood improved by less than this over
-/// [`HYPER_STALL_EVALUATIONS`] evaluations: a change of 0.1 nats moves no hyper-parameter by
-/// more than a small fraction of its own uncertainty (its 95 % likelihood interval spans a
-/// fall of 1.92 nats, and 0.1 nats is 1/√19 of that distance from the optimum: at most 0.23
-/// of the interval's half-width along a quadratic profile).
-pub const HYPER_STALL_TOL: f64 = 0.1;
+/// [`HYPER_STALL_EVALUATIONS`] evaluations: a change of 0.01 moves no hyper-parameter by more
+/// than a small fraction of its own uncertainty.
+pub const HYPER_STALL_TOL: f64 = 1e-2;
 /// See [`HYPER_STALL_TOL`].
 pub const HYPER_STALL_EVALUATIONS: usize = 50;
 
@@ -359,8 +357,31 @@ fn conditional(
     conditional_at(t, root_b, target_var, nbrs, &distances(t.obs, pos, nbrs))
 }
 
-/// [`conditional`] with the target's and neighbours' [`distances`] `d`.
+/// [`conditional`] with the target's and neighbours' [`distances`] `d`: in fixed-size
+/// matrices ([`conditional_stack`]) up to [`NEIGHBOURS`] neighbours, as every posterior has.
 fn conditional_at(
+    t: &Terms,
+    root_b: f64,
+    target_var: Sym2,
+    nbrs: &[usize],
+    d: &[f64],
+) -> Option<Conditional> {
+    let k = nbrs.len();
+    if k == 0 || k > NEIGHBOURS {
+        return conditional_dense(t, root_b, target_var, nbrs, d);
+    }
+    let (a, v) = conditional_stack::<POSTERIOR_DIM>(t, root_b, target_var, k, |p| nbrs[p], d)?;
+    Some(Conditional {
+        a: DMatrix::from_fn(2, 2 * k, |r, c| a[(r, c)]),
+        v,
+    })
+}
+
+/// Rows and columns of a posterior's conditional covariance: two per neighbour.
+const POSTERIOR_DIM: usize = 2 * NEIGHBOURS;
+
+/// [`conditional_at`] in heap matrices of the neighbours' own size.
+fn conditional_dense(
     t: &Terms,
     root_b: f64,
     target_var: Sym2,
@@ -556,31 +577,32 @@ impl Weights {
     }
 }
 
-/// [`conditional_at`] for at most [`LIKELIHOOD_NEIGHBOURS`] neighbours in fixed-size matrices
-/// (no allocation; the marginal likelihood takes ~10⁶ of them per field). With k < m
-/// neighbours the covariance is padded with the identity and the cross-covariance with zeros:
-/// C' = diag(C, 1) has the Cholesky factor diag(L, 1) and C'⁻¹ c'ᵀ = (C⁻¹ cᵀ, 0), so A and V
-/// are those of the k neighbours exactly.
-fn conditional_stack(
+/// [`conditional_dense`] for k ≤ N/2 neighbours (`nbr(p)` the p-th) in N × N matrices on the
+/// stack (no allocation; the marginal likelihood takes ~10⁶ of them per field, the
+/// predictions and screenings tens of thousands). With k < N/2 neighbours the covariance is
+/// padded with the identity and the cross-covariance with zeros: C' = diag(C, 1) has the
+/// Cholesky factor diag(L, 1) and C'⁻¹ c'ᵀ = (C⁻¹ cᵀ, 0), so A (its first 2k columns; the
+/// rest are 0) and V are those of the k neighbours exactly.
+fn conditional_stack<const N: usize>(
     t: &Terms,
     root_b: f64,
     target_var: Sym2,
-    nbrs: &[u32],
+    k: usize,
+    nbr: impl Fn(usize) -> usize,
     d: &[f64],
-) -> Option<(SMatrix<f64, 2, LIKELIHOOD_DIM>, Sym2)> {
-    let k = nbrs.len();
-    let mut c = SMatrix::<f64, LIKELIHOOD_DIM, LIKELIHOOD_DIM>::identity();
-    let mut ct = SMatrix::<f64, LIKELIHOOD_DIM, 2>::zeros();
+) -> Option<(SMatrix<f64, 2, N>, Sym2)> {
+    let mut c = SMatrix::<f64, N, N>::identity();
+    let mut ct = SMatrix::<f64, N, 2>::zeros();
     // Pair (p, q < p) of the neighbours sits at k + p(p − 1)/2 + q of `d`.
     let mut pair = k;
-    for (p, &i) in nbrs.iter().enumerate() {
-        let i = i as usize;
-        for (q, &j) in nbrs.iter().enumerate().take(p + 1) {
+    for p in 0..k {
+        let i = nbr(p);
+        for q in 0..=p {
             let s = if p == q {
                 t.own(i)
             } else {
                 pair += 1;
-                t.between_at(i, j as usize, d[pair - 1])
+                t.between_at(i, nbr(q), d[pair - 1])
             };
             for a in 0..2 {
                 for b in 0..2 {
@@ -623,10 +645,17 @@ fn pass(t: &Terms, v: &Vecchia, nk: usize, limit: usize) -> Option<Pass> {
                 let o = &obs[i];
                 let d = &v.dists[v.dstart[pos]..v.dstart[pos + 1]];
                 let (a, cv) = if nb.len() <= LIKELIHOOD_NEIGHBOURS {
-                    let (a, cv) = conditional_stack(t, t.root_b[i], t.own(i), nb, d)?;
+                    let (a, cv) = conditional_stack::<LIKELIHOOD_DIM>(
+                        t,
+                        t.root_b[i],
+                        t.own(i),
+                        nb.len(),
+                        |p| nb[p] as usize,
+                        d,
+                    )?;
                     (Weights::Stack(a), cv)
                 } else {
-                    let c = conditional_at(t, t.root_b[i], t.own(i), &v.neighbours(pos), d)?;
+                    let c = conditional_dense(t, t.root_b[i], t.own(i), &v.neighbours(pos), d)?;
                     (Weights::Heap(c.a), c.v)
                 };
                 let vinv = cv.inverse()?;
@@ -1728,20 +1757,39 @@ mod tests {
             let i = v.order[pos];
             let nb = &v.nbrs[v.start[pos]..v.start[pos + 1]];
             let d = &v.dists[v.dstart[pos]..v.dstart[pos + 1]];
-            let (a, cv) = conditional_stack(&terms, root_b[i], terms.own(i), nb, d).unwrap();
-            let c = conditional_at(&terms, root_b[i], terms.own(i), &v.neighbours(pos), d).unwrap();
+            let (a, cv) = conditional_stack::<LIKELIHOOD_DIM>(
+                &terms,
+                root_b[i],
+                terms.own(i),
+                nb.len(),
+                |p| nb[p] as usize,
+                d,
+            )
+            .unwrap();
+            let general = v.neighbours(pos);
+            let c = conditional_dense(&terms, root_b[i], terms.own(i), &general, d).unwrap();
+            // The posteriors' size (N = 32), through `conditional_at`.
+            let wide = conditional_at(&terms, root_b[i], terms.own(i), &general, d).unwrap();
             for r in 0..2 {
                 for col in 0..2 * nb.len() {
                     assert!(
                         (a[(r, col)] - c.a[(r, col)]).abs() < 1e-12,
                         "{pos} {r} {col}"
                     );
+                    assert!((wide.a[(r, col)] - c.a[(r, col)]).abs() < 1e-12);
                 }
                 for col in 2 * nb.len()..LIKELIHOOD_DIM {
                     assert_eq!(a[(r, col)], 0.0);
                 }
             }
-            for (x, y) in [(cv.pp, c.v.pp), (cv.ps, c.v.ps), (cv.ss, c.v.ss)] {
+            assert_eq!(wide.a.ncols(), 2 * nb.len());
+            for (x, y) in [
+                (cv.pp, c.v.pp),
+                (cv.ps, c.v.ps),
+                (cv.ss, c.v.ss),
+                (wide.v.pp, c.v.pp),
+                (wide.v.ss, c.v.ss),
+            ] {
                 assert!((x - y).abs() < 1e-12 * (1.0 + y.abs()), "{pos}: {x} vs {y}");
             }
             sizes.push(nb.len());
