@@ -106,23 +106,22 @@ pub const MIN_MEMBERS_FOR_CLASS_SCALE: usize = 5;
 /// Range of the class multipliers searched.
 const CLASS_SCALE_RANGE: (f64, f64) = (0.05, 20.0);
 
-/// Members whose marginal likelihood the hyper-parameter searches maximise: the first this
-/// many of the conditioning order, a random subset (the order is a hash of the segment ids).
-/// Every member still enters the class means, the screening and the predictions (P80, P82);
-/// only θ and the class multipliers are estimated on the subset. Adequate because θ has six
-/// components (and two multipliers per class): the likelihood of n members pins each to a
-/// relative standard error of about √(2/n), 6 % at 500, well inside the range over which
-/// the kriging predictions and their variances hardly change (for an exponential kernel they
-/// depend mainly on B/ℓ, Stein 1999), while the cost of each of the searches' several hundred
-/// evaluations falls in proportion. At 10,000 members it saves 95 % of them. The subset is
-/// still dense: its nearest-neighbour spacing grows by √(n/500), a fraction of ℓ on networks
-/// with that many measured segments.
+/// Members whose marginal likelihood (P80) the hyper-parameter searches maximise: the first
+/// this many of the conditioning order, a random subset (the order is a hash of the segment
+/// ids). Every member still enters the class means, the screening and the predictions (P80,
+/// P82); only θ of P78 and the class multipliers are estimated on the subset. Adequate because
+/// θ has six components (and two multipliers per class): the likelihood of n members pins
+/// each to a relative standard error of about √(2/n), 6 % at 500, while the cost of each of
+/// the searches' several hundred evaluations falls in proportion (at 10,000 members by 95 %).
+/// The subset's nearest-neighbour spacing grows by √(n/500), so ℓ alone is less sharply
+/// determined and trades against B; the kriging predictions and their variances rest mainly
+/// on B/ℓ for an exponential kernel (Stein 1999), which the subset still pins.
 pub const HYPER_MEMBERS: usize = 500;
 
-/// Bracket width in ln τ at which [`Field::robust_scatter_factor`] stops: 1 % in τ. The
-/// factor rests on the median of the members' χ² distribution functions, itself uncertain by
-/// about 0.5/√n in probability (1.6 % at n = 1000, several per cent in τ), so a finer τ would
-/// be noise.
+/// Bracket width in ln τ at which [`Field::robust_scatter_factor`] (the screening of P79–P80)
+/// stops: 1 % in τ. The factor rests on the median of the members' χ² distribution functions,
+/// itself uncertain by about 0.5/√n in probability (1.6 % at n = 1000, several per cent in
+/// τ), so a finer τ would be noise.
 const ROBUST_LN_TAU_TOL: f64 = 0.01;
 
 /// Most steps of that search (it stops by [`ROBUST_LN_TAU_TOL`] in five to eight).
@@ -563,6 +562,9 @@ const LIKELIHOOD_DIM: usize = 2 * LIKELIHOOD_NEIGHBOURS;
 
 /// The kriging weights A of a likelihood conditional: on the stack (at most
 /// [`LIKELIHOOD_NEIGHBOURS`] predecessors, as every field's structure has), else on the heap.
+/// The stack variant is the larger by design: a value lives for one member of one pass, and
+/// boxing it would bring back the allocation it exists to avoid.
+#[allow(clippy::large_enum_variant)]
 enum Weights {
     Stack(SMatrix<f64, 2, LIKELIHOOD_DIM>),
     Heap(DMatrix<f64>),
