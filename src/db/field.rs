@@ -282,7 +282,10 @@ pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
         params![run.run_id, run.fingerprint, run.hyper_source],
     )?;
     let id = tx.last_insert_rowid();
-    // Only the latest update's classes, segments and predictions are kept.
+    // Only the latest update's classes, segments and predictions are kept. The predictions'
+    // deletion cascades to their curves one prediction at a time: emptying the curves first
+    // in one statement is faster, but SQLite then holds a record of every row it deletes (on
+    // 100,000 segments, 2.9 million curve points, the update peaked at 146 MB, not 77 MB).
     tx.execute("DELETE FROM field_classes", [])?;
     tx.execute("DELETE FROM field_segments", [])?;
     tx.execute("DELETE FROM predictions", [])?;

@@ -15,7 +15,7 @@
 //! given its nearest predecessors in a fixed order, the predictions given their nearest
 //! members. Cost O(n m³), memory O(n m).
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix};
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
@@ -105,6 +105,27 @@ pub const MIN_MEMBERS_FOR_CLASS_SCALE: usize = 5;
 
 /// Range of the class multipliers searched.
 const CLASS_SCALE_RANGE: (f64, f64) = (0.05, 20.0);
+
+/// Members whose marginal likelihood (P80) the hyper-parameter searches maximise: the first
+/// this many of the conditioning order, a random subset (the order is a hash of the segment
+/// ids). Every member still enters the class means, the screening and the predictions (P80,
+/// P82); only θ of P78 and the class multipliers are estimated on the subset. Adequate because
+/// θ has six components (and two multipliers per class): the likelihood of n members pins
+/// each to a relative standard error of about √(2/n), 6 % at 500, while the cost of each of
+/// the searches' several hundred evaluations falls in proportion (at 10,000 members by 95 %).
+/// The subset's nearest-neighbour spacing grows by √(n/500), so ℓ alone is less sharply
+/// determined and trades against B; the kriging predictions and their variances rest mainly
+/// on B/ℓ for an exponential kernel (Stein 1999), which the subset still pins.
+pub const HYPER_MEMBERS: usize = 500;
+
+/// Bracket width in ln τ at which [`Field::robust_scatter_factor`] (the screening of P79–P80)
+/// stops: 1 % in τ. The factor rests on the median of the members' χ² distribution functions,
+/// itself uncertain by about 0.5/√n in probability (1.6 % at n = 1000, several per cent in
+/// τ), so a finer τ would be noise.
+const ROBUST_LN_TAU_TOL: f64 = 0.01;
+
+/// Most steps of that search (it stops by [`ROBUST_LN_TAU_TOL`] in five to eight).
+const ROBUST_MAX_STEPS: usize = 30;
 
 /// Evaluation budget of each refit after screening (warm-started from the previous optimum).
 const REFIT_EVALUATIONS: usize = 150;
@@ -251,9 +272,11 @@ impl Hyper {
     }
 }
 
-/// Euclidean distance, m.
+/// Euclidean distance, m (the plain root of the squares: map coordinates are far from
+/// overflow, and `hypot`'s care costs several times as much in the conditionals' loops).
 pub fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    (dx * dx + dy * dy).sqrt()
 }
 
 /// A spatial index of points carrying their index.
@@ -333,8 +356,31 @@ fn conditional(
     conditional_at(t, root_b, target_var, nbrs, &distances(t.obs, pos, nbrs))
 }
 
-/// [`conditional`] with the target's and neighbours' [`distances`] `d`.
+/// [`conditional`] with the target's and neighbours' [`distances`] `d`: in fixed-size
+/// matrices ([`conditional_stack`]) up to [`NEIGHBOURS`] neighbours, as every posterior has.
 fn conditional_at(
+    t: &Terms,
+    root_b: f64,
+    target_var: Sym2,
+    nbrs: &[usize],
+    d: &[f64],
+) -> Option<Conditional> {
+    let k = nbrs.len();
+    if k == 0 || k > NEIGHBOURS {
+        return conditional_dense(t, root_b, target_var, nbrs, d);
+    }
+    let (a, v) = conditional_stack::<POSTERIOR_DIM>(t, root_b, target_var, k, |p| nbrs[p], d)?;
+    Some(Conditional {
+        a: DMatrix::from_fn(2, 2 * k, |r, c| a[(r, c)]),
+        v,
+    })
+}
+
+/// Rows and columns of a posterior's conditional covariance: two per neighbour.
+const POSTERIOR_DIM: usize = 2 * NEIGHBOURS;
+
+/// [`conditional_at`] in heap matrices of the neighbours' own size.
+fn conditional_dense(
     t: &Terms,
     root_b: f64,
     target_var: Sym2,
@@ -482,18 +528,18 @@ impl Pass {
 /// touched class, its 2 × 2 block.
 fn design(
     class: usize,
-    a: &DMatrix<f64>,
-    nbrs: &[usize],
+    a: impl Fn(usize, usize) -> f64,
+    nbrs: impl IntoIterator<Item = usize>,
     obs: &[Observation],
 ) -> Vec<(usize, [f64; 4])> {
     let mut z: Vec<(usize, [f64; 4])> = vec![(class, [1.0, 0.0, 0.0, 1.0])];
-    for (p, &j) in nbrs.iter().enumerate() {
+    for (p, j) in nbrs.into_iter().enumerate() {
         let k = obs[j].class;
         let blk = [
-            -a[(0, 2 * p)],
-            -a[(0, 2 * p + 1)],
-            -a[(1, 2 * p)],
-            -a[(1, 2 * p + 1)],
+            -a(0, 2 * p),
+            -a(0, 2 * p + 1),
+            -a(1, 2 * p),
+            -a(1, 2 * p + 1),
         ];
         match z.iter_mut().find(|(c, _)| *c == k) {
             Some((_, b)) => {
@@ -511,31 +557,125 @@ fn design(
 /// thread count).
 const PASS_CHUNK: usize = 256;
 
-/// One Vecchia pass: `None` when a conditional is not positive definite.
-fn pass(t: &Terms, v: &Vecchia, nk: usize) -> Option<Pass> {
+/// Rows and columns of a likelihood conditional's covariance: two per predecessor.
+const LIKELIHOOD_DIM: usize = 2 * LIKELIHOOD_NEIGHBOURS;
+
+/// The kriging weights A of a likelihood conditional: on the stack (at most
+/// [`LIKELIHOOD_NEIGHBOURS`] predecessors, as every field's structure has), else on the heap.
+/// The stack variant is the larger by design: a value lives for one member of one pass, and
+/// boxing it would bring back the allocation it exists to avoid.
+#[allow(clippy::large_enum_variant)]
+enum Weights {
+    Stack(SMatrix<f64, 2, LIKELIHOOD_DIM>),
+    Heap(DMatrix<f64>),
+}
+
+impl Weights {
+    fn at(&self, r: usize, c: usize) -> f64 {
+        match self {
+            Weights::Stack(a) => a[(r, c)],
+            Weights::Heap(a) => a[(r, c)],
+        }
+    }
+}
+
+/// [`conditional_dense`] for k ≤ N/2 neighbours (`nbr(p)` the p-th) in N × N matrices on the
+/// stack (no allocation; the marginal likelihood takes ~10⁶ of them per field, the
+/// predictions and screenings tens of thousands). With k < N/2 neighbours the covariance is
+/// padded with the identity and the cross-covariance with zeros: C' = diag(C, 1) has the
+/// Cholesky factor diag(L, 1) and C'⁻¹ c'ᵀ = (C⁻¹ cᵀ, 0), so A (its first 2k columns; the
+/// rest are 0) and V are those of the k neighbours exactly.
+fn conditional_stack<const N: usize>(
+    t: &Terms,
+    root_b: f64,
+    target_var: Sym2,
+    k: usize,
+    nbr: impl Fn(usize) -> usize,
+    d: &[f64],
+) -> Option<(SMatrix<f64, 2, N>, Sym2)> {
+    let mut c = SMatrix::<f64, N, N>::identity();
+    let mut ct = SMatrix::<f64, N, 2>::zeros();
+    // Pair (p, q < p) of the neighbours sits at k + p(p − 1)/2 + q of `d`.
+    let mut pair = k;
+    for p in 0..k {
+        let i = nbr(p);
+        for q in 0..=p {
+            let s = if p == q {
+                t.own(i)
+            } else {
+                pair += 1;
+                t.between_at(i, nbr(q), d[pair - 1])
+            };
+            for a in 0..2 {
+                for b in 0..2 {
+                    c[(2 * p + a, 2 * q + b)] = s.at(a, b);
+                    c[(2 * q + b, 2 * p + a)] = s.at(a, b);
+                }
+            }
+        }
+        let s = t.hyper.kernel(d[p]).scale(root_b * t.root_b[i]);
+        for a in 0..2 {
+            for b in 0..2 {
+                ct[(2 * p + a, b)] = s.at(a, b);
+            }
+        }
+    }
+    let chol = c.cholesky()?;
+    let x = chol.solve(&ct);
+    let reduce = ct.transpose() * x;
+    let v = Sym2::new(
+        target_var.pp - reduce[(0, 0)],
+        target_var.ps - 0.5 * (reduce[(0, 1)] + reduce[(1, 0)]),
+        target_var.ss - reduce[(1, 1)],
+    );
+    Some((x.transpose(), v))
+}
+
+/// One Vecchia pass over the first `limit` members of the conditioning order: `None` when a
+/// conditional is not positive definite. A member's predecessors come before it in the
+/// order, so the pass over a prefix is the Vecchia likelihood of exactly those members.
+fn pass(t: &Terms, v: &Vecchia, nk: usize, limit: usize) -> Option<Pass> {
     let obs = t.obs;
-    let positions: Vec<usize> = (0..v.order.len()).collect();
+    let positions: Vec<usize> = (0..v.order.len().min(limit)).collect();
     let parts: Vec<Option<Pass>> = positions
         .par_chunks(PASS_CHUNK)
         .map(|chunk| {
             let mut acc = Pass::zero(nk);
             for &pos in chunk {
                 let i = v.order[pos];
-                let nb = v.neighbours(pos);
+                let nb = &v.nbrs[v.start[pos]..v.start[pos + 1]];
                 let o = &obs[i];
                 let d = &v.dists[v.dstart[pos]..v.dstart[pos + 1]];
-                let cond = conditional_at(t, t.root_b[i], t.own(i), &nb, d)?;
-                let vinv = cond.v.inverse()?;
+                let (a, cv) = if nb.len() <= LIKELIHOOD_NEIGHBOURS {
+                    let (a, cv) = conditional_stack::<LIKELIHOOD_DIM>(
+                        t,
+                        t.root_b[i],
+                        t.own(i),
+                        nb.len(),
+                        |p| nb[p] as usize,
+                        d,
+                    )?;
+                    (Weights::Stack(a), cv)
+                } else {
+                    let c = conditional_dense(t, t.root_b[i], t.own(i), &v.neighbours(pos), d)?;
+                    (Weights::Heap(c.a), c.v)
+                };
+                let vinv = cv.inverse()?;
                 let mut yt = o.u;
                 for (p, &j) in nb.iter().enumerate() {
-                    for (a, y) in yt.iter_mut().enumerate() {
-                        *y -=
-                            cond.a[(a, 2 * p)] * obs[j].u[0] + cond.a[(a, 2 * p + 1)] * obs[j].u[1];
+                    let uj = obs[j as usize].u;
+                    for (r, y) in yt.iter_mut().enumerate() {
+                        *y -= a.at(r, 2 * p) * uj[0] + a.at(r, 2 * p + 1) * uj[1];
                     }
                 }
                 acc.s += vinv.quad(yt);
-                acc.logdet += cond.v.det().ln();
-                let z = design(o.class, &cond.a, &nb, obs);
+                acc.logdet += cv.det().ln();
+                let z = design(
+                    o.class,
+                    |r, c| a.at(r, c),
+                    nb.iter().map(|&j| j as usize),
+                    obs,
+                );
                 // Zᵀ V⁻¹ for each touched class block: blockᵀ V⁻¹.
                 let zt_vinv: Vec<(usize, [f64; 4])> = z
                     .iter()
@@ -605,16 +745,18 @@ fn class_posterior(p: &Pass, nk: usize) -> Option<(DVector<f64>, DMatrix<f64>, f
 /// multiplier and information scale 1.
 pub fn log_likelihood(hyper: &Hyper, obs: &[Observation], v: &Vecchia, nk: usize) -> Option<f64> {
     let scales = Scales::unit(nk, obs.len());
-    log_likelihood_scaled(hyper, &scales, obs, v, nk)
+    log_likelihood_scaled(hyper, &scales, obs, v, nk, obs.len())
 }
 
-/// [`log_likelihood`] with class multipliers and information scales.
+/// [`log_likelihood`] with class multipliers and information scales, of the first `limit`
+/// members of the conditioning order.
 fn log_likelihood_scaled(
     hyper: &Hyper,
     scales: &Scales,
     obs: &[Observation],
     v: &Vecchia,
     nk: usize,
+    limit: usize,
 ) -> Option<f64> {
     let (noise, root_b) = scales.terms(hyper, obs);
     let t = Terms {
@@ -623,7 +765,7 @@ fn log_likelihood_scaled(
         noise: &noise,
         root_b: &root_b,
     };
-    let p = pass(&t, v, nk)?;
+    let p = pass(&t, v, nk, limit)?;
     class_posterior(&p, nk).map(|x| x.2)
 }
 
@@ -688,6 +830,9 @@ struct HyperSearch<'a> {
     obs: &'a [Observation],
     v: &'a Vecchia,
     nk: usize,
+    /// The members whose likelihood is maximised: the first this many of the conditioning
+    /// order (see [`HYPER_MEMBERS`]).
+    members: usize,
     /// Bounds of ℓ, m.
     bounds: (f64, f64),
 }
@@ -733,8 +878,15 @@ impl HyperSearch<'_> {
         })
         .collect();
         let objective = FnObjective::new(6, |x: &[f64]| {
-            log_likelihood_scaled(&hyper_of(x), scales, self.obs, self.v, self.nk)
-                .map_or(f64::INFINITY, |l| -l)
+            log_likelihood_scaled(
+                &hyper_of(x),
+                scales,
+                self.obs,
+                self.v,
+                self.nk,
+                self.members,
+            )
+            .map_or(f64::INFINITY, |l| -l)
         });
         let steps: Vec<f64> = [0.7, 1.0, 1.0, 0.3, 1.0, 1.0]
             .iter()
@@ -755,8 +907,8 @@ impl HyperSearch<'_> {
     /// classes with fewer than [`MIN_MEMBERS_FOR_CLASS_SCALE`] members keep theirs.
     fn classes(&self, hyper: &Hyper, scales: &Scales) -> Vec<[f64; 2]> {
         let mut count = vec![0usize; self.nk];
-        for o in self.obs {
-            if let Some(c) = count.get_mut(o.class) {
+        for &i in &self.v.order[..self.members.min(self.v.order.len())] {
+            if let Some(c) = count.get_mut(self.obs[i].class) {
                 *c += 1;
             }
         }
@@ -777,7 +929,7 @@ impl HyperSearch<'_> {
         let prior_var = CLASS_SCALE_PRIOR_SD * CLASS_SCALE_PRIOR_SD;
         let objective = FnObjective::new(2 * active.len(), |x: &[f64]| {
             let penalty = 0.5 * x.iter().map(|v| v * v).sum::<f64>() / prior_var;
-            log_likelihood_scaled(hyper, &of(x), self.obs, self.v, self.nk)
+            log_likelihood_scaled(hyper, &of(x), self.obs, self.v, self.nk, self.members)
                 .map_or(f64::INFINITY, |l| penalty - l)
         });
         let (lo, hi) = (CLASS_SCALE_RANGE.0.ln(), CLASS_SCALE_RANGE.1.ln());
@@ -860,6 +1012,13 @@ pub struct Field {
     tree: Index,
 }
 
+/// The part of a pipe's posterior its classes share (see [`Field::kriging`]).
+struct Kriging {
+    neighbours: Vec<(usize, f64)>,
+    idx: Vec<usize>,
+    unit: Option<Conditional>,
+}
+
 /// The field's posterior of one pipe's u (P80, plus its own scatter T).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Posterior {
@@ -937,6 +1096,7 @@ impl Field {
                 obs: &obs,
                 v: &v,
                 nk,
+                members: HYPER_MEMBERS,
                 bounds: (lo, hi),
             };
             let Some(mut hyper) = search.common(start, &scales, HYPER_EVALUATIONS, 1.0) else {
@@ -960,6 +1120,7 @@ impl Field {
                     obs: &obs,
                     v: &v,
                     nk,
+                    members: HYPER_MEMBERS,
                     bounds: (lo, hi),
                 };
                 if let Some(h) = search.common(hyper, &scales, REFIT_EVALUATIONS, 0.3) {
@@ -1000,7 +1161,7 @@ impl Field {
             noise: &noise,
             root_b: &root_b,
         };
-        let post = pass(&t, v, nk).and_then(|p| class_posterior(&p, nk));
+        let post = pass(&t, v, nk, obs.len()).and_then(|p| class_posterior(&p, nk));
         let (class_mean, class_cov, log_likelihood) = match post {
             Some((m, c, l)) => (m, c, Some(l)),
             None => {
@@ -1110,19 +1271,44 @@ impl Field {
             p.sort_by(f64::total_cmp);
             crate::stats::quantile(&p, 0.5).unwrap_or(0.5)
         };
-        if median_cdf(1.0) >= 0.5 {
+        let g = |x: f64| median_cdf(x.exp()) - 0.5;
+        let (mut hi, mut g_hi) = (0.0f64, g(0.0));
+        if g_hi >= 0.0 {
             return 1.0;
         }
-        let (mut lo, mut hi) = (MIN_SCREEN_SCATTER_FACTOR.ln(), 0.0f64);
-        if median_cdf(lo.exp()) < 0.5 {
+        let (mut lo, mut g_lo) = (MIN_SCREEN_SCATTER_FACTOR.ln(), 0.0);
+        g_lo += g(lo);
+        if g_lo < 0.0 {
             return MIN_SCREEN_SCATTER_FACTOR;
         }
-        for _ in 0..24 {
-            let mid = 0.5 * (lo + hi);
-            if median_cdf(mid.exp()) < 0.5 {
-                hi = mid;
+        // Illinois regula falsi in ln τ on the bracket g(lo) ≥ 0 > g(hi): the median's CDF is a
+        // smooth, nearly linear function of ln τ across the bracket, so the secant through the
+        // bracket's ends reaches the tolerance in a handful of passes where bisection takes ten;
+        // halving the value kept at an end that stays twice keeps both ends moving.
+        let mut kept = 0i8;
+        for _ in 0..ROBUST_MAX_STEPS {
+            if hi - lo <= ROBUST_LN_TAU_TOL {
+                break;
+            }
+            let secant = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+            let x = if secant.is_finite() && secant > lo && secant < hi {
+                secant
             } else {
-                lo = mid;
+                0.5 * (lo + hi)
+            };
+            let gx = g(x);
+            if gx >= 0.0 {
+                (lo, g_lo) = (x, gx);
+                if kept == 1 {
+                    g_hi *= 0.5;
+                }
+                kept = 1;
+            } else {
+                (hi, g_hi) = (x, gx);
+                if kept == -1 {
+                    g_lo *= 0.5;
+                }
+                kept = -1;
             }
         }
         (0.5 * (lo + hi)).exp()
@@ -1236,9 +1422,10 @@ impl Field {
         classes: &[(usize, f64)],
         skip: Option<usize>,
     ) -> Posterior {
+        let shared = self.kriging(pos, skip);
         let mut parts: Vec<(f64, Posterior)> = classes
             .iter()
-            .map(|&(k, p)| (p, self.posterior(pos, k, skip)))
+            .map(|&(k, p)| (p, self.posterior_with(&shared, k)))
             .collect();
         let total: f64 = parts.iter().map(|x| x.0).sum();
         let Some(best) = parts
@@ -1286,16 +1473,42 @@ impl Field {
     /// its nearest members, the class means' error included), leaving out member `skip` (its
     /// leave-one-out prediction, P82). Without a position: its class mean, B and T added.
     pub fn posterior(&self, pos: Option<[f64; 2]>, class: usize, skip: Option<usize>) -> Posterior {
-        let target_var = self.prior_var(class);
-        let root_b = self.scales.of_class(class)[0].sqrt();
+        self.posterior_with(&self.kriging(pos, skip), class)
+    }
+
+    /// What the posteriors at `pos` share across the classes a pipe may be in: its neighbours
+    /// and the conditional of a target of unit amplitude (√b = 1, no own variance) on them.
+    /// A class k scales the target's cross-covariance with the neighbours by √b_k and leaves
+    /// their covariance C as it is, so its weights are √b_k A₁ and its variance
+    /// b_k B + t_k T − b_k c₁ C⁻¹ c₁ᵀ (P80): one factorisation of C serves every class.
+    fn kriging(&self, pos: Option<[f64; 2]>, skip: Option<usize>) -> Kriging {
         let neighbours = pos.map_or_else(Vec::new, |p| self.neighbours_of(p, skip));
         let idx: Vec<usize> = neighbours.iter().map(|n| n.0).collect();
-        let cond =
-            conditional(&self.terms(), pos, root_b, target_var, &idx).unwrap_or(Conditional {
+        let unit = conditional(&self.terms(), pos, 1.0, Sym2::default(), &idx);
+        Kriging {
+            neighbours,
+            idx,
+            unit,
+        }
+    }
+
+    /// The posterior in class `class` from the shared part of [`Self::kriging`].
+    fn posterior_with(&self, k: &Kriging, class: usize) -> Posterior {
+        let target_var = self.prior_var(class);
+        let root_b = self.scales.of_class(class)[0].sqrt();
+        let neighbours = k.neighbours.clone();
+        let idx = &k.idx;
+        let cond = match &k.unit {
+            Some(u) => Conditional {
+                a: &u.a * root_b,
+                v: target_var.add(&u.v.scale(root_b * root_b)),
+            },
+            None => Conditional {
                 a: DMatrix::zeros(2, 0),
                 v: target_var,
-            });
-        let used: &[usize] = if cond.a.ncols() == 0 { &[] } else { &idx };
+            },
+        };
+        let used: &[usize] = if cond.a.ncols() == 0 { &[] } else { idx };
         let (mu, _) = self.class(class);
         let mut mean = mu;
         for (p, &j) in used.iter().enumerate() {
@@ -1306,7 +1519,12 @@ impl Field {
             }
         }
         // Z Cov(μ) Zᵀ over the touched classes (universal kriging's term for the means).
-        let z = design(class, &cond.a, used, &self.obs);
+        let z = design(
+            class,
+            |r, c| cond.a[(r, c)],
+            used.iter().copied(),
+            &self.obs,
+        );
         let mut extra = [[0.0; 2]; 2];
         for (k, bk) in &z {
             for (l, bl) in &z {
@@ -1493,6 +1711,92 @@ mod tests {
             "{a1} {a2} vs {e1} {e2}"
         );
         assert!((a1 - e1).abs() < 1e-8, "{a1} vs {e1}");
+    }
+
+    /// The pass over a prefix of the conditioning order is the Vecchia likelihood of exactly
+    /// those members (what the hyper-parameter searches maximise, [`HYPER_MEMBERS`]): the
+    /// same value as a structure built on those members alone.
+    #[test]
+    fn a_prefix_pass_is_the_likelihood_of_its_members() {
+        let (t, mu) = truth();
+        let obs = draw(17, 60, 1500.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
+        let scales = Scales::unit(2, obs.len());
+        for limit in [12, 25, 59] {
+            let subset: Vec<Observation> =
+                v.order[..limit].iter().map(|&i| obs[i].clone()).collect();
+            let alone = Vecchia::new(&subset, LIKELIHOOD_NEIGHBOURS);
+            let a = log_likelihood_scaled(&t, &scales, &obs, &v, 2, limit).unwrap();
+            let b = log_likelihood(&t, &subset, &alone, 2).unwrap();
+            assert!(
+                (a - b).abs() < 1e-9 * (1.0 + b.abs()),
+                "{limit}: {a} vs {b}"
+            );
+        }
+        let all = log_likelihood(&t, &obs, &v, 2).unwrap();
+        let part = log_likelihood_scaled(&t, &scales, &obs, &v, 2, 30).unwrap();
+        assert!((all - part).abs() > 1.0, "{all} {part}");
+    }
+
+    /// The likelihood's fixed-size conditionals give the weights and variance of the general
+    /// ones, with fewer neighbours than [`LIKELIHOOD_NEIGHBOURS`] (padded) and with as many.
+    #[test]
+    fn stack_conditionals_equal_the_general_ones() {
+        let (t, mu) = truth();
+        let obs = draw(29, 40, 1500.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
+        let mut scales = Scales::unit(2, obs.len());
+        scales.class = vec![[0.7, 1.3], [1.8, 0.6]];
+        let (noise, root_b) = scales.terms(&t, &obs);
+        let terms = Terms {
+            hyper: &t,
+            obs: &obs,
+            noise: &noise,
+            root_b: &root_b,
+        };
+        let mut sizes = Vec::new();
+        for pos in [1, 3, 7, 20, 39] {
+            let i = v.order[pos];
+            let nb = &v.nbrs[v.start[pos]..v.start[pos + 1]];
+            let d = &v.dists[v.dstart[pos]..v.dstart[pos + 1]];
+            let (a, cv) = conditional_stack::<LIKELIHOOD_DIM>(
+                &terms,
+                root_b[i],
+                terms.own(i),
+                nb.len(),
+                |p| nb[p] as usize,
+                d,
+            )
+            .unwrap();
+            let general = v.neighbours(pos);
+            let c = conditional_dense(&terms, root_b[i], terms.own(i), &general, d).unwrap();
+            // The posteriors' size (N = 32), through `conditional_at`.
+            let wide = conditional_at(&terms, root_b[i], terms.own(i), &general, d).unwrap();
+            for r in 0..2 {
+                for col in 0..2 * nb.len() {
+                    assert!(
+                        (a[(r, col)] - c.a[(r, col)]).abs() < 1e-12,
+                        "{pos} {r} {col}"
+                    );
+                    assert!((wide.a[(r, col)] - c.a[(r, col)]).abs() < 1e-12);
+                }
+                for col in 2 * nb.len()..LIKELIHOOD_DIM {
+                    assert_eq!(a[(r, col)], 0.0);
+                }
+            }
+            assert_eq!(wide.a.ncols(), 2 * nb.len());
+            for (x, y) in [
+                (cv.pp, c.v.pp),
+                (cv.ps, c.v.ps),
+                (cv.ss, c.v.ss),
+                (wide.v.pp, c.v.pp),
+                (wide.v.ss, c.v.ss),
+            ] {
+                assert!((x - y).abs() < 1e-12 * (1.0 + y.abs()), "{pos}: {x} vs {y}");
+            }
+            sizes.push(nb.len());
+        }
+        assert_eq!(sizes, vec![1, 3, 7, 10, 10]);
     }
 
     /// Data drawn from the model: the class means and ℓ are recovered, and leave-one-out z of

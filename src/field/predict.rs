@@ -54,14 +54,19 @@ const MAX_LOST_WEIGHT: f64 = 0.25;
 /// relative to the centre are interpolated in ln f (held at the band's ends outside it).
 pub const SIGMA_FREQUENCIES_HZ: [f64; 6] = [100.0, 200.0, 350.0, 500.0, 650.0, 800.0];
 
-/// Interpolate `v` (values at [`SIGMA_FREQUENCIES_HZ`], None where missing) linearly in ln f at
-/// `f`, held constant beyond the first and last available.
-fn interpolate_ln_f(v: &[Option<f64>], f: f64) -> Option<f64> {
-    let pts: Vec<(f64, f64)> = SIGMA_FREQUENCIES_HZ
+/// The available points (ln f, value) of `v` (values at [`SIGMA_FREQUENCIES_HZ`], None where
+/// missing), taken once per curve for [`interpolate_ln_f`].
+fn ln_f_points(v: &[Option<f64>]) -> Vec<(f64, f64)> {
+    SIGMA_FREQUENCIES_HZ
         .iter()
         .zip(v)
         .filter_map(|(&x, y)| y.map(|y| (x.ln(), y)))
-        .collect();
+        .collect()
+}
+
+/// Interpolate the points `pts` of [`ln_f_points`] linearly in ln f at `f`, held constant
+/// beyond the first and last available.
+fn interpolate_ln_f(pts: &[(f64, f64)], f: f64) -> Option<f64> {
     let (first, last) = (pts.first()?, pts.last()?);
     let x = f.ln();
     if x <= first.0 {
@@ -314,7 +319,9 @@ pub fn predict_speed(
             [cs, cd, as_, ad]
         })
         .collect();
-    let column = |k: usize| -> Vec<Option<f64>> { relative.iter().map(|r| r[k]).collect() };
+    let columns: Vec<Vec<(f64, f64)>> = (0..4)
+        .map(|k| ln_f_points(&relative.iter().map(|r| r[k]).collect::<Vec<_>>()))
+        .collect();
     let curve_pts = STANDARD_GRID_HZ
         .iter()
         .enumerate()
@@ -325,8 +332,8 @@ pub fn predict_speed(
                 let scaled = |x: Option<f64>, shift: usize, spread: usize| {
                     let x = x?;
                     Some(WithError {
-                        value: x * (1.0 + interpolate_ln_f(&column(shift), f)?),
-                        std: (x * interpolate_ln_f(&column(spread), f)?).abs(),
+                        value: x * (1.0 + interpolate_ln_f(&columns[shift], f)?),
+                        std: (x * interpolate_ln_f(&columns[spread], f)?).abs(),
                     })
                 };
                 (
@@ -455,10 +462,11 @@ mod tests {
             Some(0.05),
             Some(0.06),
         ];
-        let mid = interpolate_ln_f(&v, (100.0f64 * 200.0).sqrt()).unwrap();
+        let pts = ln_f_points(&v);
+        let mid = interpolate_ln_f(&pts, (100.0f64 * 200.0).sqrt()).unwrap();
         assert!((mid - 0.03).abs() < 1e-12, "{mid}");
-        assert_eq!(interpolate_ln_f(&v, 10.0), Some(0.02));
-        assert_eq!(interpolate_ln_f(&v, 2000.0), Some(0.06));
-        assert_eq!(interpolate_ln_f(&[None; 6], 300.0), None);
+        assert_eq!(interpolate_ln_f(&pts, 10.0), Some(0.02));
+        assert_eq!(interpolate_ln_f(&pts, 2000.0), Some(0.06));
+        assert_eq!(interpolate_ln_f(&ln_f_points(&[None; 6]), 300.0), None);
     }
 }
