@@ -441,14 +441,14 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
             rank_twins_with(&mut g, &scores, &fits);
             if let Some(t) = &g.twins {
                 println!(
-                    "  twins: {} {:.2} (penalty {:.2}, deviation {:.3e}) vs {} {:.2} (penalty {:.2}) over {} members; member-gain first {}",
+                    "  twins: {} {:.2} (fraction {:.2}, deviation {:.3e}) vs {} {:.2} (fraction {:.2}) over {} members; member-gain first {}",
                     t.first.name(),
                     t.first_gain,
-                    t.first_penalty,
+                    t.first_fraction,
                     t.first_deviation,
                     t.second.name(),
                     t.second_gain,
-                    t.second_penalty,
+                    t.second_fraction,
                     t.members,
                     before.map(|e| e.name()).unwrap_or("none")
                 );
