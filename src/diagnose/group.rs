@@ -52,6 +52,7 @@
 use std::collections::BTreeMap;
 
 use super::stats::sum_chibar_sf;
+use crate::invert::fit::FitResult;
 use crate::physics::effects::Effect;
 
 /// Family-wise false-alarm rate of the pooled test over one run: over all candidate effects and
@@ -272,9 +273,22 @@ pub fn member_gains(
     d: &super::Diagnosis,
     settings: &super::DiagnoseSettings,
 ) -> Vec<(Effect, f64)> {
+    member_gains_and_refits(d, settings).0
+}
+
+/// The twin refits [`member_gains_and_refits`] made for one member: (effect, fit).
+pub type TwinRefits = Vec<(Effect, FitResult)>;
+
+/// [`member_gains`] and the twin refits it made (effect, fit): the optimum from which
+/// [`rank_twins`] profiles that twin for this member ([`DiagnosedMembers`]).
+pub fn member_gains_and_refits(
+    d: &super::Diagnosis,
+    settings: &super::DiagnoseSettings,
+) -> (Vec<(Effect, f64)>, TwinRefits) {
     let mut gains = member_scores(d);
+    let mut fits = Vec::new();
     if gains.is_empty() || d.base_failed() {
-        return gains;
+        return (gains, fits);
     }
     let refitted = |e: Effect| d.refit_of(e).is_some_and(|r| r.lr.is_finite());
     let chi2_base = d.before.chi2();
@@ -296,9 +310,10 @@ pub fn member_gains(
         let lr = chi2_base - super::Residuals::of(&d.data, &fit.predicted).chi2();
         if lr.is_finite() {
             *g = lr.max(0.0);
+            fits.push((*e, fit));
         }
     }
-    gains
+    (gains, fits)
 }
 
 /// A member's gains less their smallest value over the candidate effects: the part every
@@ -563,8 +578,33 @@ pub trait MemberProfile: Sync {
     fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64>;
 }
 
-/// The diagnosed members of a run: member i is `fits[i]`.
-pub struct DiagnosedMembers<'a>(pub Vec<(&'a super::Diagnosis, &'a super::DiagnoseSettings)>);
+/// The diagnosed members of a run: member i is `.0[i]`, and `.1[i]` (when present) holds the
+/// twin refits [`member_gains_and_refits`] made for it. A member's profile along an effect starts
+/// from its own refit with it: the diagnosis's, else that twin refit, else the base. Started
+/// from the base, the profile of a twin the diagnosis did not refit falls short of the twin
+/// refit's optimum by tens where the refit found another soil (a thinner wall needs a stiffer
+/// soil), and that twin loses the comparison for it.
+pub struct DiagnosedMembers<'a>(
+    pub Vec<(&'a super::Diagnosis, &'a super::DiagnoseSettings)>,
+    pub Vec<TwinRefits>,
+);
+
+impl DiagnosedMembers<'_> {
+    /// Member i's refit with `e`: its diagnosis's, else the twin refit made for the pooled test.
+    fn refit(&self, i: usize, e: Effect) -> Option<&FitResult> {
+        let d = self.0.get(i)?.0;
+        d.refit_of(e)
+            .map(|r| &r.fit)
+            .filter(|f| f.status != crate::types::FitStatus::Failed)
+            .or_else(|| {
+                self.1
+                    .get(i)?
+                    .iter()
+                    .find(|(f, _)| *f == e)
+                    .map(|(_, fit)| fit)
+            })
+    }
+}
 
 impl MemberProfile for DiagnosedMembers<'_> {
     fn chi2_base(&self, i: usize) -> Option<f64> {
@@ -579,11 +619,7 @@ impl MemberProfile for DiagnosedMembers<'_> {
     fn own_deviation(&self, i: usize, e: Effect) -> Option<f64> {
         let neutral = self.neutral(i, e)?;
         let v = self
-            .0
-            .get(i)?
-            .0
-            .refit_of(e)?
-            .fit
+            .refit(i, e)?
             .estimates
             .iter()
             .find(|x| x.param == crate::invert::problem::Param::Effect(e))?
@@ -592,7 +628,7 @@ impl MemberProfile for DiagnosedMembers<'_> {
     }
     fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64> {
         let (d, s) = *self.0.get(i)?;
-        super::chi2_with_effect_at(d, s, e, value)
+        super::chi2_with_effect_from(d, s, e, value, self.refit(i, e))
     }
 }
 
