@@ -35,8 +35,9 @@
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
 //!   one-sided 5 % ([`VUONG_Z`]).
 //! * **Detected twins are ranked by one common size** ([`rank_twins`]): the members carrying
-//!   either twin are refitted with each held at one size common to them all; the twin whose
-//!   members' gains lose less to that size goes first, unless its size is the end of its range.
+//!   either twin are refitted with each held at one size common to them all; the twin with the
+//!   larger likelihood ratio of "a fraction of them carry it at that size" ([`mixture_lr`]) goes
+//!   first, unless its size is the end of its range.
 //!
 //! Correction: every candidate effect of every tested group is one test, at level
 //! [`GROUP_ALPHA`] / (effects × groups) (Bonferroni), so the chance of any false detection in a
