@@ -34,9 +34,12 @@
 
 use std::collections::BTreeMap;
 
-use pipewave::diagnose::group::{member_gains, pooled_test, rank_twins_with, DiagnosedMembers};
+use pipewave::diagnose::group::{
+    member_gains_and_refits, pooled_test, rank_twins_with, DiagnosedMembers,
+};
 use pipewave::diagnose::stats::sum_chibar_sf;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, Diagnosis};
+use pipewave::invert::fit::FitResult;
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::stats::normal;
@@ -268,18 +271,25 @@ fn floor_of(e: Effect, material: Material) -> Option<f64> {
 /// The members' gains of one segment's diagnosis, as `diagnose` makes them, and whether its
 /// own diagnosis named `hidden`.
 fn member(settings: &DiagnoseSettings, t: &Trial) -> (Vec<(Effect, f64)>, bool) {
-    let (g, own, _) = member_diagnosed(settings, t);
+    let (g, own, _, _) = member_diagnosed(settings, t);
     (g, own)
 }
 
-/// A member's gains, whether its own diagnosis named the hidden effect, and the diagnosis.
-type Member = (Vec<(Effect, f64)>, bool, Diagnosis);
+/// A member's gains, whether its own diagnosis named the hidden effect, the diagnosis, and the
+/// twin refits made for the pooled test.
+type Member = (
+    Vec<(Effect, f64)>,
+    bool,
+    Diagnosis,
+    Vec<(Effect, FitResult)>,
+);
 
 /// [`member`] with the member's diagnosis kept (for the group-level twin refit).
 fn member_diagnosed(settings: &DiagnoseSettings, t: &Trial) -> Member {
     let d = diagnose_segment(&t.data, None, settings);
     let own = t.hidden.is_some_and(|(h, _)| d.named == Some(h));
-    (member_gains(&d, settings), own, d)
+    let (gains, refits) = member_gains_and_refits(&d, settings);
+    (gains, own, d, refits)
 }
 
 fn settings() -> DiagnoseSettings {
@@ -437,18 +447,21 @@ fn real_groups(seeds: u64, base: u64, clean: usize) {
             own_n += n_aff;
             let mut g = pooled_test("g", &(0..N).collect::<Vec<_>>(), &scores, 8);
             let before = g.effect;
-            let fits = DiagnosedMembers(res.iter().map(|r| (&r.2, &settings)).collect());
+            let fits = DiagnosedMembers(
+                res.iter().map(|r| (&r.2, &settings)).collect(),
+                res.iter().map(|r| r.3.clone()).collect(),
+            );
             rank_twins_with(&mut g, &scores, &fits);
             if let Some(t) = &g.twins {
                 println!(
-                    "  twins: {} {:.2} (penalty {:.2}, deviation {:.3e}) vs {} {:.2} (penalty {:.2}) over {} members; member-gain first {}",
+                    "  twins: {} {:.2} (fraction {:.2}, deviation {:.3e}) vs {} {:.2} (fraction {:.2}) over {} members; member-gain first {}",
                     t.first.name(),
                     t.first_gain,
-                    t.first_penalty,
+                    t.first_fraction,
                     t.first_deviation,
                     t.second.name(),
                     t.second_gain,
-                    t.second_penalty,
+                    t.second_fraction,
                     t.members,
                     before.map(|e| e.name()).unwrap_or("none")
                 );

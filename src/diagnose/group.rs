@@ -35,8 +35,9 @@
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
 //!   one-sided 5 % ([`VUONG_Z`]).
 //! * **Detected twins are ranked by one common size** ([`rank_twins`]): the members carrying
-//!   either twin are refitted with each held at one size common to them all; the twin whose
-//!   members' gains lose less to that size goes first, unless its size is the end of its range.
+//!   either twin are refitted with each held at one size common to them all; the twin with the
+//!   larger likelihood ratio of "a fraction of them carry it at that size" ([`mixture_lr`]) goes
+//!   first, unless its size is the end of its range.
 //!
 //! Correction: every candidate effect of every tested group is one test, at level
 //! [`GROUP_ALPHA`] / (effects × groups) (Bonferroni), so the chance of any false detection in a
@@ -52,6 +53,7 @@
 use std::collections::BTreeMap;
 
 use super::stats::sum_chibar_sf;
+use crate::invert::fit::FitResult;
 use crate::physics::effects::Effect;
 
 /// Family-wise false-alarm rate of the pooled test over one run: over all candidate effects and
@@ -204,23 +206,24 @@ pub struct GroupTest {
 }
 
 /// The group-level comparison of two detected twins ([`GROUP_TWINS`]): each refitted on the
-/// members that carry either, with one magnitude common to all of them.
+/// members that carry either, with one magnitude common to the fraction of them that carry it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TwinComparison {
-    /// The twin ranked first (the larger common-magnitude gain).
+    /// The twin ranked first (the larger group evidence).
     pub first: Effect,
     /// The other twin.
     pub second: Effect,
-    /// The group-level evidence for `first`: the sum of the compared members' own gains less
-    /// what one common size costs them ([`common_penalty`]).
+    /// The group-level evidence for `first`: the likelihood ratio of "a fraction of the
+    /// compared members carry it at one common deviation" ([`common_mixture`]).
     pub first_gain: f64,
     /// The same for `second`.
     pub second_gain: f64,
-    /// What one common size costs `first` ([`common_penalty`]).
-    pub first_penalty: f64,
+    /// The fraction of the compared members carrying `first` at that likelihood ratio's
+    /// maximum.
+    pub first_fraction: f64,
     /// The same for `second`.
-    pub second_penalty: f64,
-    /// The common deviation of `first` from its neutral value at that minimum.
+    pub second_fraction: f64,
+    /// The common deviation of `first` from its neutral value at that maximum.
     pub first_deviation: f64,
     /// Members compared.
     pub members: usize,
@@ -271,9 +274,22 @@ pub fn member_gains(
     d: &super::Diagnosis,
     settings: &super::DiagnoseSettings,
 ) -> Vec<(Effect, f64)> {
+    member_gains_and_refits(d, settings).0
+}
+
+/// The twin refits [`member_gains_and_refits`] made for one member: (effect, fit).
+pub type TwinRefits = Vec<(Effect, FitResult)>;
+
+/// [`member_gains`] and the twin refits it made (effect, fit): the optimum from which
+/// [`rank_twins`] profiles that twin for this member ([`DiagnosedMembers`]).
+pub fn member_gains_and_refits(
+    d: &super::Diagnosis,
+    settings: &super::DiagnoseSettings,
+) -> (Vec<(Effect, f64)>, TwinRefits) {
     let mut gains = member_scores(d);
+    let mut fits = Vec::new();
     if gains.is_empty() || d.base_failed() {
-        return gains;
+        return (gains, fits);
     }
     let refitted = |e: Effect| d.refit_of(e).is_some_and(|r| r.lr.is_finite());
     let chi2_base = d.before.chi2();
@@ -295,9 +311,10 @@ pub fn member_gains(
         let lr = chi2_base - super::Residuals::of(&d.data, &fit.predicted).chi2();
         if lr.is_finite() {
             *g = lr.max(0.0);
+            fits.push((*e, fit));
         }
     }
-    gains
+    (gains, fits)
 }
 
 /// A member's gains less their smallest value over the candidate effects: the part every
@@ -469,13 +486,64 @@ pub fn value_at_deviation(e: Effect, neutral: f64, delta: f64) -> Option<f64> {
     (v.is_finite() && v >= p.lower && v <= p.upper).then_some(v)
 }
 
-/// The largest pooled gain at one deviation common to the members: with `chi2_base[i]` member
-/// i's base χ² and `profiles[i][k]` its χ² with the effect at the k-th common deviation,
-/// max over k of Σ_i (χ²_base,i − χ²_i,k), and that k. Under "the group carries one effect at
-/// a similar size" this is the likelihood-ratio gain of the group's model with one common
-/// parameter, as each member's gain is that of a model with its own. `None` when a profile
-/// lacks a value or there is no member.
-pub fn common_gain(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f64)> {
+/// The likelihood ratio of "a fraction π of the members carry the effect" against "none" from
+/// the members' gains g_i = χ²_base,i − χ²_i (twice each member's log-likelihood ratio, so its
+/// likelihood ratio is w_i = exp(g_i/2)): 2·max over π ∈ [0, 1] of Σ_i ln(1 − π + π·w_i), and
+/// that π. Each member is a carrier with probability π, so a member the effect does not fit
+/// (g_i ≪ 0) costs at most ln(1 − π) and not its whole χ² increase. The sum is concave in π;
+/// its derivative Σ (w_i − 1)/(1 − π + π w_i) falls with π, and its root is found by bisection
+/// (π = 1 when the derivative is still positive there, π = 0 when it is not positive at 0).
+/// Non-finite gains are ignored; (0, 0) when there is none.
+pub fn mixture_lr(gains: &[f64]) -> (f64, f64) {
+    let g: Vec<f64> = gains.iter().copied().filter(|v| v.is_finite()).collect();
+    // ln(1 − π + π e^x) and its derivative in π, without overflow for large x.
+    let term = |x: f64, pi: f64| -> f64 {
+        if x > 0.0 {
+            x + (pi + (1.0 - pi) * (-x).exp()).ln()
+        } else {
+            (1.0 - pi + pi * x.exp()).ln()
+        }
+    };
+    let slope = |pi: f64| -> f64 {
+        g.iter()
+            .map(|&v| {
+                let x = 0.5 * v;
+                if x > 0.0 {
+                    let e = (-x).exp();
+                    (1.0 - e) / (pi + (1.0 - pi) * e)
+                } else {
+                    (x.exp() - 1.0) / (1.0 - pi + pi * x.exp())
+                }
+            })
+            .sum()
+    };
+    if g.is_empty() || slope(0.0) <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let pi = if slope(1.0) >= 0.0 {
+        1.0
+    } else {
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if slope(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let lr = 2.0 * g.iter().map(|&v| term(0.5 * v, pi)).sum::<f64>();
+    (lr.max(0.0), pi)
+}
+
+/// The group's evidence for an effect carried at one deviation common to a fraction of the
+/// members: with `chi2_base[i]` member i's base χ² and `profiles[i][k]` its χ² with the
+/// effect at the k-th common deviation, the largest [`mixture_lr`] of the gains
+/// χ²_base,i − χ²_i,k over k, with that k and its fraction π. `None` when a profile lacks a
+/// value or there is no member.
+pub fn common_mixture(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f64, f64)> {
     let n_grid = profiles.first()?.len();
     if profiles
         .iter()
@@ -487,25 +555,15 @@ pub fn common_gain(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f
     }
     (0..n_grid)
         .map(|k| {
-            let g: f64 = chi2_base.iter().zip(profiles).map(|(b, p)| b - p[k]).sum();
-            (k, g)
+            let g: Vec<f64> = chi2_base
+                .iter()
+                .zip(profiles)
+                .map(|(b, p)| b - p[k])
+                .collect();
+            let (lr, pi) = mixture_lr(&g);
+            (k, lr, pi)
         })
         .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
-}
-
-/// What one common size costs the members: with their profiles as in [`common_gain`], the sum
-/// of each member's best gain over the grid less the best common gain, and the common grid
-/// index. It is ≥ 0, near 0 when one size suits every member, and large when the members need
-/// different sizes. Both terms come from the same profile fits, so an optimum the profile
-/// minimisation misses costs both alike.
-pub fn common_penalty(chi2_base: &[f64], profiles: &[Vec<f64>]) -> Option<(usize, f64)> {
-    let (k, common) = common_gain(chi2_base, profiles)?;
-    let free: f64 = chi2_base
-        .iter()
-        .zip(profiles)
-        .map(|(b, p)| p.iter().map(|v| b - v).fold(f64::NEG_INFINITY, f64::max))
-        .sum();
-    Some((k, (free - common).max(0.0)))
 }
 
 /// What [`rank_twins_with`] needs to know of the members beyond their gains.
@@ -521,8 +579,33 @@ pub trait MemberProfile: Sync {
     fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64>;
 }
 
-/// The diagnosed members of a run: member i is `fits[i]`.
-pub struct DiagnosedMembers<'a>(pub Vec<(&'a super::Diagnosis, &'a super::DiagnoseSettings)>);
+/// The diagnosed members of a run: member i is `.0[i]`, and `.1[i]` (when present) holds the
+/// twin refits [`member_gains_and_refits`] made for it. A member's profile along an effect starts
+/// from its own refit with it: the diagnosis's, else that twin refit, else the base. Started
+/// from the base, the profile of a twin the diagnosis did not refit falls short of the twin
+/// refit's optimum by tens where the refit found another soil (a thinner wall needs a stiffer
+/// soil), and that twin loses the comparison for it.
+pub struct DiagnosedMembers<'a>(
+    pub Vec<(&'a super::Diagnosis, &'a super::DiagnoseSettings)>,
+    pub Vec<TwinRefits>,
+);
+
+impl DiagnosedMembers<'_> {
+    /// Member i's refit with `e`: its diagnosis's, else the twin refit made for the pooled test.
+    fn refit(&self, i: usize, e: Effect) -> Option<&FitResult> {
+        let d = self.0.get(i)?.0;
+        d.refit_of(e)
+            .map(|r| &r.fit)
+            .filter(|f| f.status != crate::types::FitStatus::Failed)
+            .or_else(|| {
+                self.1
+                    .get(i)?
+                    .iter()
+                    .find(|(f, _)| *f == e)
+                    .map(|(_, fit)| fit)
+            })
+    }
+}
 
 impl MemberProfile for DiagnosedMembers<'_> {
     fn chi2_base(&self, i: usize) -> Option<f64> {
@@ -537,11 +620,7 @@ impl MemberProfile for DiagnosedMembers<'_> {
     fn own_deviation(&self, i: usize, e: Effect) -> Option<f64> {
         let neutral = self.neutral(i, e)?;
         let v = self
-            .0
-            .get(i)?
-            .0
-            .refit_of(e)?
-            .fit
+            .refit(i, e)?
             .estimates
             .iter()
             .find(|x| x.param == crate::invert::problem::Param::Effect(e))?
@@ -550,21 +629,29 @@ impl MemberProfile for DiagnosedMembers<'_> {
     }
     fn chi2_at(&self, i: usize, e: Effect, value: f64) -> Option<f64> {
         let (d, s) = *self.0.get(i)?;
-        super::chi2_with_effect_at(d, s, e, value)
+        super::chi2_with_effect_from(d, s, e, value, self.refit(i, e))
     }
 }
 
 /// Rank a detected effect and its detected twin ([`GROUP_TWINS`]) by the group's data at one
 /// common magnitude. Each member's gain lets the twin's parameter take whatever value suits that
 /// member, so a twin can mimic the other member by member and sum a larger gain. The group's
-/// hypothesis is one effect at a similar size: the compared members (those whose larger gain of
-/// the two exceeds [`CARRY_GAIN`]) are refitted with each twin at a deviation common to all of
-/// them, on [`COMMON_GRID`] around their median own deviation, and the twin with the larger
-/// common-magnitude gain ([`common_gain`]) is ranked first. How one deviation of either twin
-/// changes the wave depends on each member's pipe, water pressure and soil (P60, P62 in P10),
-/// differently for the two: a common size suits the true one across members and not its twin.
-/// The other detected effects and the level are unchanged; `ambiguous_with` and `carrying`
-/// follow the effect ranked first.
+/// hypothesis is one effect at a similar size in part of its members: the compared members
+/// (those whose larger gain of the two exceeds [`CARRY_GAIN`]) are refitted with each twin at a
+/// deviation common to all of them, on [`COMMON_GRID`] around their median own deviation, and
+/// the twin with the larger likelihood ratio of "a fraction of them carry it at one common
+/// deviation" ([`common_mixture`]) is ranked first. How one deviation of either twin changes
+/// the wave depends on each member's pipe, water pressure and soil (P60, P62 in P10),
+/// differently for the two: a common size suits the true one across its carriers and not its
+/// twin. Some compared members do not fit the common size: members that carry neither (a
+/// noise draw above [`CARRY_GAIN`] for one twin), carriers whose own size is far from it, and
+/// profile refits that stop short of the optimum far from the member's own. A plain sum of the
+/// gains at the common size charges a twin each such member's whole χ² increase, tens to
+/// hundreds in a few members and unequal between the twins (a lossier wall forced on members
+/// without it costs them far more than soil damping does), and those few members then decide
+/// the ranking. As a mixture, such a member costs either twin at most ln(1 − π). The other
+/// detected effects and the level are unchanged; `ambiguous_with` and `carrying` follow the
+/// effect ranked first.
 pub fn rank_twins_with(
     test: &mut GroupTest,
     scores: &[Vec<(Effect, f64)>],
@@ -659,15 +746,13 @@ pub fn rank_twins_with(
         .iter()
         .map(|r| kb.iter().map(|&k| r.3[k]).collect())
         .collect();
-    let (Some((ia, pen_a)), Some((ib, pen_b))) =
-        (common_penalty(&base, &pa), common_penalty(&base, &pb))
+    let (Some((ia, ga, fa)), Some((ib, gb, fb))) =
+        (common_mixture(&base, &pa), common_mixture(&base, &pb))
     else {
         return;
     };
-    let sum = |e: Effect| -> f64 { rows.iter().filter_map(|r| gain(r.0, e)).sum() };
-    let (ga, gb) = (sum(a) - pen_a, sum(b) - pen_b);
     // A twin whose best common size is the end of its range has its members pinned there by
-    // the range, not by the data: one size costs it nothing and says nothing (soil damping at
+    // the range, not by the data: one size suits them for no reason of theirs (soil damping at
     // its largest loss factor under an iron pipe, where the soil radiates and its loss is almost
     // invisible, mimics a lossier wall). The comparison is then not made: the member gains
     // rank the pair.
@@ -683,19 +768,19 @@ pub fn rank_twins_with(
     if (gb > ga && at_range_end(b, kb[ib], cb)) || (gb <= ga && at_range_end(a, ka[ia], ca)) {
         return;
     }
-    let (first, second, first_gain, second_gain, first_deviation, first_penalty, second_penalty) =
+    let (first, second, first_gain, second_gain, first_deviation, first_fraction, second_fraction) =
         if gb > ga {
-            (b, a, gb, ga, cb * COMMON_GRID[kb[ib]], pen_b, pen_a)
+            (b, a, gb, ga, cb * COMMON_GRID[kb[ib]], fb, fa)
         } else {
-            (a, b, ga, gb, ca * COMMON_GRID[ka[ia]], pen_a, pen_b)
+            (a, b, ga, gb, ca * COMMON_GRID[ka[ia]], fa, fb)
         };
     test.twins = Some(TwinComparison {
         first,
         second,
         first_gain,
         second_gain,
-        first_penalty,
-        second_penalty,
+        first_fraction,
+        second_fraction,
         first_deviation,
         members: rows.len(),
     });
@@ -1132,10 +1217,13 @@ mod tests {
         assert_eq!(g.pooled[0].effect, t);
         let c = g.twins.as_ref().expect("compared");
         assert_eq!(c.members, 12);
-        // One size at the grid point on thinning's own deviation: no cost.
-        assert!(c.first_penalty.abs() < 1e-9, "{c:?}");
+        // One size at the grid point on thinning's own deviation fits every carrier: all of
+        // them carry it, and the likelihood ratio is the sum of their gains, 8 + … + 19.
+        assert!((c.first_gain - 162.0).abs() < 1e-9, "{c:?}");
+        assert_eq!(c.first_fraction, 1.0);
         assert!((c.first_deviation - 0.12).abs() < 1e-12);
-        assert!(c.second_penalty > 0.1 * c.second_gain.abs(), "{c:?}");
+        // Air at one size fits each member only as well as its own size is near it.
+        assert!(c.second_gain < 0.7 * c.first_gain, "{c:?}");
         // Air at one size for every member: nothing to choose against the member gains, air
         // stays first.
         let q = carriers(false);
@@ -1144,6 +1232,88 @@ mod tests {
         rank_twins_with(&mut g, &sc, &q);
         assert_eq!(g.effect, Some(a), "{:?}", g.twins);
         assert_eq!(g.twins.as_ref().map(|c| c.first), Some(a));
+    }
+
+    #[test]
+    fn the_mixture_likelihood_ratio_takes_the_fraction_that_carries_the_effect() {
+        // Every gain positive: every member carries it, the ratio is the sum of the gains.
+        let (lr, pi) = mixture_lr(&[4.0, 9.0, 2.5]);
+        assert!((lr - 15.5).abs() < 1e-12, "{lr}");
+        assert_eq!(pi, 1.0);
+        // Nothing positive: nothing carried.
+        assert_eq!(mixture_lr(&[-3.0, 0.0, -0.5]), (0.0, 0.0));
+        assert_eq!(mixture_lr(&[]), (0.0, 0.0));
+        // Two members with w = e⁵ and two the effect does not fit at all (w ≈ 0): the
+        // derivative 2(w − 1)/(1 − π + πw) − 2/(1 − π) vanishes at π = (w − 2)/(2w − 2), and a
+        // member that does not fit costs ln(1 − π), not its χ² increase of 200.
+        let w = 5f64.exp();
+        let (lr, pi) = mixture_lr(&[10.0, 10.0, -200.0, -200.0, f64::NAN]);
+        let want_pi = (w - 2.0) / (2.0 * w - 2.0);
+        assert!((pi - want_pi).abs() < 1e-12, "{pi} vs {want_pi}");
+        let want = 4.0 * (1.0 - want_pi + want_pi * w).ln() + 4.0 * (1.0 - want_pi).ln();
+        assert!((lr - want).abs() < 1e-9, "{lr} vs {want}");
+        // Huge gains do not overflow: one member of two carries it, π near ½.
+        let (lr, pi) = mixture_lr(&[3000.0, -10.0]);
+        assert!(
+            lr.is_finite() && lr > 2990.0 && (pi - 0.5).abs() < 0.01,
+            "{lr} {pi}"
+        );
+    }
+
+    #[test]
+    fn members_the_common_size_does_not_fit_cost_a_twin_at_most_their_share() {
+        // Pipe loss in 12 of 40 members at one deviation, 0.02 above the pipe's own loss
+        // factor, own gains 8–19; soil damping mimics it in each at one loss factor, 0.1, with
+        // 0.85 of the gain. Three clean members pass the comparison's threshold by a noise draw
+        // (gain 3 for both twins); a lossier wall at the carriers' size is far from what they
+        // need and raises their χ² by 24 each, soil damping at its common size by nothing. A
+        // plain sum of the gains at the common size would rank soil damping first
+        // (0.85·162 = 137.7 against 162 − 72 = 90); the mixture charges the three members
+        // ln(1 − π) and keeps pipe loss first, carried by 12 of the 15 compared members.
+        let (sd, pl) = (Effect::SoilDamping, Effect::PipeLoss);
+        let q = Quadratic {
+            curves: (0..40)
+                .map(|i| {
+                    let s = 8.0 + i as f64;
+                    if i < 12 {
+                        BTreeMap::from([(pl, (s, 0.02)), (sd, (0.85 * s, 0.1))])
+                    } else {
+                        BTreeMap::from([(pl, (3.0, 0.005)), (sd, (3.0, 0.05))])
+                    }
+                })
+                .collect(),
+        };
+        let sc: Vec<Vec<(Effect, f64)>> = (0..40)
+            .map(|i| {
+                let w = (Effect::AirInWater, 0.0);
+                match i {
+                    0..=11 => vec![(sd, q.curves[i][&sd].0), (pl, q.curves[i][&pl].0), w],
+                    12..=14 => vec![(sd, 3.0), (pl, 3.0), w],
+                    _ => vec![(sd, 0.0), (pl, 0.0), w],
+                }
+            })
+            .collect();
+        let members: Vec<usize> = (0..40).collect();
+        let mut g = pooled_test("CI", &members, &sc, 1);
+        assert_eq!(g.effect, Some(pl), "{:?}", g.pooled);
+        assert!(g.pooled[1].p_value < g.level, "{:?}", g.pooled);
+        // The plain sum over the 15 compared members at each twin's best common size.
+        let plain = |e: Effect, value: f64| -> f64 {
+            (0..15)
+                .map(|i| 100.0 - q.chi2_at(i, e, value).expect("inside the range"))
+                .sum()
+        };
+        assert!((plain(pl, 0.03) - 90.0).abs() < 1e-9);
+        assert!((plain(sd, 0.1) - 0.85 * 162.0).abs() < 1e-9);
+        rank_twins_with(&mut g, &sc, &q);
+        assert_eq!(g.effect, Some(pl));
+        let c = g.twins.as_ref().expect("compared");
+        assert_eq!((c.first, c.members), (pl, 15));
+        assert!((c.first_deviation - 0.02).abs() < 1e-12, "{c:?}");
+        assert!((c.first_fraction - 0.8).abs() < 0.02, "{c:?}");
+        assert_eq!(c.second_fraction, 1.0);
+        assert!(c.second_gain >= 0.85 * 162.0 - 1e-9, "{c:?}");
+        assert!(c.first_gain > c.second_gain + 5.0, "{c:?}");
     }
 
     #[test]

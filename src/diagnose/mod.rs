@@ -610,6 +610,22 @@ pub fn chi2_with_effect_at(
     e: Effect,
     value: f64,
 ) -> Option<f64> {
+    let own = diag
+        .refit_of(e)
+        .map(|r| &r.fit)
+        .filter(|f| f.status != FitStatus::Failed);
+    chi2_with_effect_from(diag, settings, e, value, own)
+}
+
+/// [`chi2_with_effect_at`] minimised from `start`, a fit of the segment's data with `e` (its
+/// own refit, or one made for the pooled test), else from the base.
+pub fn chi2_with_effect_from(
+    diag: &Diagnosis,
+    settings: &DiagnoseSettings,
+    e: Effect,
+    value: f64,
+    start: Option<&FitResult>,
+) -> Option<f64> {
     if diag.base_failed() {
         return None;
     }
@@ -620,8 +636,7 @@ pub fn chi2_with_effect_at(
     let k = crate::invert::fit::predicted_with_effect_at(
         &diag.data,
         &fit_settings(settings, effects),
-        diag.refit_of(e)
-            .map(|r| &r.fit)
+        start
             .filter(|f| f.status != FitStatus::Failed)
             .unwrap_or(&diag.base),
         e,

@@ -297,17 +297,18 @@ pub fn write_groups_csv(
 }
 
 /// The `twin_comparison` column: the two detected twins' group-level evidence at one common
-/// size, the winner first (empty when no twins were both detected).
+/// size (the likelihood ratio of a fraction of the compared members carrying it), the winner
+/// first (empty when no twins were both detected).
 pub fn twin_text(t: &super::group::TwinComparison) -> String {
     format!(
-        "{} {} (common-size cost {}, deviation {}) over {} {} (cost {}); {} members",
+        "{} {} (fraction {}, deviation {}) over {} {} (fraction {}); {} members",
         t.first.name(),
         sig(t.first_gain, 4),
-        sig(t.first_penalty, 3),
+        sig(t.first_fraction, 2),
         sig(t.first_deviation, 3),
         t.second.name(),
         sig(t.second_gain, 4),
-        sig(t.second_penalty, 3),
+        sig(t.second_fraction, 2),
         t.members
     )
 }
@@ -911,14 +912,14 @@ mod tests {
             second: Effect::AirInWater,
             first_gain: 209.62,
             second_gain: 192.72,
-            first_penalty: 51.45,
-            second_penalty: 73.81,
+            first_fraction: 0.75,
+            second_fraction: 0.4167,
             first_deviation: 0.1234,
             members: 12,
         };
         assert_eq!(
             twin_text(&c),
-            "wall_thinning 209.6 (common-size cost 51.5, deviation 0.123) over air_in_water 192.7 (cost 73.8); 12 members"
+            "wall_thinning 209.6 (fraction 0.75, deviation 0.123) over air_in_water 192.7 (fraction 0.42); 12 members"
         );
     }
 }

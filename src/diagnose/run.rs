@@ -9,7 +9,8 @@ use rayon::prelude::*;
 use rusqlite::Connection;
 
 use super::group::{
-    group_key, member_gains, rank_twins, test_groups, DiagnosedMembers, GroupBy, GroupTest,
+    group_key, member_gains_and_refits, rank_twins, test_groups, DiagnosedMembers, GroupBy,
+    GroupTest,
 };
 use super::inventory::{InventoryPipe, InventoryProfile};
 use super::report::{evidence, write_csv, write_groups_csv, write_html, GroupRow};
@@ -325,15 +326,18 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
         })
         .collect();
     // Each member's gains, with the twin of a refitted compliance effect refitted too.
-    let scores: Vec<Vec<(Effect, f64)>> = pool.install(|| {
+    let (scores, twin_refits): (Vec<Vec<(Effect, f64)>>, Vec<_>) = pool.install(|| {
         diags
             .par_iter()
-            .map(|d| member_gains(&d.diagnosis, &d.settings))
-            .collect()
+            .map(|d| member_gains_and_refits(&d.diagnosis, &d.settings))
+            .unzip()
     });
     let mut groups = test_groups(&keys, &scores);
     // Detected twins ranked by a refit of the group with one common magnitude.
-    let members = DiagnosedMembers(diags.iter().map(|d| (&d.diagnosis, &d.settings)).collect());
+    let members = DiagnosedMembers(
+        diags.iter().map(|d| (&d.diagnosis, &d.settings)).collect(),
+        twin_refits,
+    );
     pool.install(|| rank_twins(&mut groups, &scores, &members));
     let rows = pool.install(|| refit_groups(&diags, &mut groups));
     summary.groups_detected = groups.iter().filter(|g| g.effect.is_some()).count();
