@@ -376,6 +376,46 @@ fn conditional_at(
     })
 }
 
+/// The covariance C of the k neighbours' observed u (`nbr(p)` the p-th; field, scatter and
+/// noise, P78–P79) and their cross-covariance cᵀ with the target's u (class scale `root_b`),
+/// written element by element through `set_c` and `set_ct` into whatever matrices hold them.
+/// `d` holds the target's distances to the neighbours, then those of each pair (p, q < p) at
+/// k + p(p − 1)/2 + q.
+fn fill_conditional(
+    t: &Terms,
+    root_b: f64,
+    k: usize,
+    nbr: impl Fn(usize) -> usize,
+    d: &[f64],
+    mut set_c: impl FnMut(usize, usize, f64),
+    mut set_ct: impl FnMut(usize, usize, f64),
+) {
+    let mut pair = k;
+    for p in 0..k {
+        let i = nbr(p);
+        for q in 0..=p {
+            let s = if p == q {
+                t.own(i)
+            } else {
+                pair += 1;
+                t.between_at(i, nbr(q), d[pair - 1])
+            };
+            for a in 0..2 {
+                for b in 0..2 {
+                    set_c(2 * p + a, 2 * q + b, s.at(a, b));
+                    set_c(2 * q + b, 2 * p + a, s.at(a, b));
+                }
+            }
+        }
+        let s = t.hyper.kernel(d[p]).scale(root_b * t.root_b[i]);
+        for a in 0..2 {
+            for b in 0..2 {
+                set_ct(2 * p + a, b, s.at(a, b));
+            }
+        }
+    }
+}
+
 /// Rows and columns of a posterior's conditional covariance: two per neighbour.
 const POSTERIOR_DIM: usize = 2 * NEIGHBOURS;
 
@@ -396,30 +436,15 @@ fn conditional_dense(
     }
     let mut c = DMatrix::<f64>::zeros(2 * k, 2 * k);
     let mut ct = DMatrix::<f64>::zeros(2 * k, 2);
-    // Pair (p, q < p) of the neighbours sits at k + p(p − 1)/2 + q of `d`.
-    let mut pair = k;
-    for (p, &i) in nbrs.iter().enumerate() {
-        for (q, &j) in nbrs.iter().enumerate().take(p + 1) {
-            let s = if p == q {
-                t.own(i)
-            } else {
-                pair += 1;
-                t.between_at(i, j, d[pair - 1])
-            };
-            for a in 0..2 {
-                for b in 0..2 {
-                    c[(2 * p + a, 2 * q + b)] = s.at(a, b);
-                    c[(2 * q + b, 2 * p + a)] = s.at(a, b);
-                }
-            }
-        }
-        let s = t.hyper.kernel(d[p]).scale(root_b * t.root_b[i]);
-        for a in 0..2 {
-            for b in 0..2 {
-                ct[(2 * p + a, b)] = s.at(a, b);
-            }
-        }
-    }
+    fill_conditional(
+        t,
+        root_b,
+        k,
+        |p| nbrs[p],
+        d,
+        |r, col, v| c[(r, col)] = v,
+        |r, col, v| ct[(r, col)] = v,
+    );
     let chol = c.cholesky()?;
     let x = chol.solve(&ct); // C⁻¹ cᵀ (2k × 2)
     let reduce = ct.transpose() * &x; // c C⁻¹ cᵀ
@@ -595,31 +620,15 @@ fn conditional_stack<const N: usize>(
 ) -> Option<(SMatrix<f64, 2, N>, Sym2)> {
     let mut c = SMatrix::<f64, N, N>::identity();
     let mut ct = SMatrix::<f64, N, 2>::zeros();
-    // Pair (p, q < p) of the neighbours sits at k + p(p − 1)/2 + q of `d`.
-    let mut pair = k;
-    for p in 0..k {
-        let i = nbr(p);
-        for q in 0..=p {
-            let s = if p == q {
-                t.own(i)
-            } else {
-                pair += 1;
-                t.between_at(i, nbr(q), d[pair - 1])
-            };
-            for a in 0..2 {
-                for b in 0..2 {
-                    c[(2 * p + a, 2 * q + b)] = s.at(a, b);
-                    c[(2 * q + b, 2 * p + a)] = s.at(a, b);
-                }
-            }
-        }
-        let s = t.hyper.kernel(d[p]).scale(root_b * t.root_b[i]);
-        for a in 0..2 {
-            for b in 0..2 {
-                ct[(2 * p + a, b)] = s.at(a, b);
-            }
-        }
-    }
+    fill_conditional(
+        t,
+        root_b,
+        k,
+        nbr,
+        d,
+        |r, col, v| c[(r, col)] = v,
+        |r, col, v| ct[(r, col)] = v,
+    );
     let chol = c.cholesky()?;
     let x = chol.solve(&ct);
     let reduce = ct.transpose() * x;
