@@ -523,15 +523,8 @@ pub fn mixture_lr(gains: &[f64]) -> (f64, f64) {
     let pi = if slope(1.0) >= 0.0 {
         1.0
     } else {
-        let (mut lo, mut hi) = (0.0, 1.0);
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if slope(mid) > 0.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
+        // The log-likelihood is concave in π: its slope falls through 0 once.
+        let (lo, hi) = crate::optimize::bisect(0.0, 1.0, 60, |pi| slope(pi) > 0.0);
         0.5 * (lo + hi)
     };
     let lr = 2.0 * g.iter().map(|&v| term(0.5 * v, pi)).sum::<f64>();

@@ -1222,15 +1222,10 @@ impl Field {
                         scale: 1.0,
                     };
                 }
-                let (mut lo, mut hi) = ((1e-12f64).ln(), 0.0f64);
-                for _ in 0..60 {
-                    let mid = 0.5 * (lo + hi);
-                    if chi2(mid.exp()) > SCREEN_TARGET_CHI2 {
-                        hi = mid;
-                    } else {
-                        lo = mid;
-                    }
-                }
+                // χ²(s) falls as s falls: the largest ln s bracketed with χ² at the target.
+                let (lo, _) = crate::optimize::bisect((1e-12f64).ln(), 0.0, 60, |ln_s| {
+                    chi2(ln_s.exp()) <= SCREEN_TARGET_CHI2
+                });
                 Screened {
                     chi2: full,
                     scale: lo.exp(),

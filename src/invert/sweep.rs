@@ -169,18 +169,7 @@ fn r_range_at(region: &SpeedBox, l: f64) -> Option<(f64, f64)> {
     if e(hi) < e_min || e(lo) > e_max {
         return None;
     }
-    let root = |target: f64| {
-        let (mut a, mut b) = (lo, hi);
-        for _ in 0..60 {
-            let m = 0.5 * (a + b);
-            if e(m) < target {
-                a = m;
-            } else {
-                b = m;
-            }
-        }
-        b
-    };
+    let root = |target: f64| crate::optimize::bisect(lo, hi, 60, |m| e(m) < target).1;
     let a = if e(lo) >= e_min { lo } else { root(e_min) };
     let b = if e(hi) <= e_max { hi } else { root(e_max) };
     // Just inside, so that the soil at either end lies in the box.

@@ -3,7 +3,8 @@
 //! This module knows nothing about pipes: it minimises any [`Objective`] over a box
 //! ([`Bounds`]) by differential evolution ([`de`]), refines least-squares problems by a
 //! bounded Levenberg–Marquardt method ([`lm`]), searches locally where the objective jumps by
-//! the downhill simplex ([`simplex`]), and offers the small dense linear algebra
+//! the downhill simplex ([`simplex`]), brackets a monotone crossing by bisection ([`bisect`]),
+//! and offers the small dense linear algebra
 //! both need, including parameter covariances from a Jacobian ([`linalg`]).
 //!
 //! The shape follows the `argmin` crate: the problem is a trait the caller implements,
@@ -16,11 +17,13 @@
 //! everywhere: they never win a comparison, so a region where the model cannot be
 //! evaluated is avoided rather than exploited.
 
+pub mod bisect;
 pub mod de;
 pub mod linalg;
 pub mod lm;
 pub mod simplex;
 
+pub use bisect::bisect;
 pub use de::{DeMethod, DeResult, DifferentialEvolution};
 pub use lm::{
     jacobian_fd, FiniteDifference, LeastSquares, LevenbergMarquardt, LmResult, LmStopReason,

@@ -125,15 +125,7 @@ pub fn pooled_error_quantile(sd_ln: &[f64], p: f64) -> f64 {
             return f64::INFINITY;
         }
     }
-    let mut lo = 0.0;
-    for _ in 0..100 {
-        let mid = 0.5 * (lo + hi);
-        if cdf(mid) < p {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
+    let (lo, hi) = crate::optimize::bisect(0.0, hi, 100, |x| cdf(x) < p);
     0.5 * (lo + hi)
 }
 
