@@ -208,11 +208,10 @@ pub fn predict_speed(
             problem.system_at(&x)
         })
     };
-    let full_curve = |sys: &System| -> Vec<Option<Complex64>> { continued_roots(sys) };
     // The reference: the curve at the posterior mean and the middle contact, by continuation
     // (as a fit's stored curve); every other node starts each frequency's root from it (as the
     // fit's curve errors do), and falls back to its own continuation where that fails.
-    let reference = system_of(mean, 0.5).map(|s| full_curve(&s));
+    let reference = system_of(mean, 0.5).map(|s| continued_roots(&s));
     // With the centre's curve the sigma points are solved at the six frequencies only.
     let at = |f: f64| reference.is_none() || SIGMA_FREQUENCIES_HZ.contains(&f);
     let mut solved: Vec<Vec<Option<(f64, f64)>>> = Vec::new();
@@ -238,7 +237,7 @@ pub fn predict_speed(
                 };
                 match from_guess {
                     Some(k) if complete(&k) => k,
-                    _ => full_curve(&sys),
+                    _ => continued_roots(&sys),
                 }
             }
             None => vec![None; nf],
