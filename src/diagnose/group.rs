@@ -6,7 +6,7 @@
 //! range: the gain is then 0 to first order). Each gain tests one parameter on the bound of its
 //! range, so under "no effect in any member" it is χ̄² = ½χ²₀ + ½χ²₁ (Self & Liang 1987), and
 //! the sum over n independent members has the binomial mixture Σ_k C(n,k)2⁻ⁿχ²_k
-//! ([`super::stats::sum_chibar_sf`]).
+//! ([`super::stats::sum_chibar_sf`]; model P90).
 //!
 //! Why gains, not scores: the score is the first-order view at the base fit. In the local model
 //! (Z_i the standardised efficient score of member i) score and gain coincide, and the sum of
@@ -34,7 +34,7 @@
 //!   non-nested extensions of the base: the members' gain differences g_A − g_B are twice their
 //!   log-likelihood ratios, independent over members; B is reported with A unless A is better at
 //!   one-sided 5 % ([`VUONG_Z`]).
-//! * **Detected twins are ranked by one common size** ([`rank_twins`]): the members carrying
+//! * **Detected twins are ranked by one common size** ([`rank_twins`], P91): the members carrying
 //!   either twin are refitted with each held at one size common to them all; the twin with the
 //!   larger likelihood ratio of "a fraction of them carry it at that size" ([`mixture_lr`]) goes
 //!   first, unless its size is the end of its range.
@@ -486,7 +486,7 @@ pub fn value_at_deviation(e: Effect, neutral: f64, delta: f64) -> Option<f64> {
     (v.is_finite() && v >= p.lower && v <= p.upper).then_some(v)
 }
 
-/// The likelihood ratio of "a fraction π of the members carry the effect" against "none" from
+/// The likelihood ratio of P91, "a fraction π of the members carry the effect" against "none", from
 /// the members' gains g_i = χ²_base,i − χ²_i (twice each member's log-likelihood ratio, so its
 /// likelihood ratio is w_i = exp(g_i/2)): 2·max over π ∈ [0, 1] of Σ_i ln(1 − π + π·w_i), and
 /// that π. Each member is a carrier with probability π, so a member the effect does not fit
