@@ -24,8 +24,12 @@ use super::problem::{Param, ParamSpec, Scale};
 pub const DCHI2_95: f64 = 3.841_458_820_694_124;
 /// z of a two-sided 95 % normal interval (√3.84).
 pub const Z_95: f64 = 1.959_963_984_540_054;
-/// Boundary points of the 95 % ellipse of (ln c_P, ln c_S) mapped to (E_m, ν_m).
-pub const ELLIPSE_POINTS: usize = 720;
+/// Points of the coarse scan of the 95 % ellipse's boundary in (ln c_P, ln c_S) whose local
+/// extremes of ln E_m are then refined to the stationary point ([`soil_intervals`]).
+pub const ELLIPSE_POINTS: usize = 48;
+/// Halvings of the bracket (one scan step, 7.5°) of a stationary point of ln E_m on the
+/// ellipse: 2⁻⁴⁰ of it, far below where the range of E_m changes in double precision.
+const ELLIPSE_REFINE_STEPS: usize = 40;
 /// An interval end within this fraction of the search range from a bound "reaches" it.
 pub const BOUND_REACH_FRACTION: f64 = 1e-3;
 
@@ -561,14 +565,8 @@ fn soil_intervals(
     };
     let r = DCHI2_95.sqrt();
     if let Some(l) = cholesky(&c2, 2) {
-        for k in 0..ELLIPSE_POINTS {
-            let th = std::f64::consts::TAU * k as f64 / ELLIPSE_POINTS as f64;
-            let (z0, z1) = (r * th.cos(), r * th.sin());
-            let dp = l[0] * z0;
-            let ds = l[2] * z0 + l[3] * z1;
-            if let Some((e, nu)) = soil_from_speeds((p0 + dp).exp(), (s0 + ds).exp(), rho) {
-                take(e, nu);
-            }
+        for (e, nu) in ellipse_extremes(p0, s0, [l[0], l[2], l[3]], r, rho) {
+            take(e, nu);
         }
         // Chords along ν = const (a line ln c_S = ln c_P + ½ ln(G/M)), at the ν bounds.
         let q = {
@@ -616,6 +614,74 @@ fn soil_intervals(
             reaches_upper_bound: nu_range.1 >= nu_spec.upper - reach_nu,
         },
     )
+}
+
+/// The soils (E_m, ν_m) on the boundary of the ellipse (ln c_P, ln c_S) = (p0, s0) + L z,
+/// |z| = `r` (L lower triangular: `l` = [L₀₀, L₁₀, L₁₁]) at which ν_m or E_m is extreme.
+///
+/// ν_m depends on d = ln c_S − ln c_P alone (q = c_S²/c_P² = e^{2d}, ν = (1 − 2q)/(2(1 − q)),
+/// P63–P64) and falls as d rises; d is linear in z, so its extremes are the two boundary points
+/// along the gradient, exactly. ln E_m = ln ρ + 2 ln c_S + h(d), h(d) = ln((3 − 4q)/(1 − q)), is
+/// smooth on the boundary away from ν_m = −1 and ½; its local extremes in a scan of
+/// [`ELLIPSE_POINTS`] angles are refined to where its derivative along the boundary vanishes,
+/// by bisection on the sign of that derivative (analytic: ∂ln E/∂ln c_S = 2 + h′(d),
+/// ∂ln E/∂ln c_P = −h′(d), h′(d) = 2q/(1 − q) − 8q/(3 − 4q)). Points that are no soil are
+/// left out; where the feasible arc ends, the chords at the ν_m bounds hold the extreme.
+fn ellipse_extremes(p0: f64, s0: f64, l: [f64; 3], r: f64, rho: f64) -> Vec<(f64, f64)> {
+    let point = |th: f64| {
+        let (z0, z1) = (r * th.cos(), r * th.sin());
+        (p0 + l[0] * z0, s0 + l[1] * z0 + l[2] * z1)
+    };
+    let soil = |th: f64| {
+        let (p, s) = point(th);
+        soil_from_speeds(p.exp(), s.exp(), rho)
+    };
+    // d ln E/dθ along the boundary.
+    let slope = |th: f64| {
+        let (p, s) = point(th);
+        let q = (2.0 * (s - p)).exp();
+        let h1 = 2.0 * q / (1.0 - q) - 8.0 * q / (3.0 - 4.0 * q);
+        let (dz0, dz1) = (-r * th.sin(), r * th.cos());
+        let (dp, ds) = (l[0] * dz0, l[1] * dz0 + l[2] * dz1);
+        -h1 * dp + (2.0 + h1) * ds
+    };
+    let mut out = Vec::new();
+    // ν_m: d − d₀ = (L₁₀ − L₀₀) z₀ + L₁₁ z₁ is extreme at θ = atan2(L₁₁, L₁₀ − L₀₀) and θ + π.
+    let th_d = l[2].atan2(l[1] - l[0]);
+    out.extend(
+        [th_d, th_d + std::f64::consts::PI]
+            .into_iter()
+            .filter_map(soil),
+    );
+    let step = std::f64::consts::TAU / ELLIPSE_POINTS as f64;
+    let ln_e: Vec<Option<f64>> = (0..ELLIPSE_POINTS)
+        .map(|k| soil(k as f64 * step).map(|(e, _)| e.ln()))
+        .collect();
+    for k in 0..ELLIPSE_POINTS {
+        let Some(v) = ln_e[k] else { continue };
+        out.extend(soil(k as f64 * step));
+        let before = ln_e[(k + ELLIPSE_POINTS - 1) % ELLIPSE_POINTS];
+        let after = ln_e[(k + 1) % ELLIPSE_POINTS];
+        let (Some(b), Some(a)) = (before, after) else {
+            continue;
+        };
+        // A local maximum (sign +1) or minimum (−1) of the scan, bracketed by the derivative's
+        // sign change between its neighbours.
+        let sign = if v >= b && v >= a {
+            1.0
+        } else if v <= b && v <= a {
+            -1.0
+        } else {
+            continue;
+        };
+        let (lo, hi) = ((k as f64 - 1.0) * step, (k as f64 + 1.0) * step);
+        if sign * slope(lo) > 0.0 && sign * slope(hi) < 0.0 {
+            let (a, b) =
+                crate::optimize::bisect(lo, hi, ELLIPSE_REFINE_STEPS, |th| sign * slope(th) > 0.0);
+            out.extend(soil(0.5 * (a + b)));
+        }
+    }
+    out
 }
 
 /// 95 % intervals of E_m and ν_m of a soil known through u = (ln c_P, ln c_S) with covariance
@@ -712,6 +778,69 @@ pub fn propagate(grad: &[f64], cov: &[f64]) -> f64 {
 mod tests {
     use super::*;
     use crate::invert::problem::{parameter_space, Method};
+
+    /// The extremes of E_m and ν_m on the 95 % ellipse's boundary, from the coarse scan refined
+    /// at its local extremes, agree with a scan of 200,000 boundary points: never narrower than
+    /// it, and wider by at most the scan's own sampling error (its step is 3e-5 rad, so it
+    /// misses an extreme by at most about 1e-9 relative). Round, elongated and tilted ellipses,
+    /// soft and stiff, including ones crossing ν_m = 0 (arcs that are no soil at ν < 0 are
+    /// still in the scan's range here, as `soil_from_speeds` accepts ν > −1).
+    #[test]
+    fn ellipse_extremes_match_a_dense_scan_of_the_boundary() {
+        let r = DCHI2_95.sqrt();
+        let cases: [([f64; 2], [f64; 3]); 6] = [
+            ([5.0, 3.9], [0.05, 0.0, 0.05]),
+            ([5.0, 3.9], [0.3, 0.28, 0.05]),
+            ([6.2, 4.1], [0.02, -0.1, 0.4]),
+            ([4.4, 3.6], [0.15, 0.1, 0.02]),
+            ([7.0, 6.3], [0.2, 0.15, 0.1]),
+            ([5.5, 3.0], [0.6, -0.4, 0.3]),
+        ];
+        for (u, l) in cases {
+            let rho = 1900.0;
+            let ends = |pts: &[(f64, f64)]| {
+                let mut e = (f64::INFINITY, f64::NEG_INFINITY);
+                let mut nu = e;
+                for &(a, b) in pts {
+                    e = (e.0.min(a), e.1.max(a));
+                    nu = (nu.0.min(b), nu.1.max(b));
+                }
+                (e, nu)
+            };
+            let n = 200_000;
+            let dense: Vec<(f64, f64)> = (0..n)
+                .filter_map(|k| {
+                    let th = std::f64::consts::TAU * k as f64 / n as f64;
+                    let (z0, z1) = (r * th.cos(), r * th.sin());
+                    soil_from_speeds(
+                        (u[0] + l[0] * z0).exp(),
+                        (u[1] + l[1] * z0 + l[2] * z1).exp(),
+                        rho,
+                    )
+                })
+                .collect();
+            let (de, dnu) = ends(&dense);
+            let (fe, fnu) = ends(&ellipse_extremes(u[0], u[1], l, r, rho));
+            let rel = |a: f64, b: f64| (a - b) / b.abs().max(1e-300);
+            for (got, want, lower) in [
+                (fe.0, de.0, true),
+                (fe.1, de.1, false),
+                (fnu.0, dnu.0, true),
+                (fnu.1, dnu.1, false),
+            ] {
+                // Lower ends may only be lower than the scan's, upper only higher.
+                let wider = if lower {
+                    -rel(got, want)
+                } else {
+                    rel(got, want)
+                };
+                assert!(
+                    (-1e-12..1e-8).contains(&wider),
+                    "{u:?} {l:?}: {got} against the dense scan's {want}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn speeds_round_trip_and_match_closed_forms() {
