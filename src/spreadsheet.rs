@@ -36,7 +36,7 @@ pub const TEXT_PREFIX: char = '\'';
 /// assert_eq!(spreadsheet_safe("HYD-1003"), "HYD-1003");
 /// ```
 pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
-    if s.starts_with(FORMULA_LEADS) {
+    if needs_prefix(s) {
         let mut t = String::with_capacity(s.len() + 1);
         t.push(TEXT_PREFIX);
         t.push_str(s);
@@ -50,20 +50,28 @@ pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
 /// is followed by one of [`FORMULA_LEADS`] is dropped; any other text is returned unchanged. The
 /// CSV import reads every cell through this, so pipewave's own CSV output (e.g. the
 /// `wavenumbers` measurements of a segment id `+1`, written `'+1`) imports as the id it was
-/// written for. A spreadsheet saving such a cell writes it without the `'` too. The one text
-/// that does not survive the round trip is one that itself begins with `'` and a formula lead
-/// (`'=1` is read as `=1`), exactly as a spreadsheet reads it.
+/// written for. A spreadsheet saving such a cell writes it without the `'` too. Text that
+/// itself begins with `'` and a formula lead is written with one more `'` (`'=1` as `''=1`,
+/// which a spreadsheet shows as `'=1`), so it survives the round trip as well.
 ///
 /// ```
 /// use pipewave::spreadsheet::{spreadsheet_safe, unneutralise};
 /// assert_eq!(unneutralise(&spreadsheet_safe("+1")), "+1");
 /// assert_eq!(unneutralise("'quoted'"), "'quoted'");
+/// assert_eq!(unneutralise(&spreadsheet_safe("'-")), "'-");
 /// ```
 pub fn unneutralise(s: &str) -> &str {
     match s.strip_prefix(TEXT_PREFIX) {
-        Some(rest) if rest.starts_with(FORMULA_LEADS) => rest,
+        Some(rest) if needs_prefix(rest) => rest,
         _ => s,
     }
+}
+
+/// Whether [`spreadsheet_safe`] prefixes `s`: it begins, after any run of `'`, with one of
+/// [`FORMULA_LEADS`]. Text that itself begins with `'` and a formula lead (`'-`) is prefixed
+/// too (`''-`), so that [`unneutralise`], which drops exactly one `'`, gives it back.
+fn needs_prefix(s: &str) -> bool {
+    s.trim_start_matches(TEXT_PREFIX).starts_with(FORMULA_LEADS)
 }
 
 /// A text cell for rows written with `csv::Writer::serialize`: serialises as
@@ -103,6 +111,8 @@ mod tests {
         for (raw, safe) in [
             ("=HYPERLINK(\"http://x\")", "'=HYPERLINK(\"http://x\")"),
             ("+1", "'+1"),
+            ("'=already text", "''=already text"),
+            ("'-", "''-"),
             ("-2+3", "'-2+3"),
             ("@SUM(A1)", "'@SUM(A1)"),
             ("\tx", "'\tx"),
@@ -122,7 +132,7 @@ mod tests {
     #[test]
     fn unneutralise_inverts_spreadsheet_safe_and_nothing_else() {
         for t in [
-            "=1+1", "+1", "-2", "@A1", "\t=x", "\r@y", "WM10003", "'", "'x", "''=1",
+            "=1+1", "+1", "-2", "@A1", "\t=x", "\r@y", "WM10003", "'", "'x", "''=1", "'-", "'=1",
         ] {
             assert_eq!(unneutralise(&spreadsheet_safe(t)), t, "{t:?}");
         }
@@ -138,7 +148,6 @@ mod tests {
             "",
             "WM10003",
             "clay",
-            "'=already text",
             "a=b",
             "x-1",
             " =padded",

@@ -27,6 +27,8 @@ fn config(ci_cases: u32) -> ProptestConfig {
     ProptestConfig {
         cases,
         failure_persistence: None,
+        // A fixed seed (overriding PROPTEST_RNG_SEED): the same cases on every run.
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x7069_7065_7761_7665),
         ..ProptestConfig::default()
     }
 }
