@@ -282,17 +282,18 @@ pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
         params![run.run_id, run.fingerprint, run.hyper_source],
     )?;
     let id = tx.last_insert_rowid();
-    // Only the latest update's classes, segments and predictions are kept. The predictions'
-    // deletion cascades to their curves one prediction at a time: emptying the curves first
-    // in one statement is faster, but SQLite then holds a record of every row it deletes (on
-    // 100,000 segments, 2.9 million curve points, the update peaked at 146 MB, not 77 MB).
+    // Only the latest update's classes, segments and predictions are kept. Predictions are
+    // overwritten in place as they come ([`insert_field_rows`]) and the ones this update did
+    // not write are deleted by [`finish_field`]: deleting all of them here would write and
+    // delete every curve point twice, and emptying the curves in one statement makes SQLite
+    // hold a record of every row it deletes (146 MB, not 77 MB, on 100,000 segments).
     tx.execute("DELETE FROM field_classes", [])?;
     tx.execute("DELETE FROM field_segments", [])?;
-    tx.execute("DELETE FROM predictions", [])?;
     Ok(id)
 }
 
-/// Complete the run row `field_run_id` and store its classes.
+/// Complete the run row `field_run_id`, store its classes and delete the predictions it did
+/// not write (with their curves).
 pub fn finish_field(
     tx: &Connection,
     field_run_id: i64,
@@ -331,6 +332,10 @@ pub fn finish_field(
             run.n_labels_rejected,
             run.elapsed_s,
         ],
+    )?;
+    tx.execute(
+        "DELETE FROM predictions WHERE field_run_id IS NOT ?1",
+        params![field_run_id],
     )?;
     let mut ins = tx.prepare_cached(
         "INSERT INTO field_classes (field_run_id, soil_class, n_segments, n_measured, \
@@ -395,14 +400,37 @@ pub fn insert_field_rows(
              soil_s_wave_speed_std_m_per_s, soil_youngs_modulus_pa, soil_youngs_modulus_lo_pa, \
              soil_youngs_modulus_hi_pa, soil_poisson, soil_poisson_lo, soil_poisson_hi, \
              leak_band_speed_m_per_s, leak_band_speed_std_m_per_s, soil_class, n_neighbours, \
-             note, leak_band_speed_gradient_ln_cp, leak_band_speed_gradient_ln_cs) \
+             note, leak_band_speed_gradient_ln_cp, leak_band_speed_gradient_ln_cs, \
+             field_run_id) \
              VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, \
-             ?17, ?18, ?19)",
+             ?17, ?18, ?19, ?20) \
+             ON CONFLICT (segment_id) DO UPDATE SET run_id = excluded.run_id, \
+             soil_p_wave_speed_m_per_s = excluded.soil_p_wave_speed_m_per_s, \
+             soil_p_wave_speed_std_m_per_s = excluded.soil_p_wave_speed_std_m_per_s, \
+             soil_s_wave_speed_m_per_s = excluded.soil_s_wave_speed_m_per_s, \
+             soil_s_wave_speed_std_m_per_s = excluded.soil_s_wave_speed_std_m_per_s, \
+             soil_youngs_modulus_pa = excluded.soil_youngs_modulus_pa, \
+             soil_youngs_modulus_lo_pa = excluded.soil_youngs_modulus_lo_pa, \
+             soil_youngs_modulus_hi_pa = excluded.soil_youngs_modulus_hi_pa, \
+             soil_poisson = excluded.soil_poisson, soil_poisson_lo = excluded.soil_poisson_lo, \
+             soil_poisson_hi = excluded.soil_poisson_hi, \
+             leak_band_speed_m_per_s = excluded.leak_band_speed_m_per_s, \
+             leak_band_speed_std_m_per_s = excluded.leak_band_speed_std_m_per_s, \
+             soil_class = excluded.soil_class, n_neighbours = excluded.n_neighbours, \
+             note = excluded.note, \
+             leak_band_speed_gradient_ln_cp = excluded.leak_band_speed_gradient_ln_cp, \
+             leak_band_speed_gradient_ln_cs = excluded.leak_band_speed_gradient_ln_cs, \
+             field_run_id = excluded.field_run_id, created_at = excluded.created_at",
         )?;
         let mut curve = tx.prepare_cached(
             "INSERT INTO prediction_curves (segment_id, frequency_hz, phase_speed_m_per_s, \
              phase_speed_std_m_per_s, attenuation_db_per_m, attenuation_std_db_per_m) \
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6) \
+             ON CONFLICT (segment_id, frequency_hz) DO UPDATE SET \
+             phase_speed_m_per_s = excluded.phase_speed_m_per_s, \
+             phase_speed_std_m_per_s = excluded.phase_speed_std_m_per_s, \
+             attenuation_db_per_m = excluded.attenuation_db_per_m, \
+             attenuation_std_db_per_m = excluded.attenuation_std_db_per_m",
         )?;
         for (p, pts) in predictions {
             let (cp, cs) = (p.soil_p_wave_speed, p.soil_s_wave_speed);
@@ -427,6 +455,7 @@ pub fn insert_field_rows(
                 p.note,
                 p.leak_band_speed_gradient.map(|g| g[0]),
                 p.leak_band_speed_gradient.map(|g| g[1]),
+                field_run_id,
             ])?;
             for c in pts {
                 curve.execute(params![
@@ -650,4 +679,72 @@ pub fn plan_picks(conn: &Connection) -> Result<Vec<PlanPick>, DbError> {
         })
     })?;
     Ok(rows.collect::<Result<_, _>>()?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::migrate::migrate;
+    use std::path::Path;
+
+    fn prediction(id: &str, speed: f64) -> Prediction {
+        let row = PredictionRow {
+            segment_id: id.into(),
+            leak_band_speed: Some((speed, 0.02 * speed)),
+            note: format!("from {speed}"),
+            ..PredictionRow::default()
+        };
+        let curve = [100.0, 200.0]
+            .map(|f| CurvePoint {
+                frequency_hz: f,
+                phase_speed_m_per_s: Some(speed + f / 100.0),
+                phase_speed_std_m_per_s: Some(1.0),
+                attenuation_db_per_m: Some(0.1),
+                attenuation_std_db_per_m: Some(0.01),
+                model_phase_speed_m_per_s: None,
+                model_attenuation_db_per_m: None,
+            })
+            .to_vec();
+        (row, curve)
+    }
+
+    fn update(conn: &mut Connection, preds: &[Prediction]) {
+        in_transaction(conn, |tx| {
+            let run = FieldRunRow::default();
+            let id = start_field(tx, &run)?;
+            insert_field_rows(tx, id, &[], preds)?;
+            finish_field(tx, id, &run, &[])
+        })
+        .unwrap();
+    }
+
+    /// A field update overwrites each prediction it makes, with its curve, and deletes the
+    /// previous update's predictions it did not make (a segment measured since), curves
+    /// included: the latest update's predictions only, as if the table had been emptied first.
+    #[test]
+    fn an_update_keeps_only_its_own_predictions() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        conn.pragma_update(None, "foreign_keys", true).unwrap();
+        migrate(&mut conn, Path::new(":memory:")).unwrap();
+        for id in ["A", "B"] {
+            conn.execute(
+                "INSERT INTO segments (segment_id, material, outer_diameter_mm, \
+                 wall_thickness_mm, soil_density_kg_m3) VALUES (?1, 'PVC', 110, 5.3, 1900)",
+                [id],
+            )
+            .unwrap();
+        }
+        update(&mut conn, &[prediction("A", 300.0), prediction("B", 310.0)]);
+        update(&mut conn, &[prediction("A", 320.0)]);
+        let a = prediction_for(&conn, "A").unwrap().expect("A is predicted");
+        assert_eq!(a.0.leak_band_speed, Some((320.0, 6.4)));
+        assert_eq!(a.0.note, "from 320");
+        let speeds: Vec<Option<f64>> = a.1.iter().map(|c| c.phase_speed_m_per_s).collect();
+        assert_eq!(speeds, [Some(321.0), Some(322.0)]);
+        assert!(prediction_for(&conn, "B").unwrap().is_none());
+        let curves: i64 = conn
+            .query_row("SELECT COUNT(*) FROM prediction_curves", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(curves, 2);
+    }
 }

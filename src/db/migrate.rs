@@ -82,6 +82,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0012_risk_weight.sql",
         sql: include_str!("../../migrations/0012_risk_weight.sql"),
     },
+    Migration {
+        version: 13,
+        name: "0013_prediction_field_run.sql",
+        sql: include_str!("../../migrations/0013_prediction_field_run.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.
