@@ -293,12 +293,11 @@ fn no_tighter_than(h: [f64; 4], rstd: [Option<f64>; 2]) -> [f64; 4] {
 }
 
 /// Relative one-sigma error of a member's single-fit c_P or c_S above which that speed gives
-/// the zone no information ([`no_tighter_than`]). Chosen on three zoned networks
-/// (`examples/zones_acceptance SEED`, 16 zones × 10 segments), by the mixed zones' E_m error
-/// p90 (the efficient-estimator bound is 13–14 % on each): with a limit of 0.1 / 0.3 / none it
-/// was 35 / 13.5 / 23 % on seed 31337 and 29 / 14 / 24 % on seed 52001; on the seed of
-/// `tests/zones.rs` (90417) 19 / under 15 / 14 %, but with no limit the metal-only zones'
-/// intervals covered the truth in only 81 % and 75 % (E_m, ν_m), and a limit of 0.5 gave 30 %.
+/// the zone no information ([`no_tighter_than`]): a speed known that loosely lies on the
+/// misfit valley's far, curved part, where the member's Gaussian information misstates it.
+/// Chosen on three zoned networks by the mixed zones' E_m error p90 against the efficient
+/// estimator's bound, and by the metal-only zones' coverage (the figures, per limit and
+/// network, are in docs/validation.md, "Soil zones").
 pub const MEMBER_SPEED_RSTD_MAX: f64 = 0.3;
 
 /// Model sigmas at which the misfit model is checked against the real misfit (and its
