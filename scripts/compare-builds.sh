@@ -36,8 +36,9 @@ usage() {
   OLD_REV, NEW_REV   any commit names git understands; NEW_REV defaults to HEAD (committed
                      changes only: uncommitted edits are not built)
 
-Without options a run takes a few minutes on two cores once both revisions are built (1000
-segments, 3 rounds; pipewave 0.1 fits about 4x slower than fit algorithm 20).
+Without options (1000 segments, 3 rounds) the timing against pipewave 0.1 takes about 4-5
+minutes, plus 1-3 minutes to rebuild pipewave twice (7.4 minutes in all on a busy 2-core
+machine; 0.1's calibrate takes about 4x the CPU of fit algorithm 20's).
 EOF
 }
 
