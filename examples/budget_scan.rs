@@ -4,13 +4,6 @@ use pipewave::bench::{paper_case_data, synthetic_iron_data, synthetic_mdpe_data,
 use pipewave::invert::{fit_segment, FitSettings};
 
 fn main() {
-    if std::env::var_os("AMOS").is_some() {
-        return pipewave::special::with_amos_only(run);
-    }
-    run()
-}
-
-fn run() {
     let args: Vec<String> = std::env::args().collect();
     let epd: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(170);
     let restarts: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2);

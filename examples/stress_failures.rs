@@ -2,9 +2,8 @@
 //! quarter of the segments each, all materials, thin walls included, fitted as `calibrate`
 //! fits (default settings, seeds from the ids).
 //!
-//! Usage: stress_failures [SEGMENTS] [SEED] [JOBS] [v0_1]
+//! Usage: stress_failures [SEGMENTS] [SEED] [JOBS]
 
-use pipewave::bench::Algorithm;
 use pipewave::physics::effects::Effect;
 use pipewave::synth::bench::BenchSegment;
 use pipewave::synth::{generate, SynthOptions};
@@ -15,11 +14,7 @@ fn main() {
     let n: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(10_000);
     let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(11);
     let jobs: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2);
-    let alg = if args.get(4).map(String::as_str) == Some("v0_1") {
-        Algorithm::V0_1
-    } else {
-        Algorithm::Current
-    };
+    let settings = pipewave::invert::FitSettings::default();
     let effects = [
         Effect::SoilDamping,
         Effect::AirInWater,
@@ -52,7 +47,7 @@ fn main() {
                     data: s.segment_data(),
                     seed: pipewave::batch::segment_seed(seed, &s.id),
                 };
-                let r = pipewave::invert::fit_segment(&seg.data, &alg.settings(), seg.seed);
+                let r = pipewave::invert::fit_segment(&seg.data, &settings, seg.seed);
                 let grazing = r
                     .notes
                     .iter()
@@ -68,15 +63,14 @@ fn main() {
         .collect();
     let by_status = |st: pipewave::types::FitStatus| results.iter().filter(|r| r.1 == st).count();
     println!(
-        "{} segments, {} failed ({} ok, {} flagged; {} with a root near grazing), {:.1} s on {} jobs ({:?})",
+        "{} segments, {} failed ({} ok, {} flagged; {} with a root near grazing), {:.1} s on {} jobs",
         results.len(),
         failed.len(),
         by_status(pipewave::types::FitStatus::Ok),
         by_status(pipewave::types::FitStatus::Flagged),
         results.iter().filter(|r| r.4).count(),
         t.elapsed().as_secs_f64(),
-        jobs,
-        alg
+        jobs
     );
     for (id, _, msg, s, _) in failed {
         println!(

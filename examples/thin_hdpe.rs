@@ -4,13 +4,6 @@ use pipewave::physics::solver::{solve_curve, Continuation, Tolerance};
 use pipewave::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 
 fn main() {
-    if std::env::var_os("AMOS").is_some() {
-        return pipewave::special::with_amos_only(run);
-    }
-    run()
-}
-
-fn run() {
     let pipe = Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.090, 0.0054).unwrap();
     let soil = Soil::new(1.8e7, 0.32, 1930.0, 0.0).unwrap();
     let sys = System::new(

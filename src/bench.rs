@@ -14,7 +14,7 @@ use crate::physics::solver::{
     solve_curve, solve_direct, solve_from_guess_tol, Continuation, Tolerance,
 };
 use crate::physics::{ContactMode, Evaluator, Fluid, Model, Pipe, Soil, System};
-use crate::special::{hankel_ratio, hankel_ratio_amos, psi};
+use crate::special::{bessel_j_ratio, hankel_ratio, hankel_ratio_amos, principal_sqrt, psi};
 use crate::synth::bench::BenchSegment;
 
 /// One measured figure.
@@ -80,7 +80,7 @@ pub fn forward_figures(scale: usize) -> Vec<Figure> {
             note: note.into(),
         });
         out.push(Figure {
-            name: format!("Hankel ratio P(z), {label} (Amos, scaled pair; v0.1)"),
+            name: format!("Hankel ratio P(z), {label} (Amos, scaled pair, as in 0.1)"),
             micros: time_per_call(7, reps, |i| {
                 black_box(hankel_ratio_amos(black_box(zz + 1e-9 * i as f64)).ok());
             }),
@@ -95,11 +95,12 @@ pub fn forward_figures(scale: usize) -> Vec<Figure> {
         note: "full model only".into(),
     });
     out.push(Figure {
-        name: "fluid loading psi(z^2) (Amos J pair; v0.1)".into(),
+        name: "fluid loading psi(z^2) (Amos J pair, as in 0.1)".into(),
         micros: time_per_call(7, reps, |i| {
-            crate::special::with_amos_only(|| {
-                black_box(psi(black_box(Complex64::new(-0.3 - 1e-9 * i as f64, 0.01))).ok());
-            })
+            // ψ = z·J₀(z)/(2·J₁(z)) with z = √w (eq. P24), the ratio by Amos: the path psi
+            // takes beyond the continued fraction's range, and the only one pipewave 0.1 had.
+            let z = principal_sqrt(black_box(Complex64::new(-0.3 - 1e-9 * i as f64, 0.01)));
+            black_box(bessel_j_ratio(z).map(|q| z * q * 0.5).ok());
         }),
         note: "full model only".into(),
     });
@@ -441,50 +442,10 @@ pub fn thread_cpu_ms() -> f64 {
     cpu_time::ThreadTime::try_now().map_or(f64::NAN, |t| t.as_duration().as_secs_f64() * 1e3)
 }
 
-/// The inversion as pipewave 0.1 ran it, kept selectable so `bench` can time it beside the
-/// current one in the same run: every Hankel and Bessel ratio by Amos
-/// ([`crate::special::with_amos_only`]), 2 restarts of 170 evaluations per parameter.
-pub const V0_1_RESTARTS: usize = 2;
-/// Evaluations per parameter of one DE run in pipewave 0.1.
-pub const V0_1_EVALUATIONS_PER_DIMENSION: usize = 170;
-
-/// Which inversion algorithm to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Algorithm {
-    /// The current defaults.
-    Current,
-    /// pipewave 0.1 (see [`V0_1_RESTARTS`]).
-    V0_1,
-}
-
-impl Algorithm {
-    /// The fit settings of the algorithm (default method).
-    pub fn settings(self) -> crate::invert::FitSettings {
-        match self {
-            Algorithm::Current => crate::invert::FitSettings::default(),
-            Algorithm::V0_1 => crate::invert::FitSettings {
-                restarts: V0_1_RESTARTS,
-                evaluations_per_dimension: V0_1_EVALUATIONS_PER_DIMENSION,
-                ..crate::invert::FitSettings::default()
-            },
-        }
-    }
-
-    /// Fit one segment (and its stored curve) with this algorithm, timed.
-    pub fn timed_fit(self, seg: &BenchSegment) -> TimedFit {
-        let settings = self.settings();
-        match self {
-            Algorithm::Current => timed_fit(seg, &settings),
-            Algorithm::V0_1 => crate::special::with_amos_only(|| timed_fit(seg, &settings)),
-        }
-    }
-}
-
-/// Per-fit figures of one algorithm on a network.
+/// Per-fit figures of the default fit on a network. An earlier version is timed by building it
+/// beside this one and alternating the two (`scripts/compare-builds.sh`), not inside this run.
 #[derive(Debug, Clone)]
 pub struct NetworkRun {
-    /// The algorithm.
-    pub algorithm: Algorithm,
     /// One entry per segment, in network order.
     pub fits: Vec<TimedFit>,
 }
@@ -517,74 +478,46 @@ impl NetworkRun {
     }
 }
 
-/// Time the current algorithm and pipewave 0.1 on every segment of `net`, one core, back to
-/// back on each segment (the order alternating between segments, so slow phases of a shared
-/// machine hit both alike).
-pub fn network_figures(net: &[BenchSegment]) -> (NetworkRun, NetworkRun) {
-    let mut cur = Vec::with_capacity(net.len());
-    let mut old = Vec::with_capacity(net.len());
-    for (i, seg) in net.iter().enumerate() {
-        if i % 2 == 0 {
-            cur.push(Algorithm::Current.timed_fit(seg));
-            old.push(Algorithm::V0_1.timed_fit(seg));
-        } else {
-            old.push(Algorithm::V0_1.timed_fit(seg));
-            cur.push(Algorithm::Current.timed_fit(seg));
-        }
+/// Time the default fit (with its stored curve) on every segment of `net`, one after another on
+/// the calling thread.
+pub fn network_figures(net: &[BenchSegment]) -> NetworkRun {
+    let settings = crate::invert::FitSettings::default();
+    NetworkRun {
+        fits: net.iter().map(|seg| timed_fit(seg, &settings)).collect(),
     }
-    (
-        NetworkRun {
-            algorithm: Algorithm::Current,
-            fits: cur,
-        },
-        NetworkRun {
-            algorithm: Algorithm::V0_1,
-            fits: old,
-        },
-    )
 }
 
-/// Print the network figures and the ratio of the previous algorithm to the current one.
-pub fn print_network_figures(label: &str, cur: &NetworkRun, old: &NetworkRun) {
+/// Print the network figures: per-fit CPU and wall time, evaluations, the share of the time
+/// spent building the result, and what the search's stages did.
+pub fn print_network_figures(label: &str, run: &NetworkRun) {
     println!(
         "fits on a realistic synthetic network ({label}, {} segments, fit + stored curve, one core):",
-        cur.fits.len()
+        run.fits.len()
     );
-    for (name, r) in [("current", cur), ("v0.1   ", old)] {
-        let (c, w) = (r.cpu(), r.wall());
-        println!(
-            "  {name}  CPU ms/fit: median {:>6.1}  p90 {:>6.1}  p99 {:>6.1}  max {:>7.1}  mean {:>6.1} \
-             | wall median {:>6.1} max {:>7.1} | {:>5.0} evaluations/fit, {} failed",
-            c.median, c.p90, c.p99, c.max, c.mean, w.median, w.max, r.mean_evaluations(), r.failed()
-        );
-    }
-    let (c, o) = (cur.cpu(), old.cpu());
+    let (c, w) = (run.cpu(), run.wall());
     println!(
-        "  v0.1 / current (same run): median {:.2}x  p90 {:.2}x  p99 {:.2}x  max {:.2}x  total {:.2}x",
-        o.median / c.median,
-        o.p90 / c.p90,
-        o.p99 / c.p99,
-        o.max / c.max,
-        o.mean / c.mean
+        "  CPU ms/fit: median {:>6.1}  p90 {:>6.1}  p99 {:>6.1}  max {:>7.1}  mean {:>6.1} \
+         | wall median {:>6.1} max {:>7.1} | {:>5.0} evaluations/fit, {} failed",
+        c.median,
+        c.p90,
+        c.p99,
+        c.max,
+        c.mean,
+        w.median,
+        w.max,
+        run.mean_evaluations(),
+        run.failed()
     );
-    let worse = cur
-        .fits
-        .iter()
-        .zip(&old.fits)
-        .map(|(a, b)| a.misfit - b.misfit)
-        .filter(|d| d.is_finite())
-        .fold(f64::NEG_INFINITY, f64::max);
-    println!("  largest misfit increase of current over v0.1 on one segment: {worse:.3e}");
-    let (res, all): (f64, f64) = cur
+    let (res, all): (f64, f64) = run
         .fits
         .iter()
         .fold((0.0, 0.0), |(a, b), f| (a + f.result_ms, b + f.ms));
     println!(
-        "  of the current fits' wall time, {:.1} % builds the result after the search (soil \
-         speeds, intervals, curve with errors, findings; issue 9)",
+        "  of the fits' wall time, {:.1} % builds the result after the search (soil speeds, \
+         intervals, curve with errors, findings)",
         100.0 * res / all.max(f64::MIN_POSITIVE)
     );
-    print!("{}", cur.stages());
+    print!("{}", run.stages());
 }
 
 /// Evaluations per parameter of each DE run of the exhaustive search ([`exhaustive_fit`]):

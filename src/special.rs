@@ -84,9 +84,6 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
     if !(z.re.is_finite() && z.im.is_finite()) || z == Complex64::new(0.0, 0.0) {
         return Err(SpecialError::BadArgument(z));
     }
-    if amos_only() {
-        return hankel_ratio_amos(z);
-    }
     let w = Complex64::new(-z.im, z.re);
     if in_modified_bessel_sector(w) {
         if let Some(r) = k0_over_k1(w) {
@@ -97,29 +94,6 @@ pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
         }
     }
     hankel_ratio_amos(z)
-}
-
-thread_local! {
-    static AMOS_ONLY: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// Run `f` with every special function of this thread computed by Amos, as pipewave 0.1 did
-/// (for `pipewave bench`, which times the previous algorithm beside the current one in the
-/// same run). Other threads are not affected.
-pub fn with_amos_only<T>(f: impl FnOnce() -> T) -> T {
-    struct Restore(bool);
-    impl Drop for Restore {
-        fn drop(&mut self) {
-            AMOS_ONLY.with(|c| c.set(self.0));
-        }
-    }
-    let _restore = Restore(AMOS_ONLY.with(|c| c.replace(true)));
-    f()
-}
-
-#[inline]
-fn amos_only() -> bool {
-    AMOS_ONLY.with(|c| c.get())
 }
 
 /// Whether w = iz lies where the principal K_ν(w) continues the principal H_ν⁽²⁾(z):
@@ -387,7 +361,7 @@ pub fn psi_d(w: Complex64) -> Result<(Complex64, Complex64), SpecialError> {
     if r2 < PSI_SERIES_Z2 * PSI_SERIES_Z2 {
         return Ok((1.0 - w / 8.0 - w * w / 192.0, -1.0 / 8.0 - w / 96.0));
     }
-    if r2 <= PSI_CF_MAX_ABS * PSI_CF_MAX_ABS && !amos_only() {
+    if r2 <= PSI_CF_MAX_ABS * PSI_CF_MAX_ABS {
         let (psi, one_minus_psi_over_w) = psi_cf(w, r2);
         if psi.is_finite() && one_minus_psi_over_w.is_finite() {
             return Ok((psi, psi * one_minus_psi_over_w - 0.25));
@@ -619,24 +593,6 @@ mod tests {
         }
         assert!(worst < 1e-13, "worst relative difference in psi {worst:e}");
         assert!(worst_d < 1e-9, "worst difference in dpsi/dw {worst_d:e}");
-    }
-
-    /// The v0.1 switch computes by Amos on this thread only, and is undone afterwards.
-    #[test]
-    fn amos_only_switch_is_scoped() {
-        let z = c(1.1, -0.01);
-        let amos = hankel_ratio_amos(z).unwrap();
-        let fast = hankel_ratio(z).unwrap();
-        assert_ne!(fast, amos, "the fast path is a different computation");
-        assert!(rel(fast, amos) < 1e-14);
-        assert_eq!(with_amos_only(|| hankel_ratio(z).unwrap()), amos);
-        let w = c(-0.3, 0.01);
-        let zz = principal_sqrt(w);
-        let want = zz * bessel_j_ratio(zz).unwrap() * 0.5;
-        assert_eq!(with_amos_only(|| psi(w).unwrap()), want);
-        let other = std::thread::spawn(move || with_amos_only(|| hankel_ratio(z).unwrap()));
-        assert_eq!(other.join().unwrap(), amos);
-        assert_eq!(hankel_ratio(z).unwrap(), fast);
     }
 
     #[test]

@@ -1,11 +1,12 @@
 //! `pipewave bench`: print timing figures (speed is measured here, never asserted in tests).
 //!
 //! Without options: per-fit times on a realistic synthetic network (`--network N`,
-//! `--materials plastic-heavy`), against pipewave 0.1 in the same run, then forward-model and
-//! single-segment inversion figures. `--verify N`: the default fit against the independent yardstick (a dense grid in the soil
-//! speeds, polished). `--calibrate N`: calibrate throughput on N synthetic
-//! segments. `--recovery DIR`: how well the calibration of a synthetic network directory
-//! recovered its truth (imports and calibrates DIR first, as `run` does, if needed).
+//! `--materials plastic-heavy`), then forward-model and single-segment inversion figures (an
+//! earlier version is timed by building it beside this one: `scripts/compare-builds.sh`).
+//! `--verify N`: the default fit against the independent yardstick (a dense grid in the soil
+//! speeds, polished). `--calibrate N`: calibrate throughput on N synthetic segments.
+//! `--recovery DIR`: how well the calibration of a synthetic network directory recovered its
+//! truth (imports and calibrates DIR first, as `run` does, if needed).
 
 use std::path::PathBuf;
 
@@ -35,8 +36,9 @@ pub struct BenchArgs {
     /// Compare the fits of a synthetic network directory with its truth.csv.
     #[arg(long, value_name = "DIR")]
     recovery: Option<PathBuf>,
-    /// Segments of the realistic synthetic network whose per-fit times are printed, for the
-    /// current algorithm and pipewave 0.1 back to back (0 skips them).
+    /// Segments of the realistic synthetic network whose per-fit times are printed, on one
+    /// core (0 skips them). To time another version, build it beside this one:
+    /// scripts/compare-builds.sh OLD_REV.
     #[arg(long, value_name = "N", default_value_t = 200)]
     network: usize,
     /// Seed of that network and of --verify's (pass new values for fresh seeds).
@@ -164,7 +166,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
                 args.network_seed,
                 args.materials,
             );
-            let (cur, old) = pipewave::bench::network_figures(&net);
+            let fits = pipewave::bench::network_figures(&net);
             let label = format!(
                 "{} mix, seed {}",
                 match args.materials {
@@ -173,7 +175,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
                 },
                 args.network_seed
             );
-            pipewave::bench::print_network_figures(&label, &cur, &old);
+            pipewave::bench::print_network_figures(&label, &fits);
         }
         let figs = pipewave::bench::forward_figures(args.scale.max(1));
         pipewave::bench::print_figures("forward model (one core):", &figs);
