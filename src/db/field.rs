@@ -272,9 +272,11 @@ fn field_run_from_row(r: &Row<'_>) -> rusqlite::Result<FieldRunRow> {
 }
 
 /// Start storing a field update inside the caller's transaction `tx`: insert its run row
-/// (counts completed by [`finish_field`]) and clear the previous update's classes, segment rows
-/// and predictions. Returns the field run's id.
-pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
+/// (counts completed by [`finish_field`]) and clear the previous update's classes and segment
+/// rows. Every prediction of the update has its curve at the frequencies `grid`: its points
+/// overwrite the stored ones in place, and if any stored point lies off `grid` (a curve of
+/// another grid) the previous predictions are cleared first. Returns the field run's id.
+pub fn start_field(tx: &Connection, run: &FieldRunRow, grid: &[f64]) -> Result<i64, DbError> {
     tx.execute(
         "INSERT INTO field_runs (run_id, fingerprint, n_segments, n_measured, n_classes, \
          n_predicted, n_class_mean_only, n_without_speed, neighbours, hyper_source) \
@@ -289,6 +291,18 @@ pub fn start_field(tx: &Connection, run: &FieldRunRow) -> Result<i64, DbError> {
     // hold a record of every row it deletes (146 MB, not 77 MB, on 100,000 segments).
     tx.execute("DELETE FROM field_classes", [])?;
     tx.execute("DELETE FROM field_segments", [])?;
+    let marks: Vec<String> = (1..=grid.len()).map(|i| format!("?{i}")).collect();
+    let off_grid: bool = tx.query_row(
+        &format!(
+            "SELECT EXISTS (SELECT 1 FROM prediction_curves WHERE frequency_hz NOT IN ({}))",
+            marks.join(", ")
+        ),
+        rusqlite::params_from_iter(grid),
+        |r| r.get(0),
+    )?;
+    if off_grid {
+        tx.execute("DELETE FROM predictions", [])?;
+    }
     Ok(id)
 }
 
@@ -688,13 +702,17 @@ mod tests {
     use std::path::Path;
 
     fn prediction(id: &str, speed: f64) -> Prediction {
+        prediction_at(id, speed, [100.0, 200.0])
+    }
+
+    fn prediction_at(id: &str, speed: f64, grid: [f64; 2]) -> Prediction {
         let row = PredictionRow {
             segment_id: id.into(),
             leak_band_speed: Some((speed, 0.02 * speed)),
             note: format!("from {speed}"),
             ..PredictionRow::default()
         };
-        let curve = [100.0, 200.0]
+        let curve = grid
             .map(|f| CurvePoint {
                 frequency_hz: f,
                 phase_speed_m_per_s: Some(speed + f / 100.0),
@@ -709,9 +727,10 @@ mod tests {
     }
 
     fn update(conn: &mut Connection, preds: &[Prediction]) {
+        let grid: Vec<f64> = preds[0].1.iter().map(|c| c.frequency_hz).collect();
         in_transaction(conn, |tx| {
             let run = FieldRunRow::default();
-            let id = start_field(tx, &run)?;
+            let id = start_field(tx, &run, &grid)?;
             insert_field_rows(tx, id, &[], preds)?;
             finish_field(tx, id, &run, &[])
         })
@@ -720,7 +739,8 @@ mod tests {
 
     /// A field update overwrites each prediction it makes, with its curve, and deletes the
     /// previous update's predictions it did not make (a segment measured since), curves
-    /// included: the latest update's predictions only, as if the table had been emptied first.
+    /// included, and every point of a curve on another grid: the latest update's predictions
+    /// only, as if the table had been emptied first.
     #[test]
     fn an_update_keeps_only_its_own_predictions() {
         let mut conn = Connection::open_in_memory().unwrap();
@@ -746,5 +766,13 @@ mod tests {
             .query_row("SELECT COUNT(*) FROM prediction_curves", [], |r| r.get(0))
             .unwrap();
         assert_eq!(curves, 2);
+        // Curves on another grid replace the old ones whole.
+        update(&mut conn, &[prediction_at("A", 330.0, [100.0, 300.0])]);
+        let a = prediction_for(&conn, "A").unwrap().expect("A is predicted");
+        let points: Vec<(f64, Option<f64>)> =
+            a.1.iter()
+                .map(|c| (c.frequency_hz, c.phase_speed_m_per_s))
+                .collect();
+        assert_eq!(points, [(100.0, Some(331.0)), (300.0, Some(333.0))]);
     }
 }

@@ -685,7 +685,7 @@ pub fn update_field(
     // Every site's result, a page of the inventory at a time, stored as it comes (flat memory),
     // all in one transaction: the previous update stays whole until this one is.
     let id = store::in_transaction(conn, |tx| {
-        let id = store::start_field(tx, &run)?;
+        let id = store::start_field(tx, &run, &crate::physics::curves::STANDARD_GRID_HZ)?;
         let mut z: Vec<f64> = Vec::new();
         let (mut predicted, mut class_mean_only, mut outliers, mut rejected) = (0, 0, 0, 0);
         let mut tally = |rows: &[FieldSegmentRow], preds: &[Prediction]| {
