@@ -149,8 +149,8 @@ fn main() {
     // A path with a segment whose true soil has no wave over the band (no root of F, P32)
     // has no true delay to test against: it is drawn again, and counted.
     let mut no_true_delay = 0usize;
-    let mut c = 0;
-    while c < cases {
+    let mut drawn = 0;
+    while drawn < cases {
         let Some(case) = draw_case(&net, &mut rng, 4, 400.0, &|_| true) else {
             break;
         };
@@ -162,8 +162,8 @@ fn main() {
             }
             continue;
         };
-        c += 1;
-        let c = c - 1;
+        let c = drawn;
+        drawn += 1;
         let tau = tau_true + SIGMA_TAU_S * normal(&mut rng);
         let delay = DelayInput::Given {
             delay_s: tau,
