@@ -35,7 +35,7 @@ use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 5;
+pub const FIELD_ALGORITHM_VERSION: u32 = 6;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -550,10 +550,20 @@ fn site_result(
         post.mean,
         post.cov,
     );
-    let note = note_of(site, &post, field, class_name);
+    let mut note = note_of(site, &post, field, class_name);
+    if speed.band.is_some() && speed.band_hz != crate::physics::curves::LEAK_BAND_HZ {
+        let _ = write!(
+            note,
+            "; its wave ends inside the leak band for most of the soils and contacts it may \
+             have, so its speed is the mean over {:.0}–{:.0} Hz",
+            speed.band_hz.0, speed.band_hz.1
+        );
+    }
     if site.fitted_speed.is_some() {
-        // A measured segment: the leave-one-out check (P82).
-        if let (Some(b), Some((c, s))) = (speed.band, site.fitted_speed) {
+        // A measured segment: the leave-one-out check (P82), on the leak band only (a fitted
+        // speed is always its mean; a prediction over a cut band is another quantity).
+        let whole_band = speed.band_hz == crate::physics::curves::LEAK_BAND_HZ;
+        if let (Some(b), Some((c, s)), true) = (speed.band, site.fitted_speed, whole_band) {
             row.field_leak_band_speed_m_per_s = Some(b.value);
             row.field_leak_band_speed_std_m_per_s = Some(b.std);
             let z = (b.value - c) / (b.std * b.std + s * s).sqrt();

@@ -105,6 +105,9 @@ pub struct SpeedPrediction {
     pub curve: Vec<CurvePoint>,
     /// The leak-band speed's mean and standard deviation, m/s.
     pub band: Option<WithError>,
+    /// The band `band` is the mean over, Hz: the leak band, or its part below the frequency
+    /// where the pipe's wave ends for most of the posterior ([`propagating_band`]).
+    pub band_hz: (f64, f64),
     /// ∂(band speed)/∂u at the posterior mean, averaged over ξ (m/s per ln unit), from the
     /// sigma points: how the speed error follows the soil's (for `plan`).
     pub band_gradient: Option<[f64; 2]>,
@@ -266,21 +269,25 @@ pub fn predict_speed(
         .as_ref()
         .map_or_else(|| vec![None; nf], |r| speeds_of(r));
     // A curve's band mean over the frequencies the sigma points are solved at.
-    let band_at = |pts: &[Option<(f64, f64)>]| {
+    let band_at = |pts: &[Option<(f64, f64)>], band: (f64, f64)| {
         let speeds: Vec<(f64, Option<f64>)> = STANDARD_GRID_HZ
             .iter()
             .zip(pts)
             .filter(|(&f, _)| at(f))
             .map(|(&f, p)| (f, p.map(|v| v.0)))
             .collect();
-        band_mean(&speeds, LEAK_BAND_HZ)
+        band_mean(&speeds, band)
     };
-    let nodes: Vec<Node> = points
+    let mirrored_nodes: Vec<(f64, Vec<Option<(f64, f64)>>)> = points
         .iter()
         .enumerate()
-        .map(|(j, &(_, _, weight))| {
-            let pts = mirrored(&solved[j], &solved[j ^ 1], &centre);
-            let band = band_at(&pts);
+        .map(|(j, &(_, _, weight))| (weight, mirrored(&solved[j], &solved[j ^ 1], &centre)))
+        .collect();
+    let band_hz = propagating_band(&mirrored_nodes);
+    let nodes: Vec<Node> = mirrored_nodes
+        .into_iter()
+        .map(|(weight, pts)| {
+            let band = band_at(&pts, band_hz);
             (weight, pts, band)
         })
         .collect();
@@ -291,7 +298,7 @@ pub fn predict_speed(
         .zip(&centre)
         .map(|(&f, p)| (f, p.map(|v| v.0)))
         .collect();
-    let offset = match (band_mean(&whole, LEAK_BAND_HZ), band_at(&centre)) {
+    let offset = match (band_mean(&whole, band_hz), band_at(&centre, band_hz)) {
         (Some(a), Some(b)) => a - b,
         _ => 0.0,
     };
@@ -381,7 +388,43 @@ pub fn predict_speed(
     SpeedPrediction {
         curve: curve_pts,
         band,
+        band_hz,
         band_gradient,
+    }
+}
+
+/// The band a prediction's speed is the mean over (P81): the leak band [`LEAK_BAND_HZ`], unless
+/// at some of its sigma frequencies the nodes with a root hold less than 1 − [`MAX_LOST_WEIGHT`]
+/// of the weight. Then the pipe's wave ends inside the band for most of the posterior (a plastic
+/// pipe in stiff, nearly incompressible ground at a middle contact is damped by more than
+/// [`STRONG_DAMPING`] per radian and its root is lost): no correlator hears it there, and the
+/// band is cut at the last sigma frequency up to which every one holds that weight. With fewer
+/// than two such frequencies the leak band is kept (and the speed is left undefined).
+fn propagating_band(nodes: &[(f64, Vec<Option<(f64, f64)>>)]) -> (f64, f64) {
+    let (lo, hi) = LEAK_BAND_HZ;
+    let held = |f: f64| {
+        let i = STANDARD_GRID_HZ.iter().position(|&g| g == f);
+        i.map_or(0.0, |i| {
+            nodes
+                .iter()
+                .filter(|n| n.1[i].is_some())
+                .map(|n| n.0)
+                .sum::<f64>()
+        })
+    };
+    let band: Vec<f64> = SIGMA_FREQUENCIES_HZ
+        .iter()
+        .copied()
+        .filter(|&f| (lo..=hi).contains(&f))
+        .collect();
+    let last = band
+        .iter()
+        .take_while(|&&f| held(f) >= 1.0 - MAX_LOST_WEIGHT)
+        .count();
+    if last == band.len() || last < 2 {
+        (lo, hi)
+    } else {
+        (lo, band[last - 1])
     }
 }
 
@@ -471,6 +514,61 @@ mod tests {
         assert!(compared > 5 * 36 * 20, "{compared}");
         // Another root on fewer than 1 % of the points.
         assert!(beyond < 5 * 36 * 32 / 100, "{beyond}");
+    }
+
+    /// A plastic pipe in stiff, nearly incompressible ground (c_P ≈ 1,300 m/s, c_S ≈ 300 m/s, a
+    /// posterior that knows c_S to 1 % and c_P to 25 %): at the middle contact its wave is
+    /// damped beyond 0.25 per radian and ends inside the leak band, at either end of the contact
+    /// prior it crosses the whole band. The speed is the mean below the wave's end, with the
+    /// contact's spread in its error; a PVC pipe in ordinary soil keeps the whole leak band.
+    #[test]
+    fn a_wave_that_ends_inside_the_band_is_averaged_below_its_end() {
+        let hdpe = SegmentData {
+            fluid: Fluid::water(),
+            pipe: Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.250, 0.0148).unwrap(),
+            soil_density: 2065.0,
+            material: Some(Material::Hdpe),
+            measurements: Vec::new(),
+        };
+        let mean = [7.164, 5.7158];
+        let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
+        let p = predict_speed(&hdpe, Model::default(), ContactMode::default(), mean, cov);
+        assert!(
+            p.band_hz.0 == 100.0 && p.band_hz.1 < 800.0,
+            "{:?}",
+            p.band_hz
+        );
+        let b = p.band.expect("a speed over the cut band");
+        assert!((420.0..560.0).contains(&b.value), "{b:?}");
+        // The contact's ends differ by over 100 m/s on this band: the error carries it.
+        assert!(b.std > 30.0, "{b:?}");
+        // The curve keeps the frequencies where the wave is found, none above its end.
+        let at = |f: f64| {
+            p.curve
+                .iter()
+                .find(|c| c.frequency_hz == f)
+                .and_then(|c| c.phase_speed_m_per_s)
+        };
+        assert!(at(100.0).is_some() && at(p.band_hz.1).is_some());
+        assert!(at(800.0).is_none());
+
+        let pvc = SegmentData {
+            fluid: Fluid::water(),
+            pipe: Pipe::from_outside_diameter(Material::Pvc.typical(), 0.110, 0.0053).unwrap(),
+            soil_density: 1900.0,
+            material: Some(Material::Pvc),
+            measurements: Vec::new(),
+        };
+        let soft = [(250.0f64).ln(), (100.0f64).ln()];
+        let p = predict_speed(
+            &pvc,
+            Model::default(),
+            ContactMode::default(),
+            soft,
+            Sym2::new(0.01, 0.005, 0.01),
+        );
+        assert_eq!(p.band_hz, LEAK_BAND_HZ);
+        assert!(p.band.is_some());
     }
 
     /// A sigma point without a root takes its mirror's value reflected through the centre
