@@ -225,12 +225,11 @@ pub fn classes(
                 .filter(|x| x.1 > 0.0)
                 .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
                 .map(|x| x.0);
-            let mut kept: Vec<(usize, f64)> = qi
-                .iter()
-                .copied()
-                .enumerate()
-                .filter(|&(c, x)| x > 0.0 && (x >= min_share || Some(c) == best))
-                .collect();
+            // Sized to the classes kept (usually one): every segment keeps its list.
+            let keep = |&(c, x): &(usize, f64)| x > 0.0 && (x >= min_share || Some(c) == best);
+            let n_kept = qi.iter().copied().enumerate().filter(keep).count();
+            let mut kept: Vec<(usize, f64)> = Vec::with_capacity(n_kept);
+            kept.extend(qi.iter().copied().enumerate().filter(keep));
             let total: f64 = kept.iter().map(|x| x.1).sum();
             for x in &mut kept {
                 x.1 /= total;
