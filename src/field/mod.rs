@@ -302,12 +302,15 @@ fn read_sites(
     Ok((fp.hex(), classes_and_members(sites, &soils)))
 }
 
+/// The fitted soils of the segments whose fit is usable, with their sites' indices.
+type MemberSoils = Vec<(usize, FittedSoil)>;
+
 /// Every segment's site in inventory order, and the fitted soils of those whose fit is usable
-/// (with their sites' indices, in that order); `each` sees every input as it streams past.
+/// (in site order); `each` sees every input as it streams past.
 fn read_sites_and_soils(
     conn: &Connection,
     mut each: impl FnMut(&FieldInput),
-) -> Result<(Vec<Site>, Vec<(usize, FittedSoil)>), DbError> {
+) -> Result<(Vec<Site>, MemberSoils), DbError> {
     let n = store::count_segments(conn)?;
     let mut sites = Vec::with_capacity(usize::try_from(n).unwrap_or(0));
     let mut soils = Vec::new();
@@ -326,7 +329,7 @@ fn read_sites_and_soils(
 /// The sites and members of the field from the inputs, with the class names.
 pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
     let (sites, soils): (Vec<Site>, Vec<FittedSoil>) = inputs.iter().map(site_of).unzip();
-    let soils: Vec<(usize, FittedSoil)> = soils
+    let soils: MemberSoils = soils
         .into_iter()
         .enumerate()
         .filter(|(_, s)| s.usable)
