@@ -53,6 +53,11 @@ pub fn field_inputs(conn: &Connection) -> Result<Vec<FieldInput>, DbError> {
     Ok(out)
 }
 
+/// Segments in the inventory (to size the lists read from it).
+pub fn count_segments(conn: &Connection) -> Result<i64, DbError> {
+    Ok(conn.query_row("SELECT COUNT(*) FROM segments", [], |r| r.get(0))?)
+}
+
 /// Every segment's [`FieldInput`] in id order, one at a time (flat memory: no row is kept).
 pub fn for_each_field_input(
     conn: &Connection,

@@ -52,20 +52,139 @@ pub struct ClassBelief {
     pub rejected: bool,
 }
 
-/// The own-label likelihood L_i(k) of a label `own` among `k` classes.
-fn likelihood(own: Option<usize>, k: usize, eps: f64) -> Vec<f64> {
+/// The own-label likelihood L_i(c) of class `c` for a label `own` among `k` classes.
+fn likelihood(own: Option<usize>, k: usize, eps: f64, c: usize) -> f64 {
     match own {
-        Some(o) => (0..k)
-            .map(|c| {
-                if c == o {
-                    1.0 - eps
-                } else {
-                    eps / (k as f64 - 1.0)
-                }
-            })
-            .collect(),
-        None => vec![1.0; k],
+        Some(o) if c == o => 1.0 - eps,
+        Some(_) => eps / (k as f64 - 1.0),
+        None => 1.0,
     }
+}
+
+/// The mean-field posteriors, one row of `k` values per segment in one flat array (segment
+/// i's q_i is `q[i * k..(i + 1) * k]`): a network of 100,000 segments then holds two arrays
+/// of 100,000 k values rather than 100,000 small vectors per sweep.
+struct MeanField {
+    q: Vec<f64>,
+    k: usize,
+    eps: f64,
+}
+
+impl MeanField {
+    fn row(&self, i: usize) -> &[f64] {
+        &self.q[i * self.k..(i + 1) * self.k]
+    }
+}
+
+/// Each segment's `LABEL_VOTERS − 1` nearest others (none without a position), as one flat
+/// list: segment i's are `hood[start[i]..start[i + 1]]`.
+struct Hoods {
+    start: Vec<usize>,
+    hood: Vec<u32>,
+}
+
+impl Hoods {
+    fn of(pos: &[Option<[f64; 2]>]) -> Hoods {
+        let tree = index_of(pos.iter().copied());
+        let mut start = Vec::with_capacity(pos.len() + 1);
+        let mut hood = Vec::with_capacity(pos.len() * (LABEL_VOTERS - 1));
+        start.push(0);
+        for (i, p) in pos.iter().enumerate() {
+            if let Some(p) = p {
+                hood.extend(
+                    tree.nearest_neighbor_iter(p)
+                        .map(|g| g.data)
+                        .filter(|&j| j as usize != i)
+                        .take(LABEL_VOTERS - 1),
+                );
+            }
+            start.push(hood.len());
+        }
+        Hoods { start, hood }
+    }
+
+    fn of_site(&self, i: usize) -> &[u32] {
+        &self.hood[self.start[i]..self.start[i + 1]]
+    }
+}
+
+/// The mean-field posteriors and the label error rate (arguments as for [`posteriors`]).
+fn mean_field(
+    labels: &[Option<usize>],
+    forced: &[bool],
+    pos: &[Option<[f64; 2]>],
+    n_classes: usize,
+) -> MeanField {
+    let k = n_classes.max(2);
+    let n = labels.len();
+    let hoods = Hoods::of(pos);
+    let mut eps = 0.1_f64;
+    // Start from the labels alone; a segment without a label starts uniform.
+    let mut w = vec![0.0; k];
+    let mut q: Vec<f64> = Vec::with_capacity(n * k);
+    for (&l, &f) in labels.iter().zip(forced) {
+        match (l, f) {
+            (Some(o), true) => q.extend((0..k).map(|c| f64::from(u8::from(c == o)))),
+            _ => {
+                for (c, x) in w.iter_mut().enumerate() {
+                    *x = likelihood(l, k, eps, c);
+                }
+                let t: f64 = w.iter().sum();
+                q.extend(w.iter().map(|x| x / t));
+            }
+        }
+    }
+    let is_labelled = |i: &usize| labels[*i].is_some() && !forced[*i];
+    let n_labelled = (0..n).filter(is_labelled).count();
+    let mut next = vec![0.0; n * k];
+    let mut field = vec![0.0; k];
+    for sweep in 0..SWEEPS {
+        for (i, out) in next.chunks_exact_mut(k).enumerate() {
+            let own = &q[i * k..(i + 1) * k];
+            let hood = hoods.of_site(i);
+            if hood.is_empty() || forced[i] {
+                out.copy_from_slice(own);
+                continue;
+            }
+            field.fill(0.0);
+            for &j in hood {
+                let j = j as usize;
+                for (f, x) in field.iter_mut().zip(&q[j * k..(j + 1) * k]) {
+                    *f += x;
+                }
+            }
+            let top = field.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            for (c, (x, f)) in w.iter_mut().zip(&field).enumerate() {
+                *x = likelihood(labels[i], k, eps, c) * (POTTS_COUPLING * (f - top)).exp();
+            }
+            let t: f64 = w.iter().sum();
+            for ((o, x), b) in out.iter_mut().zip(&w).zip(own) {
+                *o = 0.5 * (x / t + b);
+            }
+        }
+        std::mem::swap(&mut q, &mut next);
+        if (sweep + 1) % ERROR_RATE_EVERY == 0 && n_labelled > 0 {
+            let wrong: f64 = (0..n)
+                .filter(is_labelled)
+                .map(|i| 1.0 - q[i * k + labels[i].expect("labelled")])
+                .sum();
+            eps = (wrong / n_labelled as f64).clamp(LABEL_ERROR_RANGE.0, LABEL_ERROR_RANGE.1);
+        }
+    }
+    drop(next);
+    // A segment without a position keeps its own label, certain; one without a label and
+    // without labelled neighbours has no class.
+    for (i, qi) in q.chunks_exact_mut(k).enumerate() {
+        let hood = hoods.of_site(i);
+        if labels[i].is_none() && hood.iter().all(|&j| labels[j as usize].is_none()) {
+            qi.fill(0.0);
+        } else if hood.is_empty() {
+            for (c, x) in qi.iter_mut().enumerate() {
+                *x = f64::from(u8::from(labels[i] == Some(c)));
+            }
+        }
+    }
+    MeanField { q, k, eps }
 }
 
 /// The mean-field posteriors q_i (length `k`; all zero for a segment with no evidence at all)
@@ -79,87 +198,8 @@ pub fn posteriors(
     pos: &[Option<[f64; 2]>],
     n_classes: usize,
 ) -> (Vec<Vec<f64>>, f64) {
-    let k = n_classes.max(2);
-    let tree = index_of(pos.iter().copied());
-    let hoods: Vec<Vec<usize>> = pos
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            p.as_ref().map_or_else(Vec::new, |p| {
-                tree.nearest_neighbor_iter(p)
-                    .map(|g| g.data as usize)
-                    .filter(|&j| j != i)
-                    .take(LABEL_VOTERS - 1)
-                    .collect()
-            })
-        })
-        .collect();
-    let mut eps = 0.1_f64;
-    let normalised = |w: Vec<f64>| {
-        let t: f64 = w.iter().sum();
-        w.into_iter().map(|x| x / t).collect::<Vec<f64>>()
-    };
-    // Start from the labels alone; a segment without a label starts uniform.
-    let one_hot = |o: usize| {
-        (0..k)
-            .map(|c| f64::from(u8::from(c == o)))
-            .collect::<Vec<f64>>()
-    };
-    let mut q: Vec<Vec<f64>> = labels
-        .iter()
-        .zip(forced)
-        .map(|(&l, &f)| match (l, f) {
-            (Some(o), true) => one_hot(o),
-            _ => normalised(likelihood(l, k, eps)),
-        })
-        .collect();
-    let labelled: Vec<usize> = (0..labels.len())
-        .filter(|&i| labels[i].is_some() && !forced[i])
-        .collect();
-    for sweep in 0..SWEEPS {
-        let next: Vec<Vec<f64>> = (0..labels.len())
-            .map(|i| {
-                if hoods[i].is_empty() || forced[i] {
-                    return q[i].clone();
-                }
-                let mut field = vec![0.0; k];
-                for &j in &hoods[i] {
-                    for (f, x) in field.iter_mut().zip(&q[j]) {
-                        *f += x;
-                    }
-                }
-                let top = field.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                let w = likelihood(labels[i], k, eps)
-                    .into_iter()
-                    .zip(&field)
-                    .map(|(l, f)| l * (POTTS_COUPLING * (f - top)).exp())
-                    .collect();
-                normalised(w)
-                    .into_iter()
-                    .zip(&q[i])
-                    .map(|(a, b)| 0.5 * (a + b))
-                    .collect()
-            })
-            .collect();
-        q = next;
-        if (sweep + 1) % ERROR_RATE_EVERY == 0 && !labelled.is_empty() {
-            let wrong: f64 = labelled
-                .iter()
-                .map(|&i| 1.0 - q[i][labels[i].expect("labelled")])
-                .sum();
-            eps = (wrong / labelled.len() as f64).clamp(LABEL_ERROR_RANGE.0, LABEL_ERROR_RANGE.1);
-        }
-    }
-    // A segment without a position keeps its own label, certain; one without a label and
-    // without labelled neighbours has no class.
-    for (i, qi) in q.iter_mut().enumerate() {
-        if labels[i].is_none() && hoods[i].iter().all(|&j| labels[j].is_none()) {
-            *qi = vec![0.0; k];
-        } else if hoods[i].is_empty() {
-            *qi = labels[i].map_or_else(|| vec![0.0; k], one_hot);
-        }
-    }
-    (q, eps)
+    let m = mean_field(labels, forced, pos, n_classes);
+    (m.q.chunks_exact(m.k).map(<[f64]>::to_vec).collect(), m.eps)
 }
 
 /// Every segment's [`ClassBelief`] and the network's label error rate (arguments as for
@@ -171,11 +211,12 @@ pub fn classes(
     n_classes: usize,
     min_share: f64,
 ) -> (Vec<ClassBelief>, f64) {
-    let (q, eps) = posteriors(labels, forced, pos, n_classes);
-    let beliefs = q
-        .into_iter()
-        .zip(labels)
-        .map(|(qi, &own)| {
+    let m = mean_field(labels, forced, pos, n_classes);
+    let beliefs = labels
+        .iter()
+        .enumerate()
+        .map(|(i, &own)| {
+            let qi = m.row(i);
             // The likeliest class (ties: the smaller index, so the answer is one order).
             let best = qi
                 .iter()
@@ -184,11 +225,11 @@ pub fn classes(
                 .filter(|x| x.1 > 0.0)
                 .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)))
                 .map(|x| x.0);
-            let mut kept: Vec<(usize, f64)> = qi
-                .into_iter()
-                .enumerate()
-                .filter(|&(c, x)| x > 0.0 && (x >= min_share || Some(c) == best))
-                .collect();
+            // Sized to the classes kept (usually one): every segment keeps its list.
+            let keep = |&(c, x): &(usize, f64)| x > 0.0 && (x >= min_share || Some(c) == best);
+            let n_kept = qi.iter().copied().enumerate().filter(keep).count();
+            let mut kept: Vec<(usize, f64)> = Vec::with_capacity(n_kept);
+            kept.extend(qi.iter().copied().enumerate().filter(keep));
             let total: f64 = kept.iter().map(|x| x.1).sum();
             for x in &mut kept {
                 x.1 /= total;
@@ -200,7 +241,7 @@ pub fn classes(
             }
         })
         .collect();
-    (beliefs, eps)
+    (beliefs, m.eps)
 }
 
 #[cfg(test)]

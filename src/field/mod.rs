@@ -14,7 +14,7 @@ pub mod model;
 pub mod plan;
 pub mod predict;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -291,43 +291,68 @@ type SitesAndMembers = (Vec<Site>, Vec<Observation>, Vec<String>);
 
 /// Read every segment's site from the database, one inventory row at a time (no geometry text
 /// is kept: flat memory), with the fingerprint of the inputs; then the classes and members.
+/// The sites are read into a list of the inventory's size (a growing list would hold up to
+/// twice that, and its copies) and only the fitted segments' soils are kept.
 fn read_sites(
     conn: &Connection,
     settings: &FieldSettings,
 ) -> Result<(String, SitesAndMembers), DbError> {
     let mut fp = Fingerprint::new(settings);
-    let mut sites = Vec::new();
+    let (sites, soils) = read_sites_and_soils(conn, |i| fp.add(i))?;
+    Ok((fp.hex(), classes_and_members(sites, &soils)))
+}
+
+/// The fitted soils of the segments whose fit is usable, with their sites' indices.
+type MemberSoils = Vec<(usize, FittedSoil)>;
+
+/// Every segment's site in inventory order, and the fitted soils of those whose fit is usable
+/// (in site order); `each` sees every input as it streams past.
+fn read_sites_and_soils(
+    conn: &Connection,
+    mut each: impl FnMut(&FieldInput),
+) -> Result<(Vec<Site>, MemberSoils), DbError> {
+    let n = store::count_segments(conn)?;
+    let mut sites = Vec::with_capacity(usize::try_from(n).unwrap_or(0));
     let mut soils = Vec::new();
     store::for_each_field_input(conn, |i| {
-        fp.add(&i);
+        each(&i);
         let (site, soil) = site_of(&i);
+        if soil.usable {
+            soils.push((sites.len(), soil));
+        }
         sites.push(site);
-        soils.push(soil);
         Ok(())
     })?;
-    Ok((fp.hex(), classes_and_members(sites, &soils)))
+    Ok((sites, soils))
 }
 
 /// The sites and members of the field from the inputs, with the class names.
 pub fn sites_of(inputs: &[FieldInput]) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
     let (sites, soils): (Vec<Site>, Vec<FittedSoil>) = inputs.iter().map(site_of).unzip();
+    let soils: MemberSoils = soils
+        .into_iter()
+        .enumerate()
+        .filter(|(_, s)| s.usable)
+        .collect();
     classes_and_members(sites, &soils)
 }
 
-/// Classes (labels smoothed over neighbours, with their probabilities) and the members.
+/// Classes (labels smoothed over neighbours, with their probabilities) and the members: the
+/// sites with usable fits, `soils` (site index, soil) in site order.
 fn classes_and_members(
     mut sites: Vec<Site>,
-    soils: &[FittedSoil],
+    soils: &[(usize, FittedSoil)],
 ) -> (Vec<Site>, Vec<Observation>, Vec<String>) {
     // Classes: the labels and overrides in sorted order (one "network" class when there are
     // none). An override stands for the segment's label in its neighbours' votes too: it is the
     // engineer's corrected label.
     let mut names: Vec<String> = sites
         .iter()
-        .filter_map(|s| s.class_override.clone().or_else(|| s.label.clone()))
+        .filter_map(|s| s.class_override.as_deref().or(s.label.as_deref()))
+        .collect::<BTreeSet<&str>>()
+        .into_iter()
+        .map(str::to_string)
         .collect();
-    names.sort();
-    names.dedup();
     let index: BTreeMap<&str, usize> = names
         .iter()
         .enumerate()
@@ -370,7 +395,8 @@ fn classes_and_members(
         };
     }
     let mut obs = Vec::new();
-    for (s, i) in sites.iter_mut().zip(soils) {
+    for &(at, i) in soils {
+        let s = &mut sites[at];
         let (Some((cp, cs)), Some(info), true) = (i.speeds, i.information, i.usable) else {
             continue;
         };
@@ -783,13 +809,7 @@ pub fn stored_field(
     let Some(last) = store::latest_field_run(conn)? else {
         return Ok(None);
     };
-    let (mut sites, mut soils) = (Vec::new(), Vec::new());
-    store::for_each_field_input(conn, |i| {
-        let (site, soil) = site_of(&i);
-        sites.push(site);
-        soils.push(soil);
-        Ok(())
-    })?;
+    let (sites, soils) = read_sites_and_soils(conn, |_| {})?;
     let (sites, obs, names) = classes_and_members(sites, &soils);
     if obs.is_empty() {
         return Ok(None);
