@@ -93,9 +93,11 @@ fn interpolate_ln_f(pts: &[(f64, f64)], f: f64) -> Option<f64> {
     })
 }
 
-/// One quadrature node: its weight, (phase speed, attenuation in dB/m) per frequency of the
-/// grid (None without a root), and its leak-band mean speed.
-type Node = (f64, Vec<Option<(f64, f64)>>, Option<f64>);
+/// (Phase speed, attenuation in dB/m) per frequency of the grid, None without a root.
+type GridCurve = Vec<Option<(f64, f64)>>;
+
+/// One quadrature node: its weight, its curve on the grid, and its leak-band mean speed.
+type Node = (f64, GridCurve, Option<f64>);
 
 /// What the quadrature gives for one pipe.
 #[derive(Debug, Clone, PartialEq)]
@@ -278,7 +280,7 @@ pub fn predict_speed(
             .collect();
         band_mean(&speeds, band)
     };
-    let mirrored_nodes: Vec<(f64, Vec<Option<(f64, f64)>>)> = points
+    let mirrored_nodes: Vec<(f64, GridCurve)> = points
         .iter()
         .enumerate()
         .map(|(j, &(_, _, weight))| (weight, mirrored(&solved[j], &solved[j ^ 1], &centre)))
@@ -400,7 +402,7 @@ pub fn predict_speed(
 /// [`STRONG_DAMPING`] per radian and its root is lost): no correlator hears it there, and the
 /// band is cut at the last sigma frequency up to which every one holds that weight. With fewer
 /// than two such frequencies the leak band is kept (and the speed is left undefined).
-fn propagating_band(nodes: &[(f64, Vec<Option<(f64, f64)>>)]) -> (f64, f64) {
+fn propagating_band(nodes: &[(f64, GridCurve)]) -> (f64, f64) {
     let (lo, hi) = LEAK_BAND_HZ;
     let held = |f: f64| {
         let i = STANDARD_GRID_HZ.iter().position(|&g| g == f);
