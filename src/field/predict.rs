@@ -525,13 +525,14 @@ mod tests {
     /// contact's spread in its error; a PVC pipe in ordinary soil keeps the whole leak band.
     #[test]
     fn a_wave_that_ends_inside_the_band_is_averaged_below_its_end() {
-        let hdpe = SegmentData {
+        let unmeasured = |material: Material, od: f64, wall: f64, soil_density: f64| SegmentData {
             fluid: Fluid::water(),
-            pipe: Pipe::from_outside_diameter(Material::Hdpe.typical(), 0.250, 0.0148).unwrap(),
-            soil_density: 2065.0,
-            material: Some(Material::Hdpe),
+            pipe: Pipe::from_outside_diameter(material.typical(), od, wall).unwrap(),
+            soil_density,
+            material: Some(material),
             measurements: Vec::new(),
         };
+        let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
         let mean = [7.164, 5.7158];
         let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
         let p = predict_speed(&hdpe, Model::default(), ContactMode::default(), mean, cov);
@@ -554,13 +555,7 @@ mod tests {
         assert!(at(100.0).is_some() && at(p.band_hz.1).is_some());
         assert!(at(800.0).is_none());
 
-        let pvc = SegmentData {
-            fluid: Fluid::water(),
-            pipe: Pipe::from_outside_diameter(Material::Pvc.typical(), 0.110, 0.0053).unwrap(),
-            soil_density: 1900.0,
-            material: Some(Material::Pvc),
-            measurements: Vec::new(),
-        };
+        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
         let soft = [(250.0f64).ln(), (100.0f64).ln()];
         let p = predict_speed(
             &pvc,
