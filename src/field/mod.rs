@@ -29,6 +29,7 @@ use crate::db::hash::{fnv1a64, fnv1a64_update, FNV1A64_START};
 use crate::db::wkt::LineString;
 use crate::db::{pages, DbError, SegmentRecord};
 use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
+use crate::physics::curves::LEAK_BAND_HZ;
 use crate::physics::{ContactMode, Model};
 
 use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
@@ -577,7 +578,7 @@ fn site_result(
         post.cov,
     );
     let mut note = note_of(site, &post, field, class_name);
-    if speed.band.is_some() && speed.band_hz != crate::physics::curves::LEAK_BAND_HZ {
+    if speed.band.is_some() && speed.band_hz != LEAK_BAND_HZ {
         let _ = write!(
             note,
             "; its wave ends inside the leak band for most of the soils and contacts it may \
@@ -588,7 +589,7 @@ fn site_result(
     if site.fitted_speed.is_some() {
         // A measured segment: the leave-one-out check (P82), on the leak band only (a fitted
         // speed is always its mean; a prediction over a cut band is another quantity).
-        let whole_band = speed.band_hz == crate::physics::curves::LEAK_BAND_HZ;
+        let whole_band = speed.band_hz == LEAK_BAND_HZ;
         if let (Some(b), Some((c, s)), true) = (speed.band, site.fitted_speed, whole_band) {
             row.field_leak_band_speed_m_per_s = Some(b.value);
             row.field_leak_band_speed_std_m_per_s = Some(b.std);

@@ -12,7 +12,7 @@ use crate::db::CurvePoint;
 use crate::invert::problem::INVERSION_RAMP_POINTS;
 use crate::invert::uncertainty::{shear_to_compressional, soil_from_speeds, WithError};
 use crate::invert::{Method, Param, Problem, SegmentData};
-use crate::physics::curves::{band_mean, LEAK_BAND_HZ, STANDARD_GRID_HZ};
+use crate::physics::curves::{band_mean, carried_band, LEAK_BAND_HZ, STANDARD_GRID_HZ};
 use crate::physics::inputs::MAX_SOIL_POISSON;
 use crate::physics::solver::{solve_from_guess_tol, RootMethod, Tolerance};
 use crate::physics::{solve_curve, ContactMode, Continuation, Model, System};
@@ -395,39 +395,29 @@ pub fn predict_speed(
     }
 }
 
-/// The band a prediction's speed is the mean over (P81): the leak band [`LEAK_BAND_HZ`], unless
-/// at some of its sigma frequencies the nodes with a root hold less than 1 − [`MAX_LOST_WEIGHT`]
-/// of the weight. Then the pipe's wave ends inside the band for most of the posterior (a plastic
-/// pipe in stiff, nearly incompressible ground at a middle contact is damped by more than
-/// [`STRONG_DAMPING`] per radian and its root is lost): no correlator hears it there, and the
-/// band is cut at the last sigma frequency up to which every one holds that weight. With fewer
-/// than two such frequencies the leak band is kept (and the speed is left undefined).
+/// The band a prediction's speed is the mean over (P81): [`carried_band`] of the leak band with
+/// the wave counted as carried at a sigma frequency where the nodes with a root hold at least
+/// 1 − [`MAX_LOST_WEIGHT`] of the weight. Below that the wave ends for most of the posterior (a
+/// plastic pipe in stiff, nearly incompressible ground at a middle contact is damped by more
+/// than [`STRONG_DAMPING`] per radian and its root is lost).
 fn propagating_band(nodes: &[(f64, GridCurve)]) -> (f64, f64) {
-    let (lo, hi) = LEAK_BAND_HZ;
     let held = |f: f64| {
-        let i = STANDARD_GRID_HZ.iter().position(|&g| g == f);
-        i.map_or(0.0, |i| {
-            nodes
-                .iter()
-                .filter(|n| n.1[i].is_some())
-                .map(|n| n.0)
-                .sum::<f64>()
-        })
+        STANDARD_GRID_HZ
+            .iter()
+            .position(|&g| g == f)
+            .map_or(0.0, |i| {
+                nodes
+                    .iter()
+                    .filter(|n| n.1[i].is_some())
+                    .map(|n| n.0)
+                    .sum::<f64>()
+            })
     };
-    let band: Vec<f64> = SIGMA_FREQUENCIES_HZ
+    let carried: Vec<(f64, bool)> = SIGMA_FREQUENCIES_HZ
         .iter()
-        .copied()
-        .filter(|&f| (lo..=hi).contains(&f))
+        .map(|&f| (f, held(f) >= 1.0 - MAX_LOST_WEIGHT))
         .collect();
-    let last = band
-        .iter()
-        .take_while(|&&f| held(f) >= 1.0 - MAX_LOST_WEIGHT)
-        .count();
-    if last == band.len() || last < 2 {
-        (lo, hi)
-    } else {
-        (lo, band[last - 1])
-    }
+    carried_band(&carried, LEAK_BAND_HZ)
 }
 
 #[cfg(test)]

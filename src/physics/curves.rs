@@ -60,7 +60,8 @@ pub fn curve(system: &System, frequencies_hz: &[f64]) -> Vec<CurvePoint> {
 ///
 /// `None` unless the points cover the whole band (a point at each end, to 1e-9 relative) and
 /// every point in it has a value: a mean over part of the band would be a different figure
-/// under the same name.
+/// under the same name. The one exception is a wave that ends inside the band, whose band is
+/// [`carried_band`]; whoever takes that mean says so.
 pub fn band_mean(points: &[(f64, Option<f64>)], band_hz: (f64, f64)) -> Option<f64> {
     const REL_TOL: f64 = 1e-9;
     let (lo, hi) = band_hz;
@@ -80,4 +81,58 @@ pub fn band_mean(points: &[(f64, Option<f64>)], band_hz: (f64, f64)) -> Option<f
         integral += 0.5 * (c0 + c1) * (w[1].0 - w[0].0);
     }
     Some(integral / (last.0 - first.0))
+}
+
+/// The part of `band_hz` over which a wave is carried (model §7.12, P81): from the band's low
+/// end up to the last of the frequencies `carried` (ascending, each with whether the wave is
+/// found there; those outside the band are ignored) before the first where it is not. Above
+/// that frequency the wave is damped beyond measurement and its root is lost, so no correlator
+/// hears it there. The whole band when the wave is carried at every frequency, and also when
+/// at fewer than two, or not at the low end: [`band_mean`] is then left to say `None` rather
+/// than average a stub.
+pub fn carried_band(carried: &[(f64, bool)], band_hz: (f64, f64)) -> (f64, f64) {
+    let inside: Vec<(f64, bool)> = carried
+        .iter()
+        .copied()
+        .filter(|&(f, _)| f >= band_hz.0 && f <= band_hz.1)
+        .collect();
+    let n = inside.iter().take_while(|p| p.1).count();
+    if n == inside.len() || n < 2 || inside[0].0 != band_hz.0 {
+        band_hz
+    } else {
+        (band_hz.0, inside[n - 1].0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The band is cut at the last frequency before the wave is lost, and kept whole when the
+    /// wave is carried throughout, lost at the low end, or carried at only one frequency.
+    #[test]
+    fn a_band_is_cut_where_the_wave_is_lost() {
+        let at = |lost_from: f64| -> Vec<(f64, bool)> {
+            [50.0, 100.0, 200.0, 350.0, 500.0, 650.0, 800.0, 900.0]
+                .iter()
+                .map(|&f| (f, f < lost_from))
+                .collect()
+        };
+        assert_eq!(carried_band(&at(650.0), LEAK_BAND_HZ), (100.0, 500.0));
+        assert_eq!(carried_band(&at(800.0), LEAK_BAND_HZ), (100.0, 650.0));
+        // Lost only above the band: the whole band.
+        assert_eq!(carried_band(&at(900.0), LEAK_BAND_HZ), LEAK_BAND_HZ);
+        // Carried at 100 Hz alone, or lost below the band's low end: no stub, the whole band.
+        assert_eq!(carried_band(&at(200.0), LEAK_BAND_HZ), LEAK_BAND_HZ);
+        assert_eq!(carried_band(&at(80.0), LEAK_BAND_HZ), LEAK_BAND_HZ);
+        // A gap below a carried stretch cuts at the gap.
+        let gap = [
+            (100.0, true),
+            (200.0, true),
+            (350.0, false),
+            (500.0, true),
+            (800.0, true),
+        ];
+        assert_eq!(carried_band(&gap, LEAK_BAND_HZ), (100.0, 200.0));
+    }
 }
