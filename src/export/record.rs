@@ -114,17 +114,26 @@ impl SegmentExport {
             && self.leak_band_speed.is_some()
     }
 
-    /// Set [`Self::speed_source`] and its reason from the fit, prediction and field row.
+    /// Set [`Self::speed_source`] and its reason from the fit, prediction and field row. A
+    /// prediction is attached only where the fit gave no speed ([`Self::set_field`]), so it
+    /// decides first: the speed is then the prediction's even though a fit is kept.
     fn settled(mut self) -> Self {
-        let (source, reason) = if self.has_fitted_speed() {
+        let (source, reason) = if let Some(p) = &self.prediction {
+            let reason = match &self.fit {
+                Some(f) if f.status != db::FitStatus::Failed => format!(
+                    "its fit gives no leak-band speed; the soil field's: {}",
+                    p.note
+                ),
+                _ => p.note.clone(),
+            };
+            (SPEED_PREDICTED, reason)
+        } else if self.has_fitted_speed() {
             let n = self
                 .fit
                 .as_ref()
                 .and_then(|f| f.n_measurements)
                 .unwrap_or(0);
             (SPEED_FITTED, format!("fitted to {n} measurements"))
-        } else if let Some(p) = &self.prediction {
-            (SPEED_PREDICTED, p.note.clone())
         } else if let Some(f) = self.field.as_ref().filter(|f| !f.note.is_empty()) {
             (SPEED_NONE, f.note.clone())
         } else if let Some(msg) = self.fit.as_ref().and_then(|f| f.message.clone()) {
@@ -982,6 +991,64 @@ mod tests {
                 model_attenuation_db_per_m: None,
             })
             .collect()
+    }
+
+    /// A fitted segment whose curve has no leak-band mean (its wave ends inside the band) takes
+    /// the soil field's prediction: its speed, error and source are the prediction's, not
+    /// labelled as fitted with no error.
+    #[test]
+    fn a_fit_without_a_band_speed_exports_the_prediction_as_predicted() {
+        let segment = SegmentRecord {
+            segment_id: "P-1".into(),
+            material: crate::physics::Material::Hdpe,
+            outer_diameter_mm: 250.0,
+            wall_thickness_mm: 14.8,
+            soil_density_kg_m3: 2065.0,
+            pipe_youngs_modulus_pa: None,
+            pipe_poisson: None,
+            pipe_density_kg_m3: None,
+            pipe_loss_factor: None,
+            fluid_density_kg_m3: None,
+            fluid_bulk_modulus_pa: None,
+            length_m: Some(120.0),
+            soil_type: Some("gravel".into()),
+            install_year: None,
+            soil_zone: None,
+            risk_weight: None,
+            soil_class_override: None,
+            geometry_wkt: None,
+            srid: None,
+            inputs_hash: String::new(),
+            imported_at: String::new(),
+            measurements: Vec::new(),
+        };
+        let fit = db::FitRow::new(
+            "P-1",
+            1,
+            db::FitStatus::Flagged,
+            crate::physics::Model::Full,
+            crate::physics::ContactMode::Reciprocal,
+        );
+        // The fitted curve ends at 600 Hz.
+        let fitted_curve = curve(|f| (f <= 600.0).then_some(500.0));
+        let rec = SegmentExport::new(segment, Some(fit), fitted_curve);
+        assert_eq!(rec.leak_band_speed, None);
+        let prediction = db::field::PredictionRow {
+            segment_id: "P-1".into(),
+            leak_band_speed: Some((494.0, 25.0)),
+            note: "from 12 measured segments".into(),
+            ..Default::default()
+        };
+        let rec = rec.set_field(None, Some((prediction, curve(|_| Some(494.0)))));
+        assert_eq!(rec.speed_source, SPEED_PREDICTED);
+        assert_eq!(rec.leak_band_speed, Some(494.0));
+        assert_eq!(rec.leak_band_speed_std(), Some(25.0));
+        assert!(
+            rec.speed_source_reason
+                .starts_with("its fit gives no leak-band speed"),
+            "{}",
+            rec.speed_source_reason
+        );
     }
 
     #[test]
