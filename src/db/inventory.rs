@@ -89,6 +89,42 @@ pub struct MeasurementRecord {
 }
 
 impl SegmentRecord {
+    /// A segment of the given pipe and soil density with the material's typical properties,
+    /// water, no informational columns, no geometry and no measurements (set those by struct
+    /// update).
+    pub fn new(
+        segment_id: &str,
+        material: Material,
+        outer_diameter_mm: f64,
+        wall_thickness_mm: f64,
+        soil_density_kg_m3: f64,
+    ) -> SegmentRecord {
+        SegmentRecord {
+            segment_id: segment_id.to_string(),
+            material,
+            outer_diameter_mm,
+            wall_thickness_mm,
+            soil_density_kg_m3,
+            pipe_youngs_modulus_pa: None,
+            pipe_poisson: None,
+            pipe_density_kg_m3: None,
+            pipe_loss_factor: None,
+            fluid_density_kg_m3: None,
+            fluid_bulk_modulus_pa: None,
+            length_m: None,
+            soil_type: None,
+            install_year: None,
+            soil_zone: None,
+            risk_weight: None,
+            soil_class_override: None,
+            geometry_wkt: None,
+            srid: None,
+            inputs_hash: String::new(),
+            imported_at: String::new(),
+            measurements: Vec::new(),
+        }
+    }
+
     /// The material's typical properties (model §3.3) with this row's overrides.
     pub fn pipe_props(&self) -> MaterialProps {
         let mut p = self.material.typical();
@@ -466,27 +502,10 @@ mod tests {
 
     fn sample() -> SegmentRecord {
         SegmentRecord {
-            segment_id: "P-1".into(),
-            material: Material::DuctileIron,
-            outer_diameter_mm: 170.0,
-            wall_thickness_mm: 6.0,
-            soil_density_kg_m3: 1900.0,
-            pipe_youngs_modulus_pa: None,
-            pipe_poisson: None,
-            pipe_density_kg_m3: None,
-            pipe_loss_factor: None,
-            fluid_density_kg_m3: None,
-            fluid_bulk_modulus_pa: None,
             length_m: Some(120.0),
             soil_type: Some("clay".into()),
             install_year: Some(1975),
             soil_zone: Some("Z1".into()),
-            risk_weight: None,
-            soil_class_override: None,
-            geometry_wkt: None,
-            srid: None,
-            inputs_hash: String::new(),
-            imported_at: String::new(),
             measurements: vec![MeasurementRecord {
                 omega_rad_s: 2.0 * std::f64::consts::PI * 100.0,
                 frequency_hz: 100.0,
@@ -497,6 +516,7 @@ mod tests {
                 measured_on: Some("2024-05-01".into()),
                 campaign: None,
             }],
+            ..SegmentRecord::new("P-1", Material::DuctileIron, 170.0, 6.0, 1900.0)
         }
     }
 

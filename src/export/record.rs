@@ -998,30 +998,8 @@ mod tests {
     /// labelled as fitted with no error.
     #[test]
     fn a_fit_without_a_band_speed_exports_the_prediction_as_predicted() {
-        let segment = SegmentRecord {
-            segment_id: "P-1".into(),
-            material: crate::physics::Material::Hdpe,
-            outer_diameter_mm: 250.0,
-            wall_thickness_mm: 14.8,
-            soil_density_kg_m3: 2065.0,
-            pipe_youngs_modulus_pa: None,
-            pipe_poisson: None,
-            pipe_density_kg_m3: None,
-            pipe_loss_factor: None,
-            fluid_density_kg_m3: None,
-            fluid_bulk_modulus_pa: None,
-            length_m: Some(120.0),
-            soil_type: Some("gravel".into()),
-            install_year: None,
-            soil_zone: None,
-            risk_weight: None,
-            soil_class_override: None,
-            geometry_wkt: None,
-            srid: None,
-            inputs_hash: String::new(),
-            imported_at: String::new(),
-            measurements: Vec::new(),
-        };
+        let segment =
+            SegmentRecord::new("P-1", crate::physics::Material::Hdpe, 250.0, 14.8, 2065.0);
         let fit = db::FitRow::new(
             "P-1",
             1,

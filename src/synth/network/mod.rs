@@ -142,27 +142,12 @@ impl NetworkTables {
                     .collect(),
             });
             let mut rec = SegmentRecord {
-                segment_id: s.id.clone(),
-                material: s.material,
-                outer_diameter_mm: s.size.od_mm,
-                wall_thickness_mm: s.size.wall_mm,
-                soil_density_kg_m3: s.soil_density,
-                pipe_youngs_modulus_pa: None,
-                pipe_poisson: None,
-                pipe_density_kg_m3: None,
-                pipe_loss_factor: None,
-                fluid_density_kg_m3: None,
-                fluid_bulk_modulus_pa: None,
                 length_m: Some(round_to(s.length_m, 2)),
                 soil_type: Some(s.soil_label.to_string()),
                 install_year: Some(i64::from(s.install_year)),
                 soil_zone: s.soil_zone.clone(),
-                risk_weight: None,
-                soil_class_override: None,
                 srid: geometry.as_ref().map(|_| i64::from(srid)),
                 geometry_wkt: geometry.map(|g| g.to_wkt()),
-                inputs_hash: String::new(),
-                imported_at: String::new(),
                 measurements: s
                     .measurements
                     .iter()
@@ -178,6 +163,13 @@ impl NetworkTables {
                         campaign: Some("synthetic".into()),
                     })
                     .collect(),
+                ..SegmentRecord::new(
+                    &s.id,
+                    s.material,
+                    s.size.od_mm,
+                    s.size.wall_mm,
+                    s.soil_density,
+                )
             };
             rec.inputs_hash = rec.compute_inputs_hash();
             t.segments.push(rec);

@@ -68,28 +68,18 @@ fn published_record(
     measurements: Vec<MeasurementRecord>,
 ) -> SegmentRecord {
     let mut rec = SegmentRecord {
-        segment_id: segment_id.to_string(),
-        material,
-        outer_diameter_mm,
-        wall_thickness_mm,
-        soil_density_kg_m3,
         pipe_youngs_modulus_pa: Some(pipe.youngs_modulus),
         pipe_poisson: Some(pipe.poisson),
         pipe_density_kg_m3: Some(pipe.density),
         pipe_loss_factor: Some(pipe.loss_factor),
-        fluid_density_kg_m3: None,
-        fluid_bulk_modulus_pa: None,
-        length_m: None,
-        soil_type: None,
-        install_year: None,
-        soil_zone: None,
-        risk_weight: None,
-        soil_class_override: None,
-        geometry_wkt: None,
-        srid: None,
-        inputs_hash: String::new(),
-        imported_at: String::new(),
         measurements,
+        ..SegmentRecord::new(
+            segment_id,
+            material,
+            outer_diameter_mm,
+            wall_thickness_mm,
+            soil_density_kg_m3,
+        )
     };
     rec.inputs_hash = rec.compute_inputs_hash();
     rec
