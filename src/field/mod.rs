@@ -587,17 +587,12 @@ fn site_result(
         );
     }
     if site.fitted_speed.is_some() {
-        // A measured segment: the leave-one-out check (P82), on the leak band only (a fitted
-        // speed is always its mean; a prediction over a cut band is another quantity).
-        let whole_band = speed.band_hz == LEAK_BAND_HZ;
-        if let (Some(b), Some((c, s)), true) = (speed.band, site.fitted_speed, whole_band) {
+        // A measured segment: the leave-one-out check (P82), on the whole leak band only.
+        if let Some((b, z)) = site.fitted_speed.and_then(|f| speed.leave_one_out(f)) {
             row.field_leak_band_speed_m_per_s = Some(b.value);
             row.field_leak_band_speed_std_m_per_s = Some(b.std);
-            let z = (b.value - c) / (b.std * b.std + s * s).sqrt();
-            if z.is_finite() {
-                row.loo_z = Some(z);
-                row.field_outlier = z.abs() > FIELD_OUTLIER_Z;
-            }
+            row.loo_z = Some(z);
+            row.field_outlier = z.abs() > FIELD_OUTLIER_Z;
         }
         row.note = note;
         return SiteResult {

@@ -115,6 +115,20 @@ pub struct SpeedPrediction {
     pub band_gradient: Option<[f64; 2]>,
 }
 
+impl SpeedPrediction {
+    /// The leave-one-out check of a measured segment (P82) against its own fit's leak-band
+    /// speed `fitted` = (ĉ_s, σ_s): this prediction's band mean and error and
+    /// z = (ĉ_−s − ĉ_s)/√(σ²_−s + σ²_s). `None` where the prediction's band was cut below the
+    /// leak band (a fit's leak-band speed is always the whole band's mean, so the two would be
+    /// different quantities), where it has no band speed, or where z is not finite.
+    pub fn leave_one_out(&self, fitted: (f64, f64)) -> Option<(WithError, f64)> {
+        let b = self.band.filter(|_| self.band_hz == LEAK_BAND_HZ)?;
+        let (c, s) = fitted;
+        let z = (b.value - c) / (b.std * b.std + s * s).sqrt();
+        z.is_finite().then_some((b, z))
+    }
+}
+
 /// (E_m, ν_m) of u, with c_S/c_P held inside the range the search allows (ν_m in
 /// [0, ν_max]) and c_P kept: a sigma point beyond that range stands for the nearest soil.
 pub fn soil_of(u: [f64; 2], rho: f64) -> Option<(f64, f64)> {
@@ -556,6 +570,48 @@ mod tests {
         );
         assert_eq!(p.band_hz, LEAK_BAND_HZ);
         assert!(p.band.is_some());
+    }
+
+    /// A measured segment's leave-one-out z (P82) compares like with like: on a whole-band
+    /// prediction it is (ĉ_−s − ĉ_s)/√(σ²_−s + σ²_s); on a band cut below the leak band (whose
+    /// mean is another quantity than the fit's leak-band speed) there is none.
+    #[test]
+    fn the_leave_one_out_check_skips_a_cut_band() {
+        let unmeasured = |material: Material, od: f64, wall: f64, soil_density: f64| SegmentData {
+            fluid: Fluid::water(),
+            pipe: Pipe::from_outside_diameter(material.typical(), od, wall).unwrap(),
+            soil_density,
+            material: Some(material),
+            measurements: Vec::new(),
+        };
+        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
+        let soft = [(250.0f64).ln(), (100.0f64).ln()];
+        let whole = predict_speed(
+            &pvc,
+            Model::default(),
+            ContactMode::default(),
+            soft,
+            Sym2::new(0.01, 0.005, 0.01),
+        );
+        let b = whole.band.expect("a whole-band speed");
+        let fitted = (b.value + 10.0, 5.0);
+        let (own, z) = whole.leave_one_out(fitted).expect("a z on the whole band");
+        assert_eq!(own, b);
+        let expected = -10.0 / (b.std * b.std + 25.0).sqrt();
+        assert!((z - expected).abs() < 1e-12, "{z} against {expected}");
+
+        let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
+        let stiff = [7.164, 5.7158];
+        let cut = predict_speed(
+            &hdpe,
+            Model::default(),
+            ContactMode::default(),
+            stiff,
+            Sym2::new(0.0604, -0.000405, 7.6e-5),
+        );
+        let c = cut.band.expect("a speed over the cut band");
+        assert!(cut.band_hz.1 < LEAK_BAND_HZ.1);
+        assert!(cut.leave_one_out((c.value, c.std)).is_none());
     }
 
     /// A sigma point without a root takes its mirror's value reflected through the centre
