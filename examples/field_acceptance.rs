@@ -719,6 +719,7 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                     Scales {
                         class: estimated.scales.class.clone(),
                         information: oracle_means.scales.information.clone(),
+                        means: Vec::new(),
                     },
                 );
                 let a_s = Field::with_scales(
@@ -730,6 +731,7 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                     Scales {
                         class: vec![[1.0, 1.0]; nk],
                         information: estimated.scales.information.clone(),
+                        means: Vec::new(),
                     },
                 );
                 let n_screened =
