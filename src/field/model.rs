@@ -1957,6 +1957,60 @@ mod tests {
         );
     }
 
+    /// A class whose mean is given (a declared zone's estimate) keeps it and its covariance
+    /// exactly, uncorrelated with the other class, whose mean is still recovered; a pipe of
+    /// another density in that class has its posterior mean moved by −½ ln(ρ/ρ_k) in both
+    /// speeds (P63–P64), its covariance unchanged.
+    #[test]
+    fn a_given_class_mean_is_kept_and_moved_to_the_pipes_density() {
+        let (t, mu) = truth();
+        let obs = draw(11, 200, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let given = ClassMean {
+            mean: [mu[0][0] + 0.01, mu[0][1] - 0.02],
+            cov: Sym2::new(4e-4, 1e-4, 9e-4),
+            density: 1800.0,
+        };
+        let field = Field::fit_with_means(obs, 2, (50.0, 4243.0), vec![Some(given), None]);
+        let (m0, c0) = field.class(0);
+        assert_eq!(m0, given.mean);
+        assert_eq!(c0, given.cov);
+        for a in 0..2 {
+            for b in 2..4 {
+                assert_eq!(field.class_cov[(a, b)], 0.0);
+            }
+        }
+        let (m1, c1) = field.class(1);
+        for a in 0..2 {
+            let sd = c1.at(a, a).sqrt();
+            assert!(
+                (m1[a] - mu[1][a]).abs() < 3.0 * sd,
+                "{a}: {} vs {}",
+                m1[a],
+                mu[1][a]
+            );
+        }
+        let at = |rho: Option<f64>| {
+            field.mixture_posterior_at(Some([700.0, 900.0]), &[(0, 1.0)], None, rho)
+        };
+        let (own, heavy, none) = (at(Some(1800.0)), at(Some(4.0 * 1800.0)), at(None));
+        assert_eq!(own.mean, none.mean);
+        for a in 0..2 {
+            assert!((heavy.mean[a] - own.mean[a] + 0.5 * 4f64.ln()).abs() < 1e-12);
+        }
+        assert_eq!(heavy.cov, own.cov);
+        // A class without a given mean is not moved.
+        let other = field.mixture_posterior_at(
+            Some([2500.0, 900.0]),
+            &[(1, 1.0)],
+            None,
+            Some(4.0 * 1800.0),
+        );
+        assert_eq!(
+            other.mean,
+            field.posterior(Some([2500.0, 900.0]), 1, None).mean
+        );
+    }
+
     /// A fit that does not see c_S (a metal pipe) leaves c_S at the class prior: its
     /// information carries no weight in the unseen direction.
     #[test]
