@@ -83,8 +83,8 @@ pub struct FieldUpdate {
     pub up_to_date: bool,
     /// The field run's row (the stored one when up to date).
     pub run: FieldRunRow,
-    /// The declared soil zones, estimated as the zone classes' means when the field was
-    /// rebuilt (None when up to date, or when the inventory declares no zone).
+    /// The declared soil zones: estimated as the zone classes' means when the field is
+    /// rebuilt, all up to date when it is current (None when the inventory declares no zone).
     pub zones: Option<crate::zones::ZoneUpdate>,
 }
 
@@ -707,7 +707,7 @@ pub fn update_field(
                 return Ok(FieldUpdate {
                     up_to_date: true,
                     run: last,
-                    zones: None,
+                    zones: crate::zones::zones_up_to_date(conn)?,
                 });
             }
         }

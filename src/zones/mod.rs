@@ -22,7 +22,9 @@ pub use model::{
     estimate_zone, Member, MemberResult, ScatterSource, ZoneEstimate, ZoneInterval, MIN_MEMBERS,
     OUTLIER_CHI2, TAU_E_DECADES, TAU_NU,
 };
-pub use run::{estimate_stored_zones, store_zones, StoredZone, ZoneEstimates, ZoneUpdate};
+pub use run::{
+    estimate_stored_zones, store_zones, zones_up_to_date, StoredZone, ZoneEstimates, ZoneUpdate,
+};
 
 use rayon::prelude::*;
 

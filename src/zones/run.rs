@@ -222,6 +222,22 @@ pub fn estimate_stored_zones(conn: &Connection) -> Result<ZoneEstimates, DbError
     Ok(out)
 }
 
+/// The zones' part of a field update that found the field current: its inputs, the zones'
+/// member fits among them, are those of the last rebuild, so every declared zone with a stored
+/// estimate is up to date and the others had too few fitted segments.
+pub fn zones_up_to_date(conn: &Connection) -> Result<Option<ZoneUpdate>, DbError> {
+    let declared = crate::db::zones::declared_zones(conn)?;
+    if declared.is_empty() {
+        return Ok(None);
+    }
+    let stored = declared.iter().filter(|z| z.1).count();
+    Ok(Some(ZoneUpdate {
+        up_to_date: stored,
+        too_few: declared.len() - stored,
+        ..ZoneUpdate::default()
+    }))
+}
+
 /// Store the estimates of [`estimate_stored_zones`] under `run_id` in `zone_fits` /
 /// `zone_members`: a zone whose latest stored estimate has the same member fits is counted up
 /// to date and not stored again (the estimate is a function of those fits).
