@@ -781,6 +781,14 @@ pub fn update_field(
         .map(|(i, s)| (s.segment_id.as_str(), i))
         .collect();
     let n_with_fit = sites.iter().filter(|s| s.fitted_speed.is_some()).count();
+    // The zones are stored before the field: should the field's transaction fail, the next
+    // update finds it stale and estimates both again (the stored zones then count up to date).
+    let declared = !zones.zones.is_empty() || zones.too_few > 0;
+    let zones = if declared {
+        Some(crate::zones::store_zones(conn, run_id, &zones, zones_s)?)
+    } else {
+        None
+    };
     // Every site's result, a page of the inventory at a time, stored as it comes (flat memory),
     // all in one transaction: the previous update stays whole until this one is.
     let id = store::in_transaction(conn, |tx| {
@@ -852,12 +860,6 @@ pub fn update_field(
         Ok(id)
     })?;
     run.id = Some(id);
-    let declared = !zones.zones.is_empty() || zones.too_few > 0;
-    let zones = if declared {
-        Some(crate::zones::store_zones(conn, run_id, &zones, zones_s)?)
-    } else {
-        None
-    };
     Ok(FieldUpdate {
         up_to_date: false,
         run,
