@@ -17,6 +17,12 @@
 //! the share of truths within 2σ, the median 2σ width, the share with a speed and an error,
 //! the table's errors on the same segments, and the leave-one-out z (P82) of the measured.
 //!
+//! `cargo run --release --example field_acceptance -- zones [NETWORKS] [SEGMENTS] [SEED] [JOBS]
+//! [FRACTION]` (default 10 600 640001 1 0.15): zoned networks (`synth --zones 16`, no units), the
+//! segments without measurements against the truth, per network and pooled. The environment
+//! variable `PIPEWAVE_BIN` names another `pipewave` binary to import and calibrate with (e.g. an
+//! older build, for a before/after comparison); every mode honours it.
+//!
 //! `cargo run --release --example field_acceptance -- plan [NETWORKS] [SEGMENTS] [SEED] [JOBS]`
 //! (default 3 600 395001 2): on networks at 15 % measured and 350 m, the plastic p90 error of
 //! the originally unmeasured segments after importing the later-campaign measurements of
@@ -139,6 +145,9 @@ fn report_baseline(b: &Baseline) {
 
 /// The `pipewave` binary built beside this example.
 fn binary() -> PathBuf {
+    if let Some(bin) = std::env::var_os("PIPEWAVE_BIN") {
+        return PathBuf::from(bin);
+    }
     let exe = std::env::current_exe().expect("own path");
     let bin = exe
         .parent()
@@ -439,6 +448,39 @@ fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// Zoned networks (`synth --zones`: each zone one soil with a per-segment scatter, no
+/// correlated field, no wrong labels) at measured fraction `frac`: the predictions of the
+/// segments without measurements against the truth, pooled over the networks.
+fn zones_check(networks: u64, segments: usize, seed0: u64, jobs: usize, frac: f64) {
+    let zones = 16;
+    println!(
+        "zones: {networks} networks of {segments} segments in {zones} zones, measured \
+         {:.0} %, seeds from {seed0}; errors as median / p90 of |ĉ/c − 1|",
+        100.0 * frac
+    );
+    let root = std::env::temp_dir().join(format!("pipewave-field-zones-{}", std::process::id()));
+    let mut cell = Cell::default();
+    for n in 0..networks {
+        let seed = seed0 + n;
+        let opts = SynthOptions {
+            segments,
+            seed,
+            defect_fraction: 0.0,
+            zones,
+            measured_fraction: frac,
+            ..SynthOptions::default()
+        };
+        let net = Network::build(&opts, root.join(format!("n{seed}")), jobs);
+        let mut one = Cell::default();
+        one.add(&net);
+        one.report(&format!("  network {seed}"));
+        cell.add(&net);
+        let _ = std::fs::remove_dir_all(&net.dir);
+    }
+    cell.report(&format!("measured {:2.0} %, {zones} zones", 100.0 * frac));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 /// Plastic p90 |error| in per cent over the plastic segments of `ids`, each with its fitted
 /// speed if it has a fit, else its prediction (a segment with neither counts as the table).
 fn plastic_p90(net: &Network, db: &Path, ids: &[&SynthSegment]) -> f64 {
@@ -719,6 +761,7 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                     Scales {
                         class: estimated.scales.class.clone(),
                         information: oracle_means.scales.information.clone(),
+                        means: Vec::new(),
                     },
                 );
                 let a_s = Field::with_scales(
@@ -730,6 +773,7 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                     Scales {
                         class: vec![[1.0, 1.0]; nk],
                         information: estimated.scales.information.clone(),
+                        means: Vec::new(),
                     },
                 );
                 let n_screened =
@@ -937,8 +981,15 @@ fn main() {
             arg(&args, 4, 2),
             args.get(5).map_or("", String::as_str),
         ),
+        Some("zones") => zones_check(
+            arg(&args, 1, 10),
+            arg(&args, 2, 600),
+            arg(&args, 3, 640_001),
+            arg(&args, 4, 1),
+            arg(&args, 5, 0.15),
+        ),
         Some(other) => {
-            eprintln!("unknown mode '{other}' (baseline, grid, plan or oracle)");
+            eprintln!("unknown mode '{other}' (baseline, grid, plan, oracle or zones)");
             std::process::exit(2);
         }
     }

@@ -367,3 +367,87 @@ fn every_segment_of_the_sample_network_gets_a_speed() {
     assert_eq!(count("next_measurements"), 5);
     assert_eq!(count("soil_field"), count("pipe_segments"));
 }
+
+/// A zoned synthetic network through import and calibrate: each declared zone's class in the
+/// field has the zone's own estimate (model §7.11) as its mean, the very soil stored in
+/// `zone_fits`, and as its error the spread of that estimate (its 95 % interval in the speeds
+/// spans about ±1.96 of the class's stated σ); the summary still reports the zones.
+#[test]
+fn a_zone_class_mean_is_the_zone_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let net = dir.path().join("net");
+    let db = dir.path().join("z.db");
+    let ok = |out: std::process::Output| {
+        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(
+            out.status.success(),
+            "{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        stdout
+    };
+    ok(pipewave()
+        .args([
+            "synth",
+            "--segments",
+            "64",
+            "--zones",
+            "4",
+            "--measured-fraction",
+            "0.5",
+        ])
+        .args(["--defects", "0", "--no-real-cases", "--seed", "7", "--out"])
+        .arg(&net)
+        .output()
+        .unwrap());
+    ok(pipewave()
+        .args(["import", "--db"])
+        .arg(&db)
+        .arg("--segments")
+        .arg(net.join("segments.csv"))
+        .arg("--measurements")
+        .arg(net.join("measurements.csv"))
+        .output()
+        .unwrap());
+    let stdout = ok(pipewave()
+        .args(["calibrate", "--jobs", "1", "--db"])
+        .arg(&db)
+        .output()
+        .unwrap());
+    assert!(stdout.contains("zones: 4 estimated"), "{stdout}");
+    let conn = rusqlite::Connection::open(&db).unwrap();
+    let mut stmt = conn
+        .prepare(
+            "SELECT z.soil_zone, z.soil_p_wave_speed_m_per_s, z.soil_s_wave_speed_m_per_s, \
+             z.soil_p_wave_speed_lo_m_per_s, z.soil_p_wave_speed_hi_m_per_s, \
+             z.soil_s_wave_speed_lo_m_per_s, z.soil_s_wave_speed_hi_m_per_s, \
+             c.mean_ln_cp, c.mean_ln_cs, c.std_ln_cp, c.std_ln_cs \
+             FROM zone_fits z JOIN field_classes c ON c.soil_class = z.soil_zone \
+             WHERE c.field_run_id = (SELECT MAX(id) FROM field_runs)",
+        )
+        .unwrap();
+    let rows: Vec<(String, [f64; 10])> = stmt
+        .query_map([], |r| {
+            let mut v = [0.0; 10];
+            for (k, x) in v.iter_mut().enumerate() {
+                *x = r.get(k + 1)?;
+            }
+            Ok((r.get(0)?, v))
+        })
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(rows.len(), 4);
+    for (zone, v) in &rows {
+        let [cp, cs, cp_lo, cp_hi, cs_lo, cs_hi, m_cp, m_cs, s_cp, s_cs] = *v;
+        assert!((m_cp - cp.ln()).abs() < 1e-9, "{zone}: {m_cp} vs ln {cp}");
+        assert!((m_cs - cs.ln()).abs() < 1e-9, "{zone}: {m_cs} vs ln {cs}");
+        for (lo, hi, s) in [(cp_lo, cp_hi, s_cp), (cs_lo, cs_hi, s_cs)] {
+            let half = 0.5 * (hi / lo).ln() / 1.96;
+            assert!(
+                s > 0.7 * half && s < 1.4 * half,
+                "{zone}: class σ {s} against the interval's {half}"
+            );
+        }
+    }
+}

@@ -221,7 +221,8 @@ pub struct CalibrateSummary {
     pub elapsed_s: f64,
     /// Sum of the workers' time over the stored fits, ms.
     pub worker_ms: f64,
-    /// The soil zones estimated after the fits, if the run finished.
+    /// The soil zones estimated with the field after the fits (the zone classes' means), if
+    /// the run finished and the field was rebuilt.
     pub zones: Option<crate::zones::ZoneUpdate>,
     /// The soil field's update after the fits (model §7.12), if the run finished.
     pub field: Option<crate::field::FieldUpdate>,
@@ -507,14 +508,15 @@ fn locked_run(
     written?;
     finished?;
     if status == RunStatus::Finished {
-        summary.zones = Some(crate::zones::update_zones(conn, Some(run_id))?);
         let settings = crate::field::FieldSettings {
             model: opts.model,
             contact_mode: opts.contact_mode,
             jobs,
             force: false,
         };
-        summary.field = Some(crate::field::update_field(conn, Some(run_id), &settings)?);
+        let field = crate::field::update_field(conn, Some(run_id), &settings)?;
+        summary.zones.clone_from(&field.zones);
+        summary.field = Some(field);
     }
     Ok(summary)
 }

@@ -196,6 +196,18 @@ pub fn latest_zone_fits(conn: &Connection) -> Result<Vec<ZoneFitRow>, DbError> {
     Ok(rows.collect::<Result<_, _>>()?)
 }
 
+/// The zones the inventory declares (`soil_zone`, trimmed, non-empty), sorted, each with
+/// whether it has a stored estimate.
+pub fn declared_zones(conn: &Connection) -> Result<Vec<(String, bool)>, DbError> {
+    let mut stmt = conn.prepare(
+        "SELECT z, EXISTS (SELECT 1 FROM zone_fits f WHERE f.soil_zone = z) FROM \
+         (SELECT DISTINCT TRIM(soil_zone) AS z FROM segments \
+          WHERE soil_zone IS NOT NULL AND TRIM(soil_zone) <> '') ORDER BY z",
+    )?;
+    let rows = stmt.query_map([], |r| Ok((r.get(0)?, r.get(1)?)))?;
+    Ok(rows.collect::<Result<_, _>>()?)
+}
+
 /// The newest estimate of one zone.
 pub fn latest_zone_fit(conn: &Connection, zone: &str) -> Result<Option<ZoneFitRow>, DbError> {
     Ok(conn

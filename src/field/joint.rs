@@ -33,6 +33,9 @@ pub struct Target {
     pub pos: Option<[f64; 2]>,
     /// Its soil class.
     pub class: usize,
+    /// Its soil density, kg/m³: in a class whose mean is given at another density (a declared
+    /// zone's), its mean moves to this one (P63–P64); None: the class's density.
+    pub soil_density: Option<f64>,
 }
 
 /// The joint posterior of the targets' u = (ln c_P, ln c_S).
@@ -116,6 +119,7 @@ impl JointField {
         Some(Target {
             pos: s.pos,
             class: s.class.unwrap_or(0),
+            soil_density: s.soil_density,
         })
     }
 
@@ -208,6 +212,13 @@ pub fn joint_posterior(field: &Field, targets: &[Target]) -> JointPosterior {
                 for (r, o) in out.iter_mut().enumerate() {
                     *o += a_mat[(2 * t + r, 2 * p)] * d[0] + a_mat[(2 * t + r, 2 * p + 1)] * d[1];
                 }
+            }
+            if let (Some(g), Some(rho)) = (
+                field.scales.given_mean(targets[t].class),
+                targets[t].soil_density,
+            ) {
+                let d = g.shift(rho);
+                out = [out[0] + d, out[1] + d];
             }
             out
         })
@@ -316,7 +327,14 @@ mod tests {
             (None, 0),
         ] {
             let single = field.posterior(pos, class, None);
-            let joint = joint_posterior(&field, &[Target { pos, class }]);
+            let joint = joint_posterior(
+                &field,
+                &[Target {
+                    pos,
+                    class,
+                    soil_density: None,
+                }],
+            );
             for a in 0..2 {
                 assert!(
                     (joint.mean[0][a] - single.mean[a]).abs() < 1e-9,
@@ -351,10 +369,12 @@ mod tests {
             Target {
                 pos: Some([450.0, 250.0]),
                 class: 0,
+                soil_density: None,
             },
             Target {
                 pos: Some([560.0, 300.0]),
                 class: 1,
+                soil_density: None,
             },
         ];
         let pts: Vec<[f64; 2]> = mpos
@@ -462,10 +482,12 @@ mod tests {
                     Target {
                         pos: Some(a),
                         class: 0,
+                        soil_density: None,
                     },
                     Target {
                         pos: Some(b),
                         class: 0,
+                        soil_density: None,
                     },
                 ],
             );

@@ -32,11 +32,11 @@ use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
 use crate::physics::curves::LEAK_BAND_HZ;
 use crate::physics::{ContactMode, Model};
 
-use model::{Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
+use model::{ClassMean, Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 6;
+pub const FIELD_ALGORITHM_VERSION: u32 = 7;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -83,6 +83,9 @@ pub struct FieldUpdate {
     pub up_to_date: bool,
     /// The field run's row (the stored one when up to date).
     pub run: FieldRunRow,
+    /// The declared soil zones: estimated as the zone classes' means when the field is
+    /// rebuilt, all up to date when it is current (None when the inventory declares no zone).
+    pub zones: Option<crate::zones::ZoneUpdate>,
 }
 
 impl FieldUpdate {
@@ -161,6 +164,8 @@ pub struct Site {
     pub member: Option<usize>,
     /// Its fitted leak-band speed and error, m/s.
     pub fitted_speed: Option<(f64, f64)>,
+    /// Its soil density from the inventory, kg/m³.
+    pub soil_density: Option<f64>,
 }
 
 /// Midpoint (along its length) and length of a polyline, in the units of its coordinates.
@@ -278,6 +283,7 @@ fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
             classes: Vec::new(),
             member: None,
             fitted_speed: i.leak_band_speed.filter(|_| usable),
+            soil_density: i.soil_density,
         },
         FittedSoil {
             speeds: i.speeds,
@@ -414,6 +420,53 @@ fn classes_and_members(
         });
     }
     (sites, obs, names)
+}
+
+/// The given class means (model §7.12): a class named after a declared soil zone with an
+/// estimate takes the zone's soil from the hierarchical model of its members (§7.11, P67–P68)
+/// as its mean, with the zone's posterior covariance; the other classes have none (the field
+/// estimates theirs). A zone whose covariance the grid could not give keeps the field's
+/// estimate.
+pub fn zone_class_means(
+    names: &[String],
+    zones: &crate::zones::ZoneEstimates,
+) -> Vec<Option<ClassMean>> {
+    names
+        .iter()
+        .map(|n| {
+            let z = zones.get(n)?;
+            let e = &z.estimate;
+            let [pp, ps, ss] = e.speed_cov?;
+            let (cp, cs) = e.speeds();
+            let mean = [cp.ln(), cs.ln()];
+            (mean.iter().all(|v| v.is_finite()) && e.soil_density > 0.0).then_some(ClassMean {
+                mean,
+                cov: Sym2::new(pp, ps, ss),
+                density: e.soil_density,
+            })
+        })
+        .collect()
+}
+
+/// The members with their fitted u moved to their class's density where the class has a
+/// given mean (û + ½ ln(ρ_s/ρ_k), P63–P64 at fixed E_m, ν_m), so that the field's correlated
+/// part and scatter act on the residuals about the zone's soil at each pipe's own density.
+fn at_class_density(
+    mut obs: Vec<Observation>,
+    sites: &[Site],
+    means: &[Option<ClassMean>],
+) -> Vec<Observation> {
+    for s in sites {
+        let (Some(m), Some(rho)) = (s.member, s.soil_density) else {
+            continue;
+        };
+        let o = &mut obs[m];
+        if let Some(g) = means.get(o.class).and_then(Option::as_ref) {
+            let d = g.shift(rho);
+            o.u = [o.u[0] - d, o.u[1] - d];
+        }
+    }
+    obs
 }
 
 /// The bounds of ℓ (model §7.12): a typical segment length (the median) and the network's
@@ -565,11 +618,13 @@ fn site_result(
         Ok(d) => d,
         Err(e) => return none(row, format!("no speed: the pipe's data are unusable ({e})")),
     };
-    let post = if site.classes.is_empty() {
-        field.posterior(site.pos, site.class.unwrap_or(0), site.member)
+    let own = [(site.class.unwrap_or(0), 1.0)];
+    let classes: &[(usize, f64)] = if site.classes.is_empty() {
+        &own
     } else {
-        field.mixture_posterior(site.pos, &site.classes, site.member)
+        &site.classes
     };
+    let post = field.mixture_posterior_at(site.pos, classes, site.member, Some(data.soil_density));
     let speed = predict_speed(
         &data,
         settings.model,
@@ -647,6 +702,7 @@ pub fn update_field(
                 return Ok(FieldUpdate {
                     up_to_date: true,
                     run: last,
+                    zones: crate::zones::zones_up_to_date(conn)?,
                 });
             }
         }
@@ -656,9 +712,15 @@ pub fn update_field(
         .num_threads(settings.jobs.max(1))
         .build()
         .ok();
+    // The declared zones first: their hierarchical estimates are the zone classes' means.
+    let zones_started = Instant::now();
+    let zones = crate::zones::estimate_stored_zones(conn)?;
+    let zones_s = zones_started.elapsed().as_secs_f64();
+    let means = zone_class_means(&names, &zones);
+    let obs = at_class_density(obs, &sites, &means);
     let n_members = obs.len();
     let field = in_pool(&pool, || {
-        (n_members > 0).then(|| Field::fit(obs, names.len(), ell_bounds))
+        (n_members > 0).then(|| Field::fit_with_means(obs, names.len(), ell_bounds, means))
     });
     let h = field.as_ref().map(|f| f.hyper);
     // Every member's χ² against its leave-one-out prediction: the screening that set the
@@ -714,6 +776,14 @@ pub fn update_field(
         .map(|(i, s)| (s.segment_id.as_str(), i))
         .collect();
     let n_with_fit = sites.iter().filter(|s| s.fitted_speed.is_some()).count();
+    // The zones are stored before the field: should the field's transaction fail, the next
+    // update finds it stale and estimates both again (the stored zones then count up to date).
+    let declared = !zones.zones.is_empty() || zones.too_few > 0;
+    let zones = if declared {
+        Some(crate::zones::store_zones(conn, run_id, &zones, zones_s)?)
+    } else {
+        None
+    };
     // Every site's result, a page of the inventory at a time, stored as it comes (flat memory),
     // all in one transaction: the previous update stays whole until this one is.
     let id = store::in_transaction(conn, |tx| {
@@ -788,6 +858,7 @@ pub fn update_field(
     Ok(FieldUpdate {
         up_to_date: false,
         run,
+        zones,
     })
 }
 
@@ -810,6 +881,9 @@ pub fn stored_field(
     if obs.is_empty() {
         return Ok(None);
     }
+    let zones = crate::zones::estimate_stored_zones(conn)?;
+    let means = zone_class_means(&names, &zones);
+    let obs = at_class_density(obs, &sites, &means);
     let bounds = length_bounds(&sites);
     let class_scales = match last.id {
         Some(id) => store::field_class_scales(conn, id)?,
@@ -831,6 +905,7 @@ pub fn stored_field(
             .map(|n| class_scales.get(n).copied().unwrap_or([1.0, 1.0]))
             .collect(),
         information,
+        means,
     };
     let source = if last.hyper_source == model::HyperSource::Defaults.as_str() {
         model::HyperSource::Defaults
@@ -867,6 +942,7 @@ mod tests {
             speeds: None,
             information: None,
             leak_band_speed: None,
+            soil_density: Some(1800.0),
         }
     }
 

@@ -733,22 +733,88 @@ fn class_prior(nk: usize) -> (f64, DVector<f64>) {
     (prec, m0)
 }
 
-/// The class means' posterior given a pass: mean and covariance (2K).
-fn class_posterior(p: &Pass, nk: usize) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
+/// A class mean given to the field from outside rather than estimated by it: a declared soil
+/// zone's soil from the hierarchical model of its members (model §7.11–7.12, P67–P68).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClassMean {
+    /// (ln c_P, ln c_S) at [`Self::density`].
+    pub mean: [f64; 2],
+    /// Its covariance (the zone's posterior error).
+    pub cov: Sym2,
+    /// The soil density the speeds are given at, kg/m³: a pipe of density ρ in the class has
+    /// the mean shifted by −½ ln(ρ/ρ_k) in both speeds (P63–P64 at fixed E_m, ν_m).
+    pub density: f64,
+}
+
+impl ClassMean {
+    /// The shift of both ln speeds from the class's density to `rho` (P63–P64: c ∝ ρ^(−1/2)
+    /// at fixed E_m and ν_m); 0 where either density is unusable.
+    pub fn shift(&self, rho: f64) -> f64 {
+        let d = -0.5 * (rho / self.density).ln();
+        if d.is_finite() {
+            d
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The class means' posterior given a pass: mean and covariance (2K), and the log marginal
+/// likelihood. The classes with a given mean ([`ClassMean`]) take it and its covariance as
+/// they are: the pass's Gaussian in the means, s − 2 rᵀμ + μᵀ G μ, is conditioned on them,
+/// and only the other classes' means are integrated out under their prior, so the given means'
+/// members are not counted a second time in their own class mean.
+fn class_posterior(
+    p: &Pass,
+    nk: usize,
+    given: &[Option<ClassMean>],
+) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
     let (prec, m0) = class_prior(nk);
-    let mut m = p.g.clone();
-    for i in 0..2 * nk {
+    let given_of = |k: usize| given.get(k).and_then(Option::as_ref);
+    let free: Vec<usize> = (0..2 * nk).filter(|&i| given_of(i / 2).is_none()).collect();
+    let mut fixed = DVector::zeros(2 * nk);
+    for k in 0..nk {
+        if let Some(g) = given_of(k) {
+            fixed[2 * k] = g.mean[0];
+            fixed[2 * k + 1] = g.mean[1];
+        }
+    }
+    let g_fixed = &p.g * &fixed;
+    let s = p.s - 2.0 * p.r.dot(&fixed) + fixed.dot(&g_fixed);
+    let nf = free.len();
+    let mut m = DMatrix::from_fn(nf, nf, |a, b| p.g[(free[a], free[b])]);
+    for i in 0..nf {
         m[(i, i)] += prec;
     }
-    let rr = &p.r + &m0 * prec;
-    let chol = m.cholesky()?;
-    let mean = chol.solve(&rr);
-    let cov = chol.inverse();
-    let logdet_m: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
-    // log p(û | θ) with μ integrated out under its prior:
+    let m0f = DVector::from_fn(nf, |a, _| m0[free[a]]);
+    let rr = DVector::from_fn(nf, |a, _| p.r[free[a]] - g_fixed[free[a]]) + &m0f * prec;
+    let (mean_f, cov_f, logdet_m) = if nf == 0 {
+        (DVector::zeros(0), DMatrix::zeros(0, 0), 0.0)
+    } else {
+        let chol = m.cholesky()?;
+        let logdet: f64 = chol.l().diagonal().iter().map(|d| 2.0 * d.ln()).sum();
+        (chol.solve(&rr), chol.inverse(), logdet)
+    };
+    // log p(û | θ) with the free μ integrated out under their prior:
     // −½[s + m0ᵀP₀ m0 − rrᵀ M⁻¹ rr + Σ ln det V + ln det M − ln det P₀] − n ln 2π.
-    let quad = p.s + prec * m0.dot(&m0) - rr.dot(&mean);
-    let loglik = -0.5 * (quad + p.logdet + logdet_m - 2.0 * nk as f64 * prec.ln());
+    let quad = s + prec * m0f.dot(&m0f) - rr.dot(&mean_f);
+    let loglik = -0.5 * (quad + p.logdet + logdet_m - nf as f64 * prec.ln());
+    let mut mean = fixed;
+    let mut cov = DMatrix::zeros(2 * nk, 2 * nk);
+    for (a, &i) in free.iter().enumerate() {
+        mean[i] = mean_f[a];
+        for (b, &j) in free.iter().enumerate() {
+            cov[(i, j)] = cov_f[(a, b)];
+        }
+    }
+    for k in 0..nk {
+        if let Some(g) = given_of(k) {
+            cov[(2 * k, 2 * k)] = g.cov.pp;
+            cov[(2 * k, 2 * k + 1)] = g.cov.ps;
+            cov[(2 * k + 1, 2 * k)] = g.cov.ps;
+            cov[(2 * k + 1, 2 * k + 1)] = g.cov.ss;
+        }
+    }
     Some((mean, cov, loglik))
 }
 
@@ -778,7 +844,7 @@ fn log_likelihood_scaled(
         root_b: &root_b,
     };
     let p = pass(&t, v, nk, limit)?;
-    class_posterior(&p, nk).map(|x| x.2)
+    class_posterior(&p, nk, &scales.means).map(|x| x.2)
 }
 
 /// The per-class multipliers of B and T and the per-member information scales of a field.
@@ -789,15 +855,25 @@ pub struct Scales {
     /// Per member: the factor its information is multiplied by (1: as fitted; below 1: the
     /// field could not explain it, see [`SCREEN_CHI2`]).
     pub information: Vec<f64>,
+    /// Per class: its mean where given from outside (a declared zone's, model §7.11); the
+    /// classes beyond the list, or `None`, have their means estimated by the field.
+    pub means: Vec<Option<ClassMean>>,
 }
 
 impl Scales {
-    /// All 1: every class as the common B and T, every fit's information as stored.
+    /// All 1: every class as the common B and T, every fit's information as stored, every
+    /// class mean estimated.
     pub fn unit(nk: usize, n: usize) -> Scales {
         Scales {
             class: vec![[1.0, 1.0]; nk],
             information: vec![1.0; n],
+            means: Vec::new(),
         }
+    }
+
+    /// Class k's given mean, if any.
+    pub fn given_mean(&self, k: usize) -> Option<&ClassMean> {
+        self.means.get(k).and_then(Option::as_ref)
     }
 
     /// Class k's multipliers ([1, 1] for a class it does not know).
@@ -1046,7 +1122,19 @@ impl Field {
     /// Fit the field to the members: θ by maximum marginal likelihood when there are at least
     /// [`MIN_MEMBERS_FOR_HYPER`] members (defaults otherwise), ℓ within `ell_bounds`.
     pub fn fit(obs: Vec<Observation>, nk: usize, ell_bounds: (f64, f64)) -> Field {
-        Self::build(obs, nk, ell_bounds, None)
+        Self::build(obs, nk, ell_bounds, None, Vec::new())
+    }
+
+    /// [`Self::fit`] with the means of some classes given (`means[k]`, a declared zone's soil
+    /// from its members' hierarchical model, model §7.11): θ, the class multipliers and the
+    /// screening are then taken about those means, and the other classes' means estimated.
+    pub fn fit_with_means(
+        obs: Vec<Observation>,
+        nk: usize,
+        ell_bounds: (f64, f64),
+        means: Vec<Option<ClassMean>>,
+    ) -> Field {
+        Self::build(obs, nk, ell_bounds, None, means)
     }
 
     /// The field with given hyper-parameters (those of a stored update): only the class means
@@ -1058,7 +1146,7 @@ impl Field {
         hyper: Hyper,
         source: HyperSource,
     ) -> Field {
-        Self::build(obs, nk, ell_bounds, Some((hyper, source)))
+        Self::build(obs, nk, ell_bounds, Some((hyper, source)), Vec::new())
     }
 
     /// The field with given hyper-parameters, class multipliers and information scales (those
@@ -1077,6 +1165,7 @@ impl Field {
             information: (0..obs.len())
                 .map(|i| scales.information.get(i).copied().unwrap_or(1.0))
                 .collect(),
+            means: (0..nk).map(|k| scales.given_mean(k).copied()).collect(),
         };
         let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
         Self::assemble(obs, nk, bounds, hyper, source, scales, &v)
@@ -1094,11 +1183,13 @@ impl Field {
         nk: usize,
         ell_bounds: (f64, f64),
         given: Option<(Hyper, HyperSource)>,
+        means: Vec<Option<ClassMean>>,
     ) -> Field {
         let (lo, hi) = Self::clamp_bounds(ell_bounds);
         let v = Vecchia::new(&obs, LIKELIHOOD_NEIGHBOURS);
         let start = Hyper::defaults((lo * hi).sqrt());
         let mut scales = Scales::unit(nk, obs.len());
+        scales.means = means;
         let Some((mut hyper, source)) = given.or_else(|| {
             (obs.len() < MIN_MEMBERS_FOR_HYPER).then_some((start, HyperSource::Defaults))
         }) else {
@@ -1173,7 +1264,7 @@ impl Field {
             noise: &noise,
             root_b: &root_b,
         };
-        let post = pass(&t, v, nk, obs.len()).and_then(|p| class_posterior(&p, nk));
+        let post = pass(&t, v, nk, obs.len()).and_then(|p| class_posterior(&p, nk, &scales.means));
         let (class_mean, class_cov, log_likelihood) = match post {
             Some((m, c, l)) => (m, c, Some(l)),
             None => {
@@ -1429,10 +1520,24 @@ impl Field {
         classes: &[(usize, f64)],
         skip: Option<usize>,
     ) -> Posterior {
+        self.mixture_posterior_at(pos, classes, skip, None)
+    }
+
+    /// [`Self::mixture_posterior`] of a pipe whose soil density is `rho` (kg/m³): in a class
+    /// with a given mean its posterior is moved from the class's density to its own
+    /// ([`ClassMean::shift`]); without `rho` it stays at the class's density, where the field's
+    /// members of that class are kept.
+    pub fn mixture_posterior_at(
+        &self,
+        pos: Option<[f64; 2]>,
+        classes: &[(usize, f64)],
+        skip: Option<usize>,
+        rho: Option<f64>,
+    ) -> Posterior {
         let shared = self.kriging(pos, skip);
         let mut parts: Vec<(f64, Posterior)> = classes
             .iter()
-            .map(|&(k, p)| (p, self.posterior_with(&shared, k)))
+            .map(|&(k, p)| (p, self.posterior_with(&shared, k, rho)))
             .collect();
         let total: f64 = parts.iter().map(|x| x.0).sum();
         let Some(best) = parts
@@ -1441,7 +1546,7 @@ impl Field {
             .max_by(|a, b| a.1 .0.total_cmp(&b.1 .0).then(b.0.cmp(&a.0)))
             .map(|x| x.0)
         else {
-            return self.posterior(pos, 0, skip);
+            return self.posterior_with(&shared, 0, rho);
         };
         if parts.len() == 1 || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return parts.into_iter().nth(best).map(|x| x.1).expect("one part");
@@ -1480,7 +1585,7 @@ impl Field {
     /// its nearest members, the class means' error included), leaving out member `skip` (its
     /// leave-one-out prediction, P82). Without a position: its class mean, B and T added.
     pub fn posterior(&self, pos: Option<[f64; 2]>, class: usize, skip: Option<usize>) -> Posterior {
-        self.posterior_with(&self.kriging(pos, skip), class)
+        self.posterior_with(&self.kriging(pos, skip), class, None)
     }
 
     /// What the posteriors at `pos` share across the classes a pipe may be in: its neighbours
@@ -1499,8 +1604,9 @@ impl Field {
         }
     }
 
-    /// The posterior in class `class` from the shared part of [`Self::kriging`].
-    fn posterior_with(&self, k: &Kriging, class: usize) -> Posterior {
+    /// The posterior in class `class` from the shared part of [`Self::kriging`], of a pipe of
+    /// soil density `rho` (see [`Self::mixture_posterior_at`]).
+    fn posterior_with(&self, k: &Kriging, class: usize, rho: Option<f64>) -> Posterior {
         let target_var = self.prior_var(class);
         let root_b = self.scales.of_class(class)[0].sqrt();
         let neighbours = k.neighbours.clone();
@@ -1555,6 +1661,10 @@ impl Field {
             0.5 * (extra[0][1] + extra[1][0]),
             extra[1][1],
         ));
+        if let (Some(g), Some(rho)) = (self.scales.given_mean(class), rho) {
+            let d = g.shift(rho);
+            mean = [mean[0] + d, mean[1] + d];
+        }
         Posterior {
             mean,
             cov,
@@ -1844,6 +1954,60 @@ mod tests {
         assert!(
             mean.abs() < 0.15 && (0.8..1.25).contains(&sd),
             "z mean {mean}, sd {sd}"
+        );
+    }
+
+    /// A class whose mean is given (a declared zone's estimate) keeps it and its covariance
+    /// exactly, uncorrelated with the other class, whose mean is still recovered; a pipe of
+    /// another density in that class has its posterior mean moved by −½ ln(ρ/ρ_k) in both
+    /// speeds (P63–P64), its covariance unchanged.
+    #[test]
+    fn a_given_class_mean_is_kept_and_moved_to_the_pipes_density() {
+        let (t, mu) = truth();
+        let obs = draw(11, 200, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let given = ClassMean {
+            mean: [mu[0][0] + 0.01, mu[0][1] - 0.02],
+            cov: Sym2::new(4e-4, 1e-4, 9e-4),
+            density: 1800.0,
+        };
+        let field = Field::fit_with_means(obs, 2, (50.0, 4243.0), vec![Some(given), None]);
+        let (m0, c0) = field.class(0);
+        assert_eq!(m0, given.mean);
+        assert_eq!(c0, given.cov);
+        for a in 0..2 {
+            for b in 2..4 {
+                assert_eq!(field.class_cov[(a, b)], 0.0);
+            }
+        }
+        let (m1, c1) = field.class(1);
+        for a in 0..2 {
+            let sd = c1.at(a, a).sqrt();
+            assert!(
+                (m1[a] - mu[1][a]).abs() < 3.0 * sd,
+                "{a}: {} vs {}",
+                m1[a],
+                mu[1][a]
+            );
+        }
+        let at = |rho: Option<f64>| {
+            field.mixture_posterior_at(Some([700.0, 900.0]), &[(0, 1.0)], None, rho)
+        };
+        let (own, heavy, none) = (at(Some(1800.0)), at(Some(4.0 * 1800.0)), at(None));
+        assert_eq!(own.mean, none.mean);
+        for a in 0..2 {
+            assert!((heavy.mean[a] - own.mean[a] + 0.5 * 4f64.ln()).abs() < 1e-12);
+        }
+        assert_eq!(heavy.cov, own.cov);
+        // A class without a given mean is not moved.
+        let other = field.mixture_posterior_at(
+            Some([2500.0, 900.0]),
+            &[(1, 1.0)],
+            None,
+            Some(4.0 * 1800.0),
+        );
+        assert_eq!(
+            other.mean,
+            field.posterior(Some([2500.0, 900.0]), 1, None).mean
         );
     }
 

@@ -8,8 +8,8 @@
 //! * [`bound`]: the Cramér–Rao bound of a zone's soil from its members' true parameters.
 //! * [`flags`]: the zone's flags and its verdict on a member (`zone_outlier`, with evidence).
 //! * [`member`]: a member's quadratic model from its data and single fit (real misfit).
-//! * [`run`]: the zones of a database after `calibrate`: estimated when a member's fit has
-//!   changed, stored in `zone_fits` / `zone_members`.
+//! * [`run`]: the zones of a database: estimated when the soil field is rebuilt (they are its
+//!   zone classes' means), stored in `zone_fits` / `zone_members`.
 pub mod bound;
 pub mod flags;
 pub mod member;
@@ -22,7 +22,9 @@ pub use model::{
     estimate_zone, Member, MemberResult, ScatterSource, ZoneEstimate, ZoneInterval, MIN_MEMBERS,
     OUTLIER_CHI2, TAU_E_DECADES, TAU_NU,
 };
-pub use run::{update_zones, ZoneUpdate};
+pub use run::{
+    estimate_stored_zones, store_zones, zones_up_to_date, StoredZone, ZoneEstimates, ZoneUpdate,
+};
 
 use rayon::prelude::*;
 

@@ -378,6 +378,10 @@ pub struct ZoneEstimate {
     pub p_wave_speed_interval: (f64, f64),
     /// 95 % interval of the zone's c_S, m/s (P64).
     pub s_wave_speed_interval: (f64, f64),
+    /// Covariance (pp, ps, ss) of the zone's (ln c_P, ln c_S) at [`Self::soil_density`] under
+    /// its marginal likelihood (P68), where the grid allows it: the error of the zone's soil as
+    /// the field's class mean (model §7.12).
+    pub speed_cov: Option<[f64; 3]>,
     /// Scatter used: (τ_E decades, τ_ν).
     pub scatter: (f64, f64),
     /// How it was chosen.
@@ -457,8 +461,40 @@ fn search_box() -> ((f64, f64), (f64, f64)) {
     )
 }
 
-/// The minimum of Φ, the 95 % intervals of E_z and ν_z, and the 95 % region's points.
-type Solution = ((f64, f64, f64), ZoneInterval, ZoneInterval, Vec<(f64, f64)>);
+/// The minimum of Φ, the 95 % intervals of E_z and ν_z, the 95 % region's points, and the
+/// covariance of the zone's (ln c_P, ln c_S) ([`speed_covariance`]).
+type Solution = (
+    (f64, f64, f64),
+    ZoneInterval,
+    ZoneInterval,
+    Vec<(f64, f64)>,
+    Option<[f64; 3]>,
+);
+
+/// The covariance (pp, ps, ss) of the zone's speeds u = (ln c_P, ln c_S) under its marginal
+/// likelihood e^(−Φ/2) (P68, members' soils integrated out) with a flat prior in u: the
+/// weighted second moments over a regular grid in u (`points` as [`speed_grid`] gives them),
+/// weights e^(−(Φ − Φ_min)/2). The grid spans the 95 % region and a step beyond, so the tails
+/// it leaves out carry a few per cent of the weight. `None` with fewer than three finite
+/// points or a degenerate result.
+fn speed_covariance(points: &[[f64; 5]]) -> Option<[f64; 3]> {
+    let finite: Vec<&[f64; 5]> = points.iter().filter(|p| p[4].is_finite()).collect();
+    let f0 = finite.iter().map(|p| p[4]).fold(f64::INFINITY, f64::min);
+    if finite.len() < 3 || !f0.is_finite() {
+        return None;
+    }
+    let w: Vec<f64> = finite.iter().map(|p| (-0.5 * (p[4] - f0)).exp()).collect();
+    let total: f64 = w.iter().sum();
+    let mean = |k: usize| finite.iter().zip(&w).map(|(p, w)| w * p[k]).sum::<f64>() / total;
+    let (mp, ms) = (mean(0), mean(1));
+    let moment = |f: &dyn Fn(&[f64; 5]) -> f64| {
+        finite.iter().zip(&w).map(|(p, w)| w * f(p)).sum::<f64>() / total
+    };
+    let pp = moment(&|p| (p[0] - mp) * (p[0] - mp));
+    let ps = moment(&|p| (p[0] - mp) * (p[1] - ms));
+    let ss = moment(&|p| (p[1] - ms) * (p[1] - ms));
+    (pp > 0.0 && ss > 0.0 && pp * ss - ps * ps > 0.0).then_some([pp, ps, ss])
+}
 
 /// A grid of Φ in the speeds (ln c_P, ln c_S) at density `rho`, `n` × `n` points over the
 /// box: points (ln c_P, ln c_S, log10 E, ν, Φ), Φ infinite where the speeds give no soil in the
@@ -617,7 +653,7 @@ fn solve(members: &[Member], keep: &[bool], tau: (f64, f64)) -> Option<Solution>
     let nu_int = interval(nu_range, nb);
     let mut points: Vec<(f64, f64)> = region.iter().map(|p| (p[2], p[3])).collect();
     points.push((best.0, best.1));
-    Some((best, e_int, nu_int, points))
+    Some((best, e_int, nu_int, points, speed_covariance(grid_pts)))
 }
 
 /// Estimate one zone from its members (at least [`MIN_MEMBERS`]); `None` if too few or the
@@ -630,7 +666,7 @@ pub fn estimate_zone(members: &[Member]) -> Option<ZoneEstimate> {
     let tau = (TAU_E_DECADES, TAU_NU);
     let mut keep = vec![true; members.len()];
     loop {
-        let (best, e_int, nu_int, region) = solve(members, &keep, tau)?;
+        let (best, e_int, nu_int, region, speed_cov) = solve(members, &keep, tau)?;
         let z = (best.0, best.1);
         let results: Vec<MemberResult> = members
             .iter()
@@ -687,6 +723,7 @@ pub fn estimate_zone(members: &[Member]) -> Option<ZoneEstimate> {
                     soil_density: rho,
                     p_wave_speed_interval: range(|s| s.0),
                     s_wave_speed_interval: range(|s| s.1),
+                    speed_cov,
                     scatter: tau,
                     scatter_source: ScatterSource::Fixed,
                     chi2_per_dof: results

@@ -1,6 +1,7 @@
-//! The zones of a database: after the segment fits of a `calibrate` run, every zone with at
-//! least [`MIN_MEMBERS`] fitted segments whose member fits changed since its last estimate is
-//! estimated again (model §7.11) and stored in `zone_fits` / `zone_members`.
+//! The zones of a database: every zone with at least [`MIN_MEMBERS`] fitted segments is
+//! estimated (model §7.11) when the soil field is rebuilt after a `calibrate` run, as the class
+//! mean of its zone class (model §7.12), and stored in `zone_fits` / `zone_members` where its
+//! member fits changed since its last stored estimate.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -18,7 +19,7 @@ use super::flags::{OutlierEvidence, ZoneFlag, POOR_FIT_CHI2_PER_DOF};
 use super::model::{estimate_zone, ZoneEstimate, MIN_MEMBERS};
 use super::{members_by_zone, FitSetup, FittedSegment};
 
-/// What [`update_zones`] did.
+/// What the zones' part of a field update did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ZoneUpdate {
     /// Zones estimated (stored).
@@ -89,17 +90,50 @@ fn members_hash(fits: &[&FitRow]) -> String {
     crate::db::hash::fnv1a64_hex(&lines.join("\n"))
 }
 
-/// Estimate every zone whose member fits changed since its last estimate, and store it under
-/// `run_id`.
-pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUpdate, DbError> {
-    let started = Instant::now();
-    let mut update = ZoneUpdate::default();
+/// One zone estimated from the stored fits, with what its stored rows need.
+#[derive(Debug, Clone)]
+pub struct StoredZone {
+    /// The zone's name (its `soil_zone`).
+    pub zone: String,
+    /// The hierarchical estimate (model §7.11).
+    pub estimate: ZoneEstimate,
+    /// The hash of its member fits.
+    pub members_hash: String,
+    /// Its members are all metal or all plastic.
+    pub single_pipe_kind: bool,
+    /// Each member's fit id.
+    pub fit_ids: BTreeMap<String, i64>,
+    /// Time the estimate took, ms.
+    pub elapsed_ms: f64,
+}
+
+/// Every zone of a database estimated from its latest fits.
+#[derive(Debug, Clone, Default)]
+pub struct ZoneEstimates {
+    /// The zones with at least [`MIN_MEMBERS`] usable fits, by name.
+    pub zones: Vec<StoredZone>,
+    /// Zones with fewer (not estimated).
+    pub too_few: usize,
+}
+
+impl ZoneEstimates {
+    /// The zone named `zone`, if estimated.
+    pub fn get(&self, zone: &str) -> Option<&StoredZone> {
+        self.zones.iter().find(|z| z.zone == zone)
+    }
+}
+
+/// Estimate every declared zone with at least [`MIN_MEMBERS`] usable latest fits (model §7.11,
+/// P67–P68). The field update calls it when it rebuilds the field: the estimates are the class
+/// means of the zone classes (model §7.12) and what [`store_zones`] writes.
+pub fn estimate_stored_zones(conn: &Connection) -> Result<ZoneEstimates, DbError> {
+    let mut out = ZoneEstimates::default();
     let records: Vec<SegmentRecord> = load_zoned_segments(conn)?
         .into_iter()
         .filter(|r| r.soil_zone.as_deref().is_some_and(|z| !z.trim().is_empty()))
         .collect();
     if records.is_empty() {
-        return Ok(update);
+        return Ok(out);
     }
     let fits: BTreeMap<String, FitRow> = latest_fits(conn, None)?
         .into_iter()
@@ -125,7 +159,7 @@ pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUp
             }
         }
     }
-    update.too_few = all_zones
+    out.too_few = all_zones
         .iter()
         .filter(|z| zones.get(*z).map_or(0, Vec::len) < MIN_MEMBERS)
         .count();
@@ -133,10 +167,6 @@ pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUp
         let t0 = Instant::now();
         let fit_refs: Vec<&FitRow> = members.iter().map(|(_, f)| *f).collect();
         let hash = members_hash(&fit_refs);
-        if latest_zone_fit(conn, zone)?.is_some_and(|z| z.members_hash == hash) {
-            update.up_to_date += 1;
-            continue;
-        }
         let data: Vec<Option<crate::invert::SegmentData>> =
             members.iter().map(|(r, _)| segment_data(r).ok()).collect();
         let mut fitted = Vec::new();
@@ -174,21 +204,68 @@ pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUp
         }
         let by_zone = members_by_zone(&fitted);
         let Some(est) = by_zone.get(zone).and_then(|ms| estimate_zone(ms)) else {
-            update.too_few += 1;
+            out.too_few += 1;
             continue;
         };
-        let fit_ids: BTreeMap<&str, i64> = fit_refs
-            .iter()
-            .map(|f| (f.segment_id.as_str(), f.id.unwrap_or(-1)))
-            .collect();
-        let mut row = zone_row(zone, run_id, &est, &hash, plastic == 0 || metal == 0);
-        row.elapsed_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
+        out.zones.push(StoredZone {
+            zone: zone.clone(),
+            estimate: est,
+            members_hash: hash,
+            single_pipe_kind: plastic == 0 || metal == 0,
+            fit_ids: fit_refs
+                .iter()
+                .map(|f| (f.segment_id.clone(), f.id.unwrap_or(-1)))
+                .collect(),
+            elapsed_ms: t0.elapsed().as_secs_f64() * 1e3,
+        });
+    }
+    Ok(out)
+}
+
+/// The zones' part of a field update that found the field current: its inputs, the zones'
+/// member fits among them, are those of the last rebuild, so every declared zone with a stored
+/// estimate is up to date and the others had too few fitted segments.
+pub fn zones_up_to_date(conn: &Connection) -> Result<Option<ZoneUpdate>, DbError> {
+    let declared = crate::db::zones::declared_zones(conn)?;
+    if declared.is_empty() {
+        return Ok(None);
+    }
+    let stored = declared.iter().filter(|z| z.1).count();
+    Ok(Some(ZoneUpdate {
+        up_to_date: stored,
+        too_few: declared.len() - stored,
+        ..ZoneUpdate::default()
+    }))
+}
+
+/// Store the estimates of [`estimate_stored_zones`] under `run_id` in `zone_fits` /
+/// `zone_members`: a zone whose latest stored estimate has the same member fits is counted up
+/// to date and not stored again (the estimate is a function of those fits).
+pub fn store_zones(
+    conn: &mut Connection,
+    run_id: Option<i64>,
+    zones: &ZoneEstimates,
+    elapsed_s: f64,
+) -> Result<ZoneUpdate, DbError> {
+    let mut update = ZoneUpdate {
+        too_few: zones.too_few,
+        elapsed_s,
+        ..ZoneUpdate::default()
+    };
+    for z in &zones.zones {
+        if latest_zone_fit(conn, &z.zone)?.is_some_and(|s| s.members_hash == z.members_hash) {
+            update.up_to_date += 1;
+            continue;
+        }
+        let est = &z.estimate;
+        let mut row = zone_row(&z.zone, run_id, est, &z.members_hash, z.single_pipe_kind);
+        row.elapsed_ms = Some(z.elapsed_ms);
         let member_rows: Vec<ZoneMemberRow> = est
             .members
             .iter()
             .map(|m| ZoneMemberRow {
                 segment_id: m.segment_id.clone(),
-                fit_id: fit_ids.get(m.segment_id.as_str()).copied().unwrap_or(-1),
+                fit_id: z.fit_ids.get(&m.segment_id).copied().unwrap_or(-1),
                 shrunk_soil_youngs_modulus_pa: Some(m.shrunk_modulus),
                 shrunk_soil_poisson: Some(m.shrunk_poisson),
                 statistic: Some(m.statistic),
@@ -199,7 +276,6 @@ pub fn update_zones(conn: &mut Connection, run_id: Option<i64>) -> Result<ZoneUp
         insert_zone_fit(conn, &row, &member_rows)?;
         update.estimated += 1;
     }
-    update.elapsed_s = started.elapsed().as_secs_f64();
     Ok(update)
 }
 
