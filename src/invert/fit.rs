@@ -644,11 +644,25 @@ fn search(
         let ends = sweep::valley_ends(problem, bounds, &optima);
         stage(Stage::SpeedValleyEnds, ends, before, &mut optima);
     }
+    // The DE runs in the speed coordinates (ln c_P, r = c_S/c_P, …) on the image of the box.
+    let in_speeds = sweep::InSpeeds::new(problem, bounds)
+        .filter(|_| settings.global == GlobalStage::SpeedDe && settings.method == Method::Default);
+    let speed_bounds = in_speeds.as_ref().and_then(|s| s.speed_bounds());
     for r in (0..restarts).filter(|_| !sweeping) {
         let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
         let de = de_for(settings, problem)?;
-        let res = de.minimize(problem, bounds, &mut rng)?;
+        let res = match (&in_speeds, &speed_bounds) {
+            (Some(s), Some(yb)) => {
+                let mut res = de.minimize(s, yb, &mut rng)?;
+                match s.x(&res.x) {
+                    Some(x) => res.x = x,
+                    None => res.f = f64::INFINITY,
+                }
+                res
+            }
+            _ => de.minimize(problem, bounds, &mut rng)?,
+        };
         if !res.f.is_finite()
             || (settings.method == Method::Paper && res.f >= FAILED_SOLVE_OBJECTIVE)
         {
@@ -682,6 +696,29 @@ fn search(
     }
     let pieces =
         probes::Pieces::new(problem).filter(|_| settings.method == Method::Default && !sweeping);
+    let speed_faces = in_speeds.is_some() && speed_bounds.is_some();
+    if let (Some(_), true) = (&pieces, speed_faces) {
+        // The faces r = r_min and ξ ∈ {0, 1} at the best optimum, instead of the contact and
+        // incompressible probes below.
+        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let best = (0..optima.len()).min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
+        let found = best.map_or_else(Vec::new, |i| sweep::faces(problem, bounds, &optima[i]));
+        let n = found.len();
+        for (o, c) in found {
+            optima.push(o);
+            capped.push(c);
+            found_by.push(Stage::SpeedFaces);
+        }
+        let stop = if n > 0 {
+            StageStop::Polished {
+                starts: n,
+                optima: n,
+            }
+        } else {
+            StageStop::NotApplicable
+        };
+        stages.push(record(problem, Stage::SpeedFaces, stop, e0, b0, &optima));
+    }
     if let Some(pieces) = pieces {
         // The contact probe from each optimum of the DE runs (and the start), best first, but
         // one whose coordinates all lie within [`SAME_OPTIMUM_FRACTION`] of their range of
@@ -689,36 +726,38 @@ fn search(
         // the better (f 0.545, log10 E_m 7.89, ν_m 0.496) has no deeper basin at ξ = 1, the
         // other (f 0.770, log10 E_m 9.61, ν_m 0) has the global optimum (f 0.183) there
         // (`tests/paper_case.rs`).
-        let mut order: Vec<usize> = (0..optima.len()).collect();
-        order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
-        let mut tried: Vec<Vec<f64>> = Vec::new();
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
-        let mut contact_optima = 0;
-        for i in order {
-            let x = optima[i].x.clone();
-            let same = |y: &Vec<f64>| {
-                (0..x.len()).all(|j| (x[j] - y[j]).abs() <= SAME_OPTIMUM_FRACTION * bounds.width(j))
+        if !speed_faces {
+            let mut order: Vec<usize> = (0..optima.len()).collect();
+            order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
+            let mut tried: Vec<Vec<f64>> = Vec::new();
+            let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+            let mut contact_optima = 0;
+            for i in order {
+                let x = optima[i].x.clone();
+                let same = |y: &Vec<f64>| {
+                    (0..x.len()).all(|j| (x[j] - y[j]).abs() <= SAME_OPTIMUM_FRACTION * bounds.width(j))
+                };
+                if tried.iter().any(same) {
+                    continue;
+                }
+                if let Some((o, c)) = probes::contact_probe(&pieces, bounds, &optima[i]) {
+                    optima.push(o);
+                    capped.push(c);
+                    found_by.push(Stage::Contact);
+                    contact_optima += 1;
+                }
+                tried.push(x);
+            }
+            let stop = if contact_optima > 0 {
+                StageStop::Polished {
+                    starts: contact_optima,
+                    optima: contact_optima,
+                }
+            } else {
+                StageStop::NotApplicable
             };
-            if tried.iter().any(same) {
-                continue;
-            }
-            if let Some((o, c)) = probes::contact_probe(&pieces, bounds, &optima[i]) {
-                optima.push(o);
-                capped.push(c);
-                found_by.push(Stage::Contact);
-                contact_optima += 1;
-            }
-            tried.push(x);
+            stages.push(record(problem, Stage::Contact, stop, e0, b0, &optima));
         }
-        let stop = if contact_optima > 0 {
-            StageStop::Polished {
-                starts: contact_optima,
-                optima: contact_optima,
-            }
-        } else {
-            StageStop::NotApplicable
-        };
-        stages.push(record(problem, Stage::Contact, stop, e0, b0, &optima));
         // Each probe starts from the best optimum so far.
         let best = |optima: &[Optimum]| {
             optima
@@ -747,11 +786,13 @@ fn search(
             };
             stages.push(record(problem, stage, stop, e0, b0, optima));
         };
-        run_probe(
-            Stage::Incompressible,
-            &probes::incompressible_probe,
-            &mut optima,
-        );
+        if !speed_faces {
+            run_probe(
+                Stage::Incompressible,
+                &probes::incompressible_probe,
+                &mut optima,
+            );
+        }
         run_probe(Stage::ValleyEnd, &probes::valley_end_probe, &mut optima);
         // The grazing and edge probes again from a best they moved: its pieces are others.
         // The first round with the gap scan's starts (`probes::gap_scan`).

@@ -38,11 +38,14 @@ pub enum Stage {
     SpeedGaps,
     /// The ends of the best's valley in (r, ξ) at its c_P, polished.
     SpeedValleyEnds,
+    /// Polishes from the faces r = r_min and ξ ∈ {0, 1} of the speed coordinates at the best
+    /// optimum of the DE runs in those coordinates.
+    SpeedFaces,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 12] = [
+    pub const ALL: [Stage; 13] = [
         Stage::Global,
         Stage::NestedStart,
         Stage::Contact,
@@ -55,6 +58,7 @@ impl Stage {
         Stage::SpeedSweep,
         Stage::SpeedGaps,
         Stage::SpeedValleyEnds,
+        Stage::SpeedFaces,
     ];
 
     /// Name used in reports.
@@ -72,6 +76,7 @@ impl Stage {
             Stage::SpeedSweep => "speed sweep",
             Stage::SpeedGaps => "speed gaps",
             Stage::SpeedValleyEnds => "speed valley ends",
+            Stage::SpeedFaces => "speed faces",
         }
     }
 

@@ -28,7 +28,7 @@ use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, Objective};
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem, Scale};
-use super::speed::{soil_of, SpeedBox};
+use super::speed::{soil_of, speeds_of, SpeedBox};
 
 /// Which global stage the default method runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -39,6 +39,9 @@ pub enum GlobalStage {
     /// The prototype sweep over c_P ([`sweep`]) without DE or probes, where the problem fits
     /// E_m, ν_m and ξ only (otherwise the DE).
     SpeedSweep,
+    /// The DE restarts in the speed coordinates ([`InSpeeds`]), the faces of the best optimum
+    /// ([`faces`]) instead of the contact and incompressible probes, then the walking probes.
+    SpeedDe,
 }
 
 /// Spacing of the sweep in ln c_P (22 % in c_P) within [`SWEEP_NEAR`] of the measured phase
@@ -429,6 +432,197 @@ pub(super) fn valley_ends(
                 .into_iter()
                 .filter_map(move |y0| held_then_polished(problem, bounds, region, l, y0))
         })
+        .collect()
+}
+
+/// The problem in the speed coordinates: the soil's (E_m, ν_m) replaced by (ln c_P, r =
+/// c_S/c_P) through the exact map of P63–P64 ([`super::speed`]), every other parameter (ξ, the
+/// effects) as it is. Its box is the bounding box of the image of the search box (P51) in
+/// (ln c_P, r) and the search box's own ranges of the rest; a point of it outside the image
+/// (a soft soil at large r, a stiff one at small r) is rated at its projection along ln c_P
+/// onto the image, the soil of the same r at E_m's bound, so that every rated soil is one of
+/// the search box. In these coordinates the cliffs of P44 are (nearly) planes of constant
+/// ln c_P, and the incompressible corner ν_m → ½ is the face r = r_min: r uniform over its
+/// range puts 39 % of a population at ν_m ≥ 0.45, where the misfit's basins are narrow in
+/// (log10 E_m, ν_m).
+pub(super) struct InSpeeds<'q, 'a> {
+    problem: &'q Problem<'a>,
+    /// The search box, in the search coordinates.
+    bounds: &'q Bounds,
+    /// Its image in (ln c_P, r).
+    region: SpeedBox,
+    /// Index of E_m (ln c_P in these coordinates) among the parameters.
+    je: usize,
+    /// Index of ν_m (r).
+    jn: usize,
+}
+
+impl<'q, 'a> InSpeeds<'q, 'a> {
+    /// `None` unless the problem fits E_m and ν_m.
+    pub(super) fn new(problem: &'q Problem<'a>, bounds: &'q Bounds) -> Option<Self> {
+        let position = |p: Param| problem.specs.iter().position(|s| s.param == p);
+        let (je, jn) = (position(Param::SoilModulus)?, position(Param::SoilPoisson)?);
+        let e = &problem.specs[je];
+        let region = SpeedBox::new(
+            (e.value(bounds.lower()[je]), e.value(bounds.upper()[je])),
+            (bounds.lower()[jn], bounds.upper()[jn]),
+            problem.data.soil_density,
+        );
+        Some(Self {
+            problem,
+            bounds,
+            region,
+            je,
+            jn,
+        })
+    }
+
+    /// The box of the speed coordinates.
+    pub(super) fn speed_bounds(&self) -> Option<Bounds> {
+        let (mut lo, mut hi) = (self.bounds.lower().to_vec(), self.bounds.upper().to_vec());
+        let (l, r) = (self.region.ln_cp_range(), self.region.r_range());
+        (lo[self.je], hi[self.je]) = l;
+        (lo[self.jn], hi[self.jn]) = r;
+        Bounds::new(lo, hi).ok()
+    }
+
+    /// The search coordinates of the point `y` of the speed coordinates, its ln c_P moved into
+    /// the image of the search box at its r; `None` where r gives no soil.
+    pub(super) fn x(&self, y: &[f64]) -> Option<Vec<f64>> {
+        let (lo, hi) = self.region.ln_cp_range_at(y[self.jn])?;
+        let (e, nu) = soil_of(y[self.je].clamp(lo, hi), y[self.jn], self.region.rho)?;
+        let mut x = y.to_vec();
+        x[self.je] = self.problem.specs[self.je].coordinate(e);
+        x[self.jn] = nu;
+        self.bounds.clamp(&mut x);
+        Some(x)
+    }
+
+    /// The speed coordinates of the point `x` of the search coordinates.
+    pub(super) fn y(&self, x: &[f64]) -> Vec<f64> {
+        let e = self.problem.specs[self.je].value(x[self.je]);
+        let (l, r) = speeds_of(e, x[self.jn], self.region.rho);
+        let mut y = x.to_vec();
+        y[self.je] = l;
+        y[self.jn] = r;
+        y
+    }
+}
+
+impl Objective for InSpeeds<'_, '_> {
+    fn dim(&self) -> usize {
+        self.problem.specs.len()
+    }
+    fn value(&self, y: &[f64]) -> f64 {
+        self.x(y).map_or(f64::INFINITY, |x| self.problem.value(&x))
+    }
+    fn search_value(&self, y: &[f64]) -> f64 {
+        self.x(y)
+            .map_or(f64::INFINITY, |x| self.problem.search_value(&x))
+    }
+}
+
+/// Step in ln c_P of the line on the face r = r_min past grazing ([`faces`]): 10 % in c_P.
+pub const FACE_LN_CP_STEP: f64 = 0.1;
+/// Step in ln c_P of the line's stiffest end, the last [`FACE_STIFF_WIDTH`] below the box's
+/// top (0.015 in log10 E_m).
+pub const FACE_STIFF_STEP: f64 = 0.0173;
+/// Width in ln c_P of the line's stiffest end: log10 E_m ≥ 9.7 at ν_m's upper bound.
+pub const FACE_STIFF_WIDTH: f64 = 0.345;
+/// The line's classes of c_P: past grazing up to this multiple of the mean measured phase
+/// speed, and beyond.
+pub const FACE_FAR_PAST_GRAZING: f64 = 2.0;
+/// The best of the stiffest end is polished only when its misfit is at most this multiple of
+/// the best optimum's.
+pub const FACE_STIFF_GATE: f64 = 2.0;
+
+/// The faces of the box in the speed coordinates at the best optimum: bounded
+/// Levenberg–Marquardt polishes
+///
+/// * from its soil at the same c_P moved to r = r_min (ν_m → ½, the incompressible face: the
+///   fluid-like end of a valley of constant c_P, c_S → 0);
+/// * from its soil at each face of ξ that is not its own (ξ enters the soil's stiffness as a
+///   weight, §4.10, so a misfit falling towards one face can have a deeper basin at the
+///   other);
+/// * from the best point of each class of a line along the face r = r_min past grazing (c_P
+///   above the mean measured phase speed v̄, where compressional radiation switches off, model
+///   §7.8 item 3, P44), at ξ ∈ {its own, 0, 1}: c_P up to [`FACE_FAR_PAST_GRAZING`] v̄, above
+///   it, and the stiffest end of the box (gated by [`FACE_STIFF_GATE`]). Those basins are
+///   narrow in r (c_P² ∝ 1/(1 − 2ν_m)) and in c_P, and a population seldom lands in them.
+pub(super) fn faces(
+    problem: &Problem<'_>,
+    bounds: &Bounds,
+    best: &Optimum,
+) -> Vec<(Optimum, bool)> {
+    let Some(speeds) = InSpeeds::new(problem, bounds) else {
+        return Vec::new();
+    };
+    let (je, jn) = (speeds.je, speeds.jn);
+    let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
+    let r_min = speeds.region.r_range().0;
+    let y_best = speeds.y(&best.x);
+    let mut starts: Vec<Vec<f64>> = Vec::new();
+    let mut y = y_best.clone();
+    y[jn] = r_min;
+    starts.extend(speeds.x(&y));
+    let mut xis = vec![None];
+    if let Some(j) = jx {
+        for face in [bounds.lower()[j], bounds.upper()[j]] {
+            if face != best.x[j] {
+                let mut x = best.x.clone();
+                x[j] = face;
+                starts.push(x);
+                xis.push(Some(face));
+            }
+        }
+    }
+    let n = problem.data.measurements.len().max(1) as f64;
+    let v = problem
+        .data
+        .measurements
+        .iter()
+        .map(|m| m.phase_speed())
+        .sum::<f64>()
+        / n;
+    if let (true, Some((_, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_min)) {
+        // The best point of each class: [up to FACE_FAR_PAST_GRAZING v̄, beyond, stiffest].
+        let mut best_of: [Option<(f64, Vec<f64>)>; 3] = [None, None, None];
+        let mut rate = |l: f64, class: usize| {
+            for &xi in &xis {
+                let mut y = y_best.clone();
+                (y[je], y[jn]) = (l, r_min);
+                if let (Some(j), Some(xi)) = (jx, xi) {
+                    y[j] = xi;
+                }
+                let Some(x) = speeds.x(&y) else { continue };
+                let f = problem.value(&x);
+                if f.is_finite() && best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
+                    best_of[class] = Some((f, x));
+                }
+            }
+        };
+        let (far, stiff) = ((FACE_FAR_PAST_GRAZING * v).ln(), top - FACE_STIFF_WIDTH);
+        let mut l = v.ln() + FACE_LN_CP_STEP;
+        while l < stiff {
+            rate(l, usize::from(l > far));
+            l += FACE_LN_CP_STEP;
+        }
+        let mut l = top;
+        while l >= stiff {
+            rate(l, 2);
+            l -= FACE_STIFF_STEP;
+        }
+        if best_of[2]
+            .as_ref()
+            .is_some_and(|(f, _)| *f > FACE_STIFF_GATE * best.cost)
+        {
+            best_of[2] = None;
+        }
+        starts.extend(best_of.into_iter().flatten().map(|(_, x)| x));
+    }
+    starts
+        .iter()
+        .filter_map(|x| polish(problem, x, bounds, POLISH_ITERATIONS))
         .collect()
 }
 
