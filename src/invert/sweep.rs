@@ -514,9 +514,15 @@ impl Objective for InSpeeds<'_, '_> {
         self.problem.specs.len()
     }
     fn value(&self, y: &[f64]) -> f64 {
+        if !self.region.contains(y[self.je], y[self.jn]) {
+            return f64::INFINITY;
+        }
         self.x(y).map_or(f64::INFINITY, |x| self.problem.value(&x))
     }
     fn search_value(&self, y: &[f64]) -> f64 {
+        if !self.region.contains(y[self.je], y[self.jn]) {
+            return f64::INFINITY;
+        }
         self.x(y)
             .map_or(f64::INFINITY, |x| self.problem.search_value(&x))
     }
