@@ -528,11 +528,13 @@ impl Objective for InSpeeds<'_, '_> {
     }
 }
 
-/// Step in ln c_P of the line on the face r = r_min past grazing ([`faces`]): 10 % in c_P.
-pub const FACE_LN_CP_STEP: f64 = 0.1;
+/// Step in ln c_P of the line on the face r = r_min past grazing ([`faces`]): 22 % in c_P.
+pub const FACE_LN_CP_STEP: f64 = 0.2;
 /// Step in ln c_P of the line's stiffest end, the last [`FACE_STIFF_WIDTH`] below the box's
-/// top (0.015 in log10 E_m).
-pub const FACE_STIFF_STEP: f64 = 0.0173;
+/// top (0.05 in log10 E_m).
+pub const FACE_STIFF_STEP: f64 = 0.0576;
+/// An optimum within this fraction of ξ's range of one of its bounds lies on that face.
+pub const FACE_ON_BOUND_RTOL: f64 = 1e-9;
 /// Width in ln c_P of the line's stiffest end: log10 E_m ≥ 9.7 at ν_m's upper bound.
 pub const FACE_STIFF_WIDTH: f64 = 0.345;
 /// The line's classes of c_P: past grazing up to this multiple of the mean measured phase
@@ -547,9 +549,9 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 ///
 /// * from its soil at the same c_P moved to r = r_min (ν_m → ½, the incompressible face: the
 ///   fluid-like end of a valley of constant c_P, c_S → 0);
-/// * from its soil at each face of ξ that is not its own (ξ enters the soil's stiffness as a
-///   weight, §4.10, so a misfit falling towards one face can have a deeper basin at the
-///   other);
+/// * when it lies on a face of ξ, from its soil at the opposite face (ξ enters the soil's
+///   stiffness as a weight, §4.10, so a misfit falling towards one face can have a deeper
+///   basin at the other);
 /// * from the best point of each class of a line along the face r = r_min past grazing (c_P
 ///   above the mean measured phase speed v̄, where compressional radiation switches off, model
 ///   §7.8 item 3, P44), at ξ ∈ {its own, 0, 1}: c_P up to [`FACE_FAR_PAST_GRAZING`] v̄, above
@@ -573,13 +575,25 @@ pub(super) fn faces(
     starts.extend(speeds.x(&y));
     let mut xis = vec![None];
     if let Some(j) = jx {
-        for face in [bounds.lower()[j], bounds.upper()[j]] {
+        let (lo, hi) = (bounds.lower()[j], bounds.upper()[j]);
+        for face in [lo, hi] {
             if face != best.x[j] {
-                let mut x = best.x.clone();
-                x[j] = face;
-                starts.push(x);
                 xis.push(Some(face));
             }
+        }
+        // An optimum on a face of ξ: the polish from the opposite face.
+        let on_face = FACE_ON_BOUND_RTOL * (hi - lo);
+        let opposite = if best.x[j] <= lo + on_face {
+            Some(hi)
+        } else if best.x[j] >= hi - on_face {
+            Some(lo)
+        } else {
+            None
+        };
+        if let Some(face) = opposite {
+            let mut x = best.x.clone();
+            x[j] = face;
+            starts.push(x);
         }
     }
     let n = problem.data.measurements.len().max(1) as f64;
