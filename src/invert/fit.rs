@@ -735,7 +735,8 @@ fn search(
             for i in order {
                 let x = optima[i].x.clone();
                 let same = |y: &Vec<f64>| {
-                    (0..x.len()).all(|j| (x[j] - y[j]).abs() <= SAME_OPTIMUM_FRACTION * bounds.width(j))
+                    (0..x.len())
+                        .all(|j| (x[j] - y[j]).abs() <= SAME_OPTIMUM_FRACTION * bounds.width(j))
                 };
                 if tried.iter().any(same) {
                     continue;

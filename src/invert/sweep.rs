@@ -704,4 +704,86 @@ mod tests {
         assert!(r_range_at(&b, 0.1f64.ln()).is_none());
         assert!(r_range_at(&b, 50_000f64.ln()).is_none());
     }
+
+    /// The speed DE's coordinates: the box is the image's bounding box (ln c_P −0.32 to 10.30
+    /// at ρ_m 1,900 kg/m³, r from r(0.499) to 1/√2, ξ's own range); a point of the search box
+    /// returns to itself through (ln c_P, r); a point of the bounding box outside the image has
+    /// no misfit, and one inside is rated as its soil.
+    #[test]
+    fn the_speed_de_rates_the_image_of_the_search_box_only() {
+        use crate::invert::FitSettings;
+        use crate::synth::bench::{bench_network, MaterialMix};
+        let data = bench_network(5, 848484, MaterialMix::Default)
+            .into_iter()
+            .next()
+            .expect("a segment")
+            .data;
+        let st = FitSettings::default();
+        let problem = Problem::new(&data, st.method, st.model, st.contact_mode, &st.effects);
+        let bounds = problem.bounds().expect("bounds");
+        let speeds = InSpeeds::new(&problem, &bounds).expect("E_m and ν_m are fitted");
+        let yb = speeds.speed_bounds().expect("a box");
+        let rho = data.soil_density;
+        let (l_lo, l_hi) = (0.5 * (E_BOUNDS.0 / rho).ln(), {
+            let nu = MAX_SOIL_POISSON;
+            0.5 * (E_BOUNDS.1 * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)) / rho).ln()
+        });
+        assert!((yb.lower()[0] - l_lo).abs() < 1e-9 && (yb.upper()[0] - l_hi).abs() < 1e-9);
+        assert!((yb.lower()[1] - 0.044_68).abs() < 1e-5, "{}", yb.lower()[1]);
+        assert!((yb.upper()[1] - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
+        assert_eq!(
+            (yb.lower()[2], yb.upper()[2]),
+            (bounds.lower()[2], bounds.upper()[2])
+        );
+        for x in [
+            vec![7.3, 0.21, 0.4],
+            vec![3.5, 0.0, 1.0],
+            vec![9.9, 0.499, 0.0],
+        ] {
+            let back = speeds.x(&speeds.y(&x)).expect("a soil");
+            for (a, b) in x.iter().zip(&back) {
+                assert!((a - b).abs() < 1e-9, "{x:?} -> {back:?}");
+            }
+        }
+        // ln c_P 9 (8,100 m/s) at r = 1/√2 needs E_m = 1.2e11 Pa, above the box: no misfit.
+        let outside = [9.0, std::f64::consts::FRAC_1_SQRT_2, 0.5];
+        assert!(!speeds.region.contains(outside[0], outside[1]));
+        assert_eq!(speeds.value(&outside), f64::INFINITY);
+        assert_eq!(speeds.search_value(&outside), f64::INFINITY);
+        let inside = speeds.y(&[7.3, 0.21, 0.4]);
+        let x = speeds.x(&inside).expect("a soil");
+        assert_eq!(speeds.value(&inside), problem.value(&x));
+        assert!(speeds.value(&inside).is_finite());
+    }
+
+    /// A ductile-iron pipe whose global optimum lies past grazing on the face r = r_min (c_P
+    /// 2,538 m/s, r 0.056, χ² 1.14), while a basin at c_P 166 m/s (χ² 2.08) holds the best
+    /// optimum of a search: the faces stage reaches the first from the second, by the line
+    /// along the face (the polish from r_min at the best's own c_P stays below grazing).
+    #[test]
+    fn the_faces_reach_an_optimum_past_grazing_on_the_incompressible_face() {
+        use crate::invert::FitSettings;
+        use crate::synth::bench::{bench_network, MaterialMix};
+        let data = bench_network(200, 848484, MaterialMix::Default)
+            .into_iter()
+            .find(|s| s.id == "WM10101")
+            .expect("segment")
+            .data;
+        let st = FitSettings::default();
+        let problem = Problem::new(&data, st.method, st.model, st.contact_mode, &st.effects);
+        let bounds = problem.bounds().expect("bounds");
+        let speeds = InSpeeds::new(&problem, &bounds).expect("E_m and ν_m are fitted");
+        let x = speeds.x(&[166.15f64.ln(), 0.4307, 1.0]).expect("a soil");
+        let (best, _) = polish(&problem, &x, &bounds, POLISH_ITERATIONS).expect("polished");
+        assert!((best.cost - 2.08).abs() < 0.01, "{}", best.cost);
+        let found = faces(&problem, &bounds, &best);
+        let lowest = found
+            .iter()
+            .map(|(o, _)| o)
+            .min_by(|a, b| a.cost.total_cmp(&b.cost));
+        let lowest = lowest.expect("optima");
+        assert!(lowest.cost < 1.2, "{}", lowest.cost);
+        let y = speeds.y(&lowest.x);
+        assert!(y[0].exp() > 2_000.0 && y[1] < 0.07, "{y:?}");
+    }
 }
