@@ -3,12 +3,11 @@
 //! answer; with `exhaustive`, also how often the yardstick reaches the χ² of the default
 //! search run far longer (`bench::exhaustive_fit`).
 //!
-//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep|speedde]
+//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]
 //!
-//! With `sweep` (the prototype sweep in the speed coordinates, `invert::sweep`) or `speedde`
-//! (the DE runs in the speed coordinates with the walking probes), each segment is also fitted
-//! with that search, timed on the thread's CPU clock alternately with today's search, and both
-//! are judged against the yardstick.
+//! With `sweep` (the prototype sweep in the speed coordinates, `invert::sweep`), each segment
+//! is also fitted with that search, timed on the thread's CPU clock alternately with today's
+//! search, and both are judged against the yardstick.
 //!
 //! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
 //! do not depend on JOBS.
@@ -46,7 +45,7 @@ struct Row {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep|speedde]";
+    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]";
     let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
     let parsed = (|| -> Result<(MaterialMix, u64, u64, usize, usize), String> {
         Ok((
@@ -65,17 +64,16 @@ fn main() {
         }
     };
     let exhaustive = arg(6) == "exhaustive";
-    // The other search timed against today's: the sweep, or the DE in the speed coordinates.
+    // The other search timed against today's: the sweep.
     let other = match arg(6) {
         "sweep" => Some(("speed sweep   ", GlobalStage::SpeedSweep)),
-        "speedde" => Some(("speed DE      ", GlobalStage::SpeedDe)),
         _ => None,
     };
     let sweeping = other.is_some();
     let other_name = other.map_or("", |o| o.0);
     let settings = FitSettings::default();
     let sweep_settings = FitSettings {
-        global: other.map_or(GlobalStage::De, |o| o.1),
+        global: other.map_or(GlobalStage::SpeedDe, |o| o.1),
         ..FitSettings::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()

@@ -17,10 +17,6 @@ pub enum Stage {
     Global,
     /// The polish from a base fit's optimum (a fit with effects).
     NestedStart,
-    /// The polish from an optimum on a face of ξ at the opposite face.
-    Contact,
-    /// Candidates towards ν_m → ½ and past grazing (P44), polished.
-    Incompressible,
     /// The polish from the other end of a valley of constant c_P.
     ValleyEnd,
     /// Candidates across a grazing cliff (P44) and in its gaps, polished and walked from.
@@ -45,11 +41,9 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 13] = [
+    pub const ALL: [Stage; 11] = [
         Stage::Global,
         Stage::NestedStart,
-        Stage::Contact,
-        Stage::Incompressible,
         Stage::ValleyEnd,
         Stage::Grazing,
         Stage::Edge,
@@ -66,8 +60,6 @@ impl Stage {
         match self {
             Stage::Global => "global",
             Stage::NestedStart => "nested start",
-            Stage::Contact => "contact",
-            Stage::Incompressible => "incompressible",
             Stage::ValleyEnd => "valley end",
             Stage::Grazing => "grazing",
             Stage::Edge => "edge",

@@ -33,15 +33,13 @@ use super::speed::{soil_of, speeds_of, SpeedBox};
 /// Which global stage the default method runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum GlobalStage {
-    /// Differential evolution (SHADE) restarts, then the probes: today's search.
+    /// The DE restarts, every other one in the speed coordinates ([`InSpeeds`]), the faces of
+    /// the best optimum ([`faces`]), then the walking probes: the default search.
     #[default]
-    De,
-    /// The prototype sweep over c_P ([`sweep`]) without DE or probes, where the problem fits
-    /// E_m, ν_m and ξ only (otherwise the DE).
-    SpeedSweep,
-    /// The DE restarts in the speed coordinates ([`InSpeeds`]), the faces of the best optimum
-    /// ([`faces`]) instead of the contact and incompressible probes, then the walking probes.
     SpeedDe,
+    /// The prototype sweep over c_P ([`sweep`]) without DE or probes, where the problem fits
+    /// E_m, ν_m and ξ only (otherwise the default search).
+    SpeedSweep,
 }
 
 /// Spacing of the sweep in ln c_P (22 % in c_P) within [`SWEEP_NEAR`] of the measured phase
