@@ -44,7 +44,7 @@ pub struct FitSettings {
     pub restarts: usize,
     /// Evaluation budget of one default-method DE run, per fitted parameter.
     pub evaluations_per_dimension: usize,
-    /// The default method's global stage (today's DE and probes, or the prototype sweep).
+    /// The default method's global stage (the DE runs, faces and probes, or the prototype sweep).
     pub global: GlobalStage,
 }
 
