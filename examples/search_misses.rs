@@ -5,8 +5,8 @@
 //!
 //! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]
 //!
-//! With `sweep`, each segment is also fitted with the prototype global stage in the speed
-//! coordinates (`invert::sweep`), timed on the thread's CPU clock alternately with today's
+//! With `sweep` (the prototype sweep in the speed coordinates, `invert::sweep`), each segment
+//! is also fitted with that search, timed on the thread's CPU clock alternately with today's
 //! search, and both are judged against the yardstick.
 //!
 //! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
@@ -64,10 +64,16 @@ fn main() {
         }
     };
     let exhaustive = arg(6) == "exhaustive";
-    let sweeping = arg(6) == "sweep";
+    // The other search timed against today's: the sweep.
+    let other = match arg(6) {
+        "sweep" => Some(("speed sweep   ", GlobalStage::SpeedSweep)),
+        _ => None,
+    };
+    let sweeping = other.is_some();
+    let other_name = other.map_or("", |o| o.0);
     let settings = FitSettings::default();
     let sweep_settings = FitSettings {
-        global: GlobalStage::SpeedSweep,
+        global: other.map_or(GlobalStage::SpeedDe, |o| o.1),
         ..FitSettings::default()
     };
     let pool = rayon::ThreadPoolBuilder::new()
@@ -206,7 +212,7 @@ fn main() {
             .filter_map(|r| r.sweep.as_ref().map(|s| (r, s)))
             .collect();
         cost(
-            "speed sweep   ",
+            other_name,
             swept.iter().map(|(_, s)| s.1).collect(),
             swept.iter().map(|(_, s)| s.2).collect(),
         );
@@ -214,12 +220,13 @@ fn main() {
         for (_, s) in &swept {
             stages.observe(&s.3);
         }
-        print!("  the sweep's {stages}");
+        print!("  {}: {stages}", other_name.trim());
         let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
         let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
         println!(
-            "  speed sweep more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; \
+            "  {} more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; \
              above today's fit by more than {VERIFY_DCHI2_MAX}: {}; below it: {}",
+            other_name.trim(),
             misses.len(),
             swept
                 .iter()
@@ -232,7 +239,7 @@ fn main() {
         );
         for (r, s) in misses {
             println!(
-                "    {} ({:?}) sweep {:.4} today {:.4} yardstick {:.4}\n{}\n      sweep:      {}\n      today:      {}",
+                "    {} ({:?}) other {:.4} today {:.4} yardstick {:.4}\n{}\n      other:      {}\n      today:      {}",
                 r.id, r.material, s.0, r.fit, r.yard, r.places, s.4, r.today_place
             );
         }

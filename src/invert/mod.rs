@@ -3,16 +3,17 @@
 //! uncertainty and flags (model §7).
 //!
 //! * `paper` method: the paper's DE/rand/1/bin exactly (P51–P59), its objective and bounds.
-//! * default method: SHADE over (log10 E_m, ν_m, ξ, …), chi-square in the measurement standard
+//! * default method: SHADE over (ln c_P, c_S/c_P, ξ, …) and (log10 E_m, ν_m, ξ, …), chi-square in the measurement standard
 //!   deviations when given (otherwise the paper's relative errors, squared), a
 //!   Levenberg–Marquardt polish, restarts to detect separated minima.
 //! * what the data determine (model §7.10, `uncertainty`): the soil's c_P and c_S with errors,
 //!   95 % intervals of every parameter, the predicted curve with errors;
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
-//! `fit` searches and builds the result once; `probes` looks for the basins a search leaves
-//! unvisited (across a grazing cliff, towards ν_m → ½ and back along a valley of constant c_P,
-//! at the other face of ξ, along the edge of a cliff); `uncertainty` and `flags` are pure
+//! `fit` searches and builds the result once; `sweep` holds the search's speed coordinates and
+//! the faces of their box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search
+//! leaves unvisited (across a grazing cliff, back along a valley of constant c_P, along the
+//! edge of a cliff); `uncertainty` and `flags` are pure
 //! functions of what the search found; `provenance` records which stage found the answer and
 //! why each stage stopped; `speed` maps the soil to (ln c_P, c_S/c_P); `yardstick` is the
 //! independent dense-grid search `bench --verify` judges the fit against.

@@ -1,6 +1,6 @@
 //! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
-//! candidates built from the best optimum so far and polished (the contact, incompressible,
-//! valley-end and grazing probes), the walk along a cliff's edge from a best optimum on one
+//! candidates built from the best optimum so far and polished (the valley-end and grazing
+//! probes; the faces of the box in the speed coordinates are in [`super::sweep::faces`]), the walk along a cliff's edge from a best optimum on one
 //! (the edge probe), and the step off a grazing cliff that lets the reference path confirm an
 //! optimum on its edge.
 
@@ -15,141 +15,8 @@ use super::uncertainty::{
 };
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, NelderMead, Objective};
 
-/// The contact probe: when an optimum of the DE runs lies on a face of the contact
-/// coefficient's range (ξ = 0 or ξ = 1), a polish from the same soil at the opposite face
-/// (the search runs it from each of them with its own soil). ξ enters the soil's
-/// stiffness as a weight (§4.10), so a misfit that falls towards one face from one side can
-/// have a deeper basin towards the other: on the paper's case (bench) both DE runs of seed 15
-/// end at ξ = 0 with f = 0.770, while the global optimum, at ξ = 0.72 and nearly the same
-/// E_m, has f = 0.183; the polish from ξ = 1 reaches it (`examples/budget_scan 170 2 100`).
-/// Returns the probe's optimum and whether its polish was capped.
-pub(super) fn contact_probe(
-    pieces: &Pieces<'_, '_>,
-    bounds: &Bounds,
-    from: &Optimum,
-) -> Option<(Optimum, bool)> {
-    let problem = pieces.problem;
-    let j = pieces.jx?;
-    let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
-    let on_face = ON_BOUND_RTOL * (hi - lo);
-    let opposite = if from.x[j] <= lo + on_face {
-        hi
-    } else if from.x[j] >= hi - on_face {
-        lo
-    } else {
-        return None;
-    };
-    let mut x = from.x.clone();
-    x[j] = opposite;
-    pieces.polish(bounds, &x)
-}
-
-/// The incompressible probe: whether a deeper basin lies towards ν_m → ½, the end of the
-/// soil's range that no DE population samples well (saturated, nearly incompressible soils).
-/// Two kinds of basin lie there, both narrow in (log E_m, ν_m) because c_P² ∝ 1/(1 − 2ν_m):
-///
-/// * the fluid-like end of the c_P valley of a metal pipe: the same c_P, c_S → 0
-///   (on a metal pipe χ² 10.41 at ν_m = 0.499 against the search's 10.63 at ν_m = 0);
-/// * a soil whose c_P lies above the pipe's wave speed, where compressional radiation switches
-///   off (model §7.8 item 3): a basin past the grazing cliff (P44), e.g. χ² 1.14 at c_P ≈ 2,500
-///   m/s against 2.08 at c_P = 166 m/s on a metal pipe. Water-saturated soils
-///   have c_P near that of water; beyond a few thousand m/s such a soil is not plausible, but
-///   per segment the data cannot tell, and the fit reports its c_P as undetermined.
-///
-/// The probe evaluates candidates: the best optimum's soil moved to the upper bound of ν_m at
-/// its own c_S and at its own c_P, and a grid of ν_m ∈ [`INCOMPRESSIBLE_PROBE_NU`] (capped at
-/// the upper bound) by log10 E_m ∈ [`INCOMPRESSIBLE_PROBE_LOG10_E`] by ξ ∈ {the best's, 0, 1},
-/// kept where c_P lies above the measured phase speed. It polishes the best candidate of each
-/// class of c_P: below the phase speed, between it and [`FAR_PAST_GRAZING`] times it, and
-/// above; and the best of the stiffest candidates ([`INCOMPRESSIBLE_PROBE_STIFF_LOG10_E`]) when
-/// it is promising. Against exhaustive searches of realistic networks the segments left more
-/// than 0.1 in χ² above the global optimum fell from 20 of 600 to none, for about 260
-/// evaluations a fit more.
-pub(super) fn incompressible_probe(
-    pieces: &Pieces<'_, '_>,
-    bounds: &Bounds,
-    best: &Optimum,
-) -> Vec<(Optimum, bool)> {
-    let problem = pieces.problem;
-    let (je, jn, jx) = (pieces.je, pieces.jn, pieces.jx);
-    let (e_spec, nu_hi) = (&problem.specs[je], problem.specs[jn].upper);
-    // E_m in its search coordinate (log10 E_m, [`Param::SoilModulus`]).
-    let candidate = |log10_e: f64, nu: f64, xi: Option<f64>| {
-        let mut x = best.x.clone();
-        x[je] = log10_e.clamp(e_spec.lower, e_spec.upper);
-        x[jn] = nu.min(nu_hi);
-        if let (Some(j), Some(xi)) = (jx, xi) {
-            x[j] = xi;
-        }
-        x
-    };
-    let c_p_of = |x: &[f64]| pieces.speeds(x).0;
-    let phase_speed = problem
-        .data
-        .measurements
-        .iter()
-        .map(|m| m.phase_speed())
-        .sum::<f64>()
-        / problem.data.measurements.len().max(1) as f64;
-    // The best soil at the upper bound of ν_m, at its own c_S (G = E/2(1 + ν) kept) and at its
-    // own c_P (M = E(1 − ν)/((1 + ν)(1 − 2ν)) kept), eqs. P63–P64; then the grid, past
-    // grazing only (c_P above the measured phase speed).
-    let (m, g) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
-    let mut starts = vec![
-        candidate(e_spec.coordinate(g * 2.0 * (1.0 + nu_hi)), nu_hi, None),
-        candidate(
-            e_spec.coordinate(youngs_from_p_wave_modulus(m, nu_hi)),
-            nu_hi,
-            None,
-        ),
-    ];
-    let xis = pieces.contacts(&best.x);
-    for &nu1 in &INCOMPRESSIBLE_PROBE_NU {
-        for &log10_e in &INCOMPRESSIBLE_PROBE_LOG10_E {
-            for &xi in &xis {
-                let x = candidate(log10_e, nu1, xi);
-                if c_p_of(&x) > phase_speed {
-                    starts.push(x);
-                }
-            }
-        }
-    }
-    // The best candidate of each class: c_P below the measured phase speed, above it (past
-    // grazing), above twice it (far past). The grazing cliff separates their basins, so the
-    // best of all candidates would often lie in the search's own basin.
-    let mut best_of: [Option<(f64, Vec<f64>)>; 4] = [None, None, None, None];
-    // The stiffest class: its own, so that it does not displace the far-past class's best.
-    for &log10_e in &INCOMPRESSIBLE_PROBE_STIFF_LOG10_E {
-        for &xi in &xis {
-            let x = candidate(log10_e, nu_hi, xi);
-            let f = problem.value(&x);
-            let promising = f.is_finite() && f <= GRAZING_PROBE_GATE * best.cost;
-            if promising && best_of[3].as_ref().is_none_or(|(g, _)| f < *g) {
-                best_of[3] = Some((f, x));
-            }
-        }
-    }
-    for x in starts {
-        let c_p = c_p_of(&x);
-        let class = if c_p > FAR_PAST_GRAZING * phase_speed {
-            2
-        } else {
-            usize::from(c_p > phase_speed)
-        };
-        let f = problem.value(&x);
-        if f.is_finite() && best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
-            best_of[class] = Some((f, x));
-        }
-    }
-    best_of
-        .into_iter()
-        .flatten()
-        .filter_map(|(_, x)| pieces.polish(bounds, &x))
-        .collect()
-}
-
 /// The valley-end probe: when the best optimum lies at the upper bound of ν_m (the fluid-like
-/// end of a valley of constant c_P, c_S → 0, which the incompressible probe often finds), a
+/// end of a valley of constant c_P, c_S → 0, which the polish from the face r = r_min often finds, `sweep::faces`), a
 /// polish from the valley's other end, the same c_P at ν_m's lower bound (c_S = c_P/√2 at
 /// ν_m = 0). The data of a metal pipe fix c_P and barely c_S, so χ² changes little along the
 /// valley, and a polish from one end does not cross it: a ductile-iron pipe ended at χ² 13.43
@@ -785,28 +652,8 @@ pub const GRAZING_PROBE_POLISHES: usize = 2;
 /// 1.43 times the best's misfit; the limit skips about 9 in 10.
 pub const GRAZING_PROBE_GATE: f64 = 2.0;
 
-/// The incompressible probe's classes of c_P: far past grazing above this multiple of the
-/// measured phase speed.
-pub const FAR_PAST_GRAZING: f64 = 2.0;
-/// log10 E_m (Pa) of the incompressible probe's stiffest candidates, at ν_m's upper bound and ξ
-/// ∈ {the best's, 0, 1}: a class of their own, whose best is polished only when within
-/// [`GRAZING_PROBE_GATE`] times the best's misfit. Some cast-iron pipes have their global
-/// optimum in a basin there narrower than a tenth of a decade along E_m, c_P about 23,000 m/s
-/// with ξ below 0.02, which the half-decade grid steps over (χ² at ν_m 0.499, ξ 0: 102 at
-/// log10 E_m 9.5, 12.45 at 9.75, 999 at 10, where the search had ended at 20.09); one such
-/// basin lies at 9.82, where 9.75 alone gives more than twice the best's misfit, hence a line.
-/// As candidates of the far-past class they would displace its best, whose polish reaches
-/// other optima (a steel pipe: 8.19, else 9.62); polished whatever their misfit they would
-/// cost about 94 evaluations a fit, against 3. The line evaluates up to 15 candidates a fit
-/// (10 when the best lies on a face of ξ, `Pieces::contacts`).
-pub const INCOMPRESSIBLE_PROBE_STIFF_LOG10_E: [f64; 5] = [9.7, 9.75, 9.8, 9.85, 9.9];
-/// Poisson's ratios of the incompressible probe's grid (each capped at the upper bound).
-pub const INCOMPRESSIBLE_PROBE_NU: [f64; 3] = [0.49, 0.496, 0.499];
-/// log10 E_m (Pa) of the incompressible probe's grid: half decades over the moduli of soils.
-pub const INCOMPRESSIBLE_PROBE_LOG10_E: [f64; 8] = [6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5];
-
 /// An optimum whose coordinate is within this fraction of its range from a bound lies on that
-/// bound (ξ's for the contact probe, ν_m's for the valley-end probe).
+/// bound (ν_m's, for the valley-end probe).
 pub const ON_BOUND_RTOL: f64 = 1e-9;
 
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.

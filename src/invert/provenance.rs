@@ -17,10 +17,6 @@ pub enum Stage {
     Global,
     /// The polish from a base fit's optimum (a fit with effects).
     NestedStart,
-    /// The polish from an optimum on a face of ξ at the opposite face.
-    Contact,
-    /// Candidates towards ν_m → ½ and past grazing (P44), polished.
-    Incompressible,
     /// The polish from the other end of a valley of constant c_P.
     ValleyEnd,
     /// Candidates across a grazing cliff (P44) and in its gaps, polished and walked from.
@@ -38,15 +34,16 @@ pub enum Stage {
     SpeedGaps,
     /// The ends of the best's valley in (r, ξ) at its c_P, polished.
     SpeedValleyEnds,
+    /// Polishes from the faces r = r_min and ξ ∈ {0, 1} of the speed coordinates at the best
+    /// optimum of the DE runs in those coordinates.
+    SpeedFaces,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 12] = [
+    pub const ALL: [Stage; 11] = [
         Stage::Global,
         Stage::NestedStart,
-        Stage::Contact,
-        Stage::Incompressible,
         Stage::ValleyEnd,
         Stage::Grazing,
         Stage::Edge,
@@ -55,6 +52,7 @@ impl Stage {
         Stage::SpeedSweep,
         Stage::SpeedGaps,
         Stage::SpeedValleyEnds,
+        Stage::SpeedFaces,
     ];
 
     /// Name used in reports.
@@ -62,8 +60,6 @@ impl Stage {
         match self {
             Stage::Global => "global",
             Stage::NestedStart => "nested start",
-            Stage::Contact => "contact",
-            Stage::Incompressible => "incompressible",
             Stage::ValleyEnd => "valley end",
             Stage::Grazing => "grazing",
             Stage::Edge => "edge",
@@ -72,6 +68,7 @@ impl Stage {
             Stage::SpeedSweep => "speed sweep",
             Stage::SpeedGaps => "speed gaps",
             Stage::SpeedValleyEnds => "speed valley ends",
+            Stage::SpeedFaces => "speed faces",
         }
     }
 
