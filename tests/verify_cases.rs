@@ -51,16 +51,17 @@ fn reaches_the_bottom_of_a_narrow_curved_valley() {
 }
 
 /// A ductile-iron segment whose global optimum is a nearly incompressible soil with c_P above
-/// the pipe's wave speed (χ² 1.14 at c_P ≈ 2,500 m/s), past the grazing cliff: the search
-/// without the incompressible probe ended in the subsonic basin at χ² 2.08 (c_P 166 m/s).
+/// the pipe's wave speed (χ² 1.14 at c_P ≈ 2,500 m/s), past the grazing cliff: a search that
+/// does not polish from the face r = c_S/c_P → its lower bound ends in the subsonic basin at
+/// χ² 2.08 (c_P 166 m/s).
 #[test]
 fn finds_a_nearly_incompressible_optimum_past_grazing() {
     verify_below(848484, "WM10101", 1.5, "the subsonic basin is at 2.08");
 }
 
 /// A cast-iron segment whose global optimum is the fluid-like end of its c_P valley (ν_m at
-/// its upper bound, c_S → 0, χ² 10.41): the search without the incompressible probe ended at
-/// the other end, ν_m = 0, at χ² 10.63.
+/// its upper bound, c_S → 0, χ² 10.41): a search that does not polish from the face
+/// r = c_S/c_P → its lower bound ends at the other end, ν_m = 0, at χ² 10.63.
 #[test]
 fn finds_the_fluid_like_end_of_a_valley_of_constant_c_p() {
     verify_below(848484, "WM10095", 10.5, "the ν_m = 0 end is at 10.63");
@@ -151,7 +152,7 @@ fn confirms_an_optimum_where_the_reference_path_takes_another_root() {
 }
 
 /// A ductile-iron segment whose search ended at the fluid-like end of its valley of constant
-/// c_P (ν_m = 0.499, c_S = 8 m/s, χ² 13.43, where the incompressible probe leads), while the
+/// c_P (ν_m = 0.499, c_S = 8 m/s, χ² 13.43, on the face r = c_S/c_P → its lower bound), while the
 /// valley's other end (ν_m = 0, c_S 132 m/s) has 13.21. The valley-end probe polishes from
 /// the same c_P at ν_m = 0.
 #[test]
@@ -213,7 +214,7 @@ fn reaches_a_piece_just_below_the_highest_model_phase_speed() {
 
 /// Three cast-iron pipes whose global optimum lies in a basin far past grazing, narrower than a
 /// tenth of a decade of E_m (log10 E_m 9.75–9.82, ν_m at its bound, c_P about 23,000 m/s, ξ
-/// below 0.02), which the incompressible probe's half-decade grid stepped over: the searches
+/// below 0.02), which a half-decade grid of E_m along the face ν_m = 0.499 steps over: searches
 /// ended at χ² 20.09, 15.83 and 10.95 against the exhaustive 12.12, 12.04 and 9.45. The probe
 /// also polishes from the stiffest soils, a line of moduli, when they fit promisingly; at
 /// log10 E_m 9.75 alone WM10028's best candidate (23.6) was above twice the best's misfit.

@@ -647,8 +647,7 @@ fn search(
     // With the DE in the speed coordinates, the first run (and every other) samples the image
     // of the box uniformly in (ln c_P, r = c_S/c_P, …), the second in (log10 E_m, ν_m, …):
     // uniform in r, 39 % of a population lies at ν_m ≥ 0.45, uniform in ν_m 10 %, so the two
-    // runs favour different basins. Both runs in the speed coordinates left an HDPE pipe's
-    // walks in a piece 4.6 above its optimum.
+    // runs favour different basins (docs/performance.md, "The search's DE in speed coordinates").
     let in_speeds = sweep::InSpeeds::new(problem, bounds)
         .filter(|_| settings.global == GlobalStage::SpeedDe && settings.method == Method::Default);
     let speed_bounds = in_speeds.as_ref().and_then(|s| s.speed_bounds());
@@ -1880,10 +1879,10 @@ mod tests {
 
     /// A fit flagged `high_misfit` searches once more only up to
     /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from seed 10
-    /// (one of the seeds from which it does) the search ends at χ² 59.7 (χ²/dof 8.5), the second search at 6.3.
-    /// With its
-    /// attenuations written in dB/m (8.7 × too large, a defect of the sample network) χ²/dof is
-    /// far above the limit, and the fit is the first search's, evaluation for evaluation.
+    /// (one of the seeds from which it does) the search ends at χ² 59.7 (χ²/dof 8.5), the
+    /// second search at 6.3. With its attenuations written in dB/m (8.7 × too large, a defect
+    /// of the sample network) χ²/dof is far above the limit, and the fit is the first search's,
+    /// evaluation for evaluation.
     #[test]
     fn a_high_misfit_is_searched_again_only_below_the_chi2_per_dof_limit() {
         use crate::synth::bench::{bench_network, MaterialMix};

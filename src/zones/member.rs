@@ -256,8 +256,9 @@ pub fn soil_information(
 /// A speed the single fit knows only loosely (relative one-sigma error above
 /// [`MEMBER_SPEED_RSTD_MAX`]) gives no information at all: only the other speed's marginal
 /// information is kept. The misfit of such a segment can have a second basin as good as its
-/// optimum's (a nearly incompressible soil with c_P past grazing, found by the fit's
-/// incompressible probe), which no quadratic model about the optimum represents; a metal
+/// optimum's (a nearly incompressible soil with c_P past grazing, on the face r = c_S/c_P →
+/// its lower bound of the fit's search), which no quadratic model about the optimum
+/// represents; a metal
 /// pipe whose single fit lies in that basin would otherwise pull its zone's c_P there
 /// (`tests/zones.rs`, metal-only zones: coverage 0.81 and 0.75 of E_m and ν_m).
 fn no_tighter_than(h: [f64; 4], rstd: [Option<f64>; 2]) -> [f64; 4] {
