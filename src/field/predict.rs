@@ -439,6 +439,18 @@ mod tests {
     use super::*;
     use crate::physics::{Fluid, Material, Pipe, Soil};
 
+    /// A pipe of `material` (outside diameter and wall in m) in soil of density `soil_density`,
+    /// without measurements: what the field predicts for.
+    fn unmeasured(material: Material, od: f64, wall: f64, soil_density: f64) -> SegmentData {
+        SegmentData {
+            fluid: Fluid::water(),
+            pipe: Pipe::from_outside_diameter(material.typical(), od, wall).unwrap(),
+            soil_density,
+            material: Some(material),
+            measurements: Vec::new(),
+        }
+    }
+
     /// The prediction's continuation finds the reference continuation's roots (model §5.4's
     /// 29-point ramp, Muller to the reference tolerance) to 1e-9 relative at every frequency of
     /// the standard grid, and fails where it fails, up to the first frequency where the
@@ -529,13 +541,6 @@ mod tests {
     /// contact's spread in its error; a PVC pipe in ordinary soil keeps the whole leak band.
     #[test]
     fn a_wave_that_ends_inside_the_band_is_averaged_below_its_end() {
-        let unmeasured = |material: Material, od: f64, wall: f64, soil_density: f64| SegmentData {
-            fluid: Fluid::water(),
-            pipe: Pipe::from_outside_diameter(material.typical(), od, wall).unwrap(),
-            soil_density,
-            material: Some(material),
-            measurements: Vec::new(),
-        };
         let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
         let mean = [7.164, 5.7158];
         let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
@@ -577,13 +582,6 @@ mod tests {
     /// mean is another quantity than the fit's leak-band speed) there is none.
     #[test]
     fn the_leave_one_out_check_skips_a_cut_band() {
-        let unmeasured = |material: Material, od: f64, wall: f64, soil_density: f64| SegmentData {
-            fluid: Fluid::water(),
-            pipe: Pipe::from_outside_diameter(material.typical(), od, wall).unwrap(),
-            soil_density,
-            material: Some(material),
-            measurements: Vec::new(),
-        };
         let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
         let soft = [(250.0f64).ln(), (100.0f64).ln()];
         let whole = predict_speed(

@@ -649,7 +649,14 @@ pub(super) fn faces(
 mod tests {
     use super::*;
     use crate::invert::problem::E_BOUNDS;
+    use crate::invert::{FitSettings, SegmentData};
     use crate::physics::inputs::MAX_SOIL_POISSON;
+
+    /// The default fit's problem for `data`.
+    fn default_problem(data: &SegmentData) -> Problem<'_> {
+        let st = FitSettings::default();
+        Problem::new(data, st.method, st.model, st.contact_mode, &st.effects)
+    }
 
     /// The samples hold both sides of each measured phase speed, the gaps' fractions and the
     /// soils just outside the range; none lie closer than [`SWEEP_MERGE`]; the fine spacing
@@ -710,15 +717,13 @@ mod tests {
     /// no misfit, and one inside is rated as its soil.
     #[test]
     fn the_speed_de_rates_the_image_of_the_search_box_only() {
-        use crate::invert::FitSettings;
         use crate::synth::bench::{bench_network, MaterialMix};
         let data = bench_network(5, 848484, MaterialMix::Default)
             .into_iter()
             .next()
             .expect("a segment")
             .data;
-        let st = FitSettings::default();
-        let problem = Problem::new(&data, st.method, st.model, st.contact_mode, &st.effects);
+        let problem = default_problem(&data);
         let bounds = problem.bounds().expect("bounds");
         let speeds = InSpeeds::new(&problem, &bounds).expect("E_m and ν_m are fitted");
         let yb = speeds.speed_bounds().expect("a box");
@@ -761,15 +766,13 @@ mod tests {
     /// along the face (the polish from r_min at the best's own c_P stays below grazing).
     #[test]
     fn the_faces_reach_an_optimum_past_grazing_on_the_incompressible_face() {
-        use crate::invert::FitSettings;
         use crate::synth::bench::{bench_network, MaterialMix};
         let data = bench_network(200, 848484, MaterialMix::Default)
             .into_iter()
             .find(|s| s.id == "WM10101")
             .expect("segment")
             .data;
-        let st = FitSettings::default();
-        let problem = Problem::new(&data, st.method, st.model, st.contact_mode, &st.effects);
+        let problem = default_problem(&data);
         let bounds = problem.bounds().expect("bounds");
         let speeds = InSpeeds::new(&problem, &bounds).expect("E_m and ν_m are fitted");
         let x = speeds.x(&[166.15f64.ln(), 0.4307, 1.0]).expect("a soil");
