@@ -438,12 +438,12 @@ pub(super) fn valley_ends(
 /// effects) as it is. Its box is the bounding box of the image of the search box (P51) in
 /// (ln c_P, r) and the search box's own ranges of the rest; a point of it outside the image
 /// (a soft soil at large r, a stiff one at small r; about 24 % of the box) has no misfit and
-/// costs no forward evaluation, so that every rated soil is one of the search box. (Rated at
-/// its projection along ln c_P onto the image, such points left a PVC pipe's DE runs in a
-/// stiff basin χ² 53 above its optimum.) In these coordinates the cliffs of P44 are (nearly) planes of constant
-/// ln c_P, and the incompressible corner ν_m → ½ is the face r = r_min: r uniform over its
-/// range puts 39 % of a population at ν_m ≥ 0.45, where the misfit's basins are narrow in
-/// (log10 E_m, ν_m).
+/// costs no forward evaluation, so that every rated soil is one of the search box (a point
+/// rated at its projection onto the image would weigh the image's edge with the whole band
+/// beyond it; docs/performance.md measures both). In these coordinates the cliffs of P44 are
+/// (nearly) planes of constant ln c_P, and the incompressible corner ν_m → ½ is the face
+/// r = r_min: r uniform over its range puts 39 % of a population at ν_m ≥ 0.45, where the
+/// misfit's basins are narrow in (log10 E_m, ν_m).
 pub(super) struct InSpeeds<'q, 'a> {
     problem: &'q Problem<'a>,
     /// The search box, in the search coordinates.
