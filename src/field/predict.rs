@@ -439,6 +439,24 @@ mod tests {
     use super::*;
     use crate::physics::{Fluid, Material, Pipe, Soil};
 
+    /// A PVC pipe in ordinary soft soil (c_P 250 m/s, c_S 100 m/s, a posterior 10 % wide): its
+    /// wave crosses the whole leak band.
+    fn pvc_in_soft_soil() -> SpeedPrediction {
+        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
+        let soft = [(250.0f64).ln(), (100.0f64).ln()];
+        let cov = Sym2::new(0.01, 0.005, 0.01);
+        predict_speed(&pvc, Model::default(), ContactMode::default(), soft, cov)
+    }
+
+    /// An HDPE pipe in stiff, nearly incompressible ground (c_P ≈ 1,300 m/s, c_S ≈ 300 m/s, a
+    /// posterior that knows c_S to 1 % and c_P to 25 %).
+    fn hdpe_in_stiff_ground() -> SpeedPrediction {
+        let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
+        let mean = [7.164, 5.7158];
+        let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
+        predict_speed(&hdpe, Model::default(), ContactMode::default(), mean, cov)
+    }
+
     /// A pipe of `material` (outside diameter and wall in m) in soil of density `soil_density`,
     /// without measurements: what the field predicts for.
     fn unmeasured(material: Material, od: f64, wall: f64, soil_density: f64) -> SegmentData {
@@ -541,10 +559,7 @@ mod tests {
     /// contact's spread in its error; a PVC pipe in ordinary soil keeps the whole leak band.
     #[test]
     fn a_wave_that_ends_inside_the_band_is_averaged_below_its_end() {
-        let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
-        let mean = [7.164, 5.7158];
-        let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
-        let p = predict_speed(&hdpe, Model::default(), ContactMode::default(), mean, cov);
+        let p = hdpe_in_stiff_ground();
         assert!(
             p.band_hz.0 == 100.0 && p.band_hz.1 < 800.0,
             "{:?}",
@@ -564,15 +579,7 @@ mod tests {
         assert!(at(100.0).is_some() && at(p.band_hz.1).is_some());
         assert!(at(800.0).is_none());
 
-        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
-        let soft = [(250.0f64).ln(), (100.0f64).ln()];
-        let p = predict_speed(
-            &pvc,
-            Model::default(),
-            ContactMode::default(),
-            soft,
-            Sym2::new(0.01, 0.005, 0.01),
-        );
+        let p = pvc_in_soft_soil();
         assert_eq!(p.band_hz, LEAK_BAND_HZ);
         assert!(p.band.is_some());
     }
@@ -582,15 +589,7 @@ mod tests {
     /// mean is another quantity than the fit's leak-band speed) there is none.
     #[test]
     fn the_leave_one_out_check_skips_a_cut_band() {
-        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
-        let soft = [(250.0f64).ln(), (100.0f64).ln()];
-        let whole = predict_speed(
-            &pvc,
-            Model::default(),
-            ContactMode::default(),
-            soft,
-            Sym2::new(0.01, 0.005, 0.01),
-        );
+        let whole = pvc_in_soft_soil();
         let b = whole.band.expect("a whole-band speed");
         let fitted = (b.value + 10.0, 5.0);
         let (own, z) = whole.leave_one_out(fitted).expect("a z on the whole band");
@@ -598,15 +597,7 @@ mod tests {
         let expected = -10.0 / (b.std * b.std + 25.0).sqrt();
         assert!((z - expected).abs() < 1e-12, "{z} against {expected}");
 
-        let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
-        let stiff = [7.164, 5.7158];
-        let cut = predict_speed(
-            &hdpe,
-            Model::default(),
-            ContactMode::default(),
-            stiff,
-            Sym2::new(0.0604, -0.000405, 7.6e-5),
-        );
+        let cut = hdpe_in_stiff_ground();
         let c = cut.band.expect("a speed over the cut band");
         assert!(cut.band_hz.1 < LEAK_BAND_HZ.1);
         assert!(cut.leave_one_out((c.value, c.std)).is_none());
