@@ -127,6 +127,7 @@ fn predicted_speeds_cover_the_truth() {
                 ],
                 info,
                 key: i as u64 * 7919 % 40,
+                suspect: false,
             }
         })
         .collect();
@@ -182,6 +183,7 @@ fn plan_prefers_a_pick_among_many_unmeasured_pipes() {
             u: *u,
             info,
             key: i as u64,
+            suspect: false,
         })
         .collect();
     let field = Field::with_hyper(

@@ -43,6 +43,8 @@ pub struct FieldInput {
     pub leak_band_speed: Option<(f64, f64)>,
     /// `soil_density_kg_m3`: maps a zone's soil to the segment's speeds (P63–P64).
     pub soil_density: Option<f64>,
+    /// Latest fit's flag and note codes, comma-separated (empty without a fit).
+    pub fit_findings: String,
 }
 
 /// Every segment's [`FieldInput`], in id order.
@@ -70,7 +72,8 @@ pub fn for_each_field_input(
          s.inputs_hash, f.id, f.status, f.soil_p_wave_speed_m_per_s, \
          f.soil_s_wave_speed_m_per_s, f.soil_information_pp, f.soil_information_ps, \
          f.soil_information_ss, f.leak_band_speed_m_per_s, f.leak_band_speed_std_m_per_s, s.material, \
-         s.risk_weight, s.soil_class_override, s.soil_density_kg_m3 \
+         s.risk_weight, s.soil_class_override, s.soil_density_kg_m3, \
+         coalesce(f.flags, '') || ',' || coalesce(f.notes, '') \
          FROM segments s LEFT JOIN latest_fits f ON f.segment_id = s.segment_id \
          ORDER BY s.segment_id",
     )?;
@@ -101,6 +104,7 @@ pub fn for_each_field_input(
             risk_weight: r.get(17)?,
             soil_class_override: r.get(18)?,
             soil_density: r.get(19)?,
+            fit_findings: r.get(20)?,
         })
     })?;
     for row in rows {

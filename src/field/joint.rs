@@ -298,6 +298,7 @@ mod tests {
                 u: *u,
                 info: INFO,
                 key: crate::db::hash::fnv1a64(format!("m{i}").as_bytes()),
+                suspect: false,
             })
             .collect()
     }
@@ -405,6 +406,7 @@ mod tests {
             u: [0.0; 2],
             info: INFO,
             key: 0,
+            suspect: false,
         }
         .noise()
         .cholesky()

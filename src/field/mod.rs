@@ -36,7 +36,7 @@ use model::{ClassMean, Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 7;
+pub const FIELD_ALGORITHM_VERSION: u32 = 8;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -263,6 +263,17 @@ struct FittedSoil {
     speeds: Option<(f64, f64)>,
     information: Option<[f64; 3]>,
     usable: bool,
+    suspect: bool,
+}
+
+/// Whether a fit's own findings say its information may mislead the field
+/// ([`Observation::suspect`]): `near_grazing`, or `soil_undetermined` on a metal pipe.
+fn suspect_fit(material: &str, findings: &str) -> bool {
+    let has = |code: &str| findings.split(',').any(|c| c.trim() == code);
+    let metal = material
+        .parse::<crate::physics::Material>()
+        .is_ok_and(|m| !m.is_plastic());
+    has("near_grazing") || (metal && has("soil_undetermined"))
 }
 
 /// A segment's site (its geometry reduced to a midpoint and a length) and its fit's soil.
@@ -289,6 +300,7 @@ fn site_of(i: &FieldInput) -> (Site, FittedSoil) {
             speeds: i.speeds,
             information: i.information,
             usable,
+            suspect: suspect_fit(&i.material, &i.fit_findings),
         },
     )
 }
@@ -417,6 +429,7 @@ fn classes_and_members(
             u: [cp.ln(), cs.ln()],
             info: Sym2::new(info[0], info[1], info[2]),
             key: fnv1a64(s.segment_id.as_bytes()),
+            suspect: i.suspect,
         });
     }
     (sites, obs, names)
@@ -943,6 +956,7 @@ mod tests {
             information: None,
             leak_band_speed: None,
             soil_density: Some(1800.0),
+            fit_findings: String::new(),
         }
     }
 
@@ -974,6 +988,22 @@ mod tests {
         let (sites, _, names) = sites_of(&plain);
         assert_eq!(names[sites[10].class.unwrap()], "clay");
         assert!(sites[10].label_rejected);
+    }
+
+    /// A fit is suspect when it notes its wave near grazing (any pipe) or, on a metal pipe, its
+    /// soil undetermined; a plastic pipe's undetermined soil is not.
+    #[test]
+    fn suspect_fits_follow_their_findings() {
+        assert!(suspect_fit("PVC", "speed_uncertain,near_grazing"));
+        assert!(suspect_fit("CI", "near_grazing"));
+        assert!(suspect_fit("DI", ",soil_undetermined,contact_undetermined"));
+        assert!(!suspect_fit(
+            "MDPE",
+            "soil_undetermined,contact_undetermined"
+        ));
+        assert!(!suspect_fit("ST", "soil_via_cp,at_bound"));
+        assert!(!suspect_fit("ST", "near_grazing_x"));
+        assert!(!suspect_fit("CI", ""));
     }
 
     /// The fingerprint changes with an override and, without one, is what it was before the

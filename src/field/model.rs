@@ -74,6 +74,12 @@ pub const HYPER_STALL_EVALUATIONS: usize = 50;
 /// information scaled down before the hyper-parameters are refitted (P79–P80).
 pub const SCREEN_CHI2: f64 = 13.8;
 
+/// The screening's χ² for a member whose own fit says its information may mislead
+/// ([`Observation::suspect`]): χ²₂ at p = 0.10. Measured on synthetic networks against the truth,
+/// such fits state information that the truth lies far outside (χ² > 13.8 in it) in 30–100 % of
+/// cases, the others in 1–3 % (docs/field-validation.md, "Members whose fit doubts itself").
+pub const SCREEN_CHI2_SUSPECT: f64 = 4.605;
+
 /// The χ² a screened member is brought to by scaling its information: the expectation of χ²₂,
 /// i.e. its claimed noise is widened (a Birge ratio against its neighbourhood, as P88 does
 /// against its own residuals) until its distance from the field is typical.
@@ -229,6 +235,11 @@ pub struct Observation {
     /// A key fixing its place in the conditioning order (a hash of the segment id, so the
     /// order does not depend on how the segments were read).
     pub key: u64,
+    /// Its fit says its information may mislead: a wave near grazing (a cusp of the misfit,
+    /// model §5.6, whose curvature claims more than the misfit holds), or a metal pipe's soil
+    /// undetermined (its one determined speed, c_P, not pinned: often a second basin). Screened
+    /// at [`SCREEN_CHI2_SUSPECT`] instead of [`SCREEN_CHI2`].
+    pub suspect: bool,
 }
 
 impl Observation {
@@ -1310,7 +1321,12 @@ impl Field {
                         .map_or(0.0, |inv| inv.quad(d))
                 };
                 let full = chi2(1.0);
-                if full <= SCREEN_CHI2 {
+                let limit = if o.suspect {
+                    SCREEN_CHI2_SUSPECT
+                } else {
+                    SCREEN_CHI2
+                };
+                if full <= limit {
                     return Screened {
                         chi2: full,
                         scale: 1.0,
@@ -1751,6 +1767,7 @@ mod tests {
                     u,
                     info,
                     key: crate::db::hash::fnv1a64(format!("s{i}").as_bytes()),
+                    suspect: false,
                 }
             })
             .collect()
@@ -2022,6 +2039,7 @@ mod tests {
                 u: [5.0, 7.0],
                 info: Sym2::new(1e4, 0.0, 0.0),
                 key: i,
+                suspect: false,
             })
             .collect();
         let field = Field::fit(obs, 1, (10.0, 100.0));
@@ -2058,6 +2076,46 @@ mod tests {
         // The screening that set the scales is stored with the field, beyond the threshold.
         assert_eq!(field.screened.len(), 300);
         assert!(bad.iter().all(|&i| field.screened[i].chi2 > SCREEN_CHI2));
+    }
+
+    /// A member whose fit doubts its own information ([`Observation::suspect`]) is screened at
+    /// [`SCREEN_CHI2_SUSPECT`]: moved so that its leave-one-out χ² lies between that and
+    /// [`SCREEN_CHI2`], it keeps its information as an ordinary member and has it scaled down,
+    /// to χ² = [`SCREEN_TARGET_CHI2`], as a suspect one.
+    #[test]
+    fn a_fit_that_doubts_itself_is_screened_at_the_lower_threshold() {
+        let (t, mu) = truth();
+        let obs = draw(11, 300, 3000.0, &t, mu, Sym2::new(2500.0, 500.0, 900.0));
+        let field = Field::fit(obs.clone(), 2, (50.0, 4243.0));
+        let i = 40;
+        // Move member i along ln c_P until its leave-one-out χ² is about 8.
+        let p = field.posterior(obs[i].pos, obs[i].class, Some(i));
+        let var = p.cov.add(&obs[i].noise()).pp;
+        let mut moved = obs;
+        moved[i].u[0] = p.mean[0] + (8.0 * var).sqrt();
+        let screen = |suspect: bool| {
+            let mut o = moved.clone();
+            o[i].suspect = suspect;
+            let f = Field::with_scales(
+                o,
+                2,
+                (50.0, 4243.0),
+                field.hyper,
+                field.source,
+                Scales::unit(2, 300),
+            );
+            f.screen()[i]
+        };
+        let plain = screen(false);
+        assert!(
+            plain.chi2 > SCREEN_CHI2_SUSPECT && plain.chi2 < SCREEN_CHI2,
+            "{}",
+            plain.chi2
+        );
+        assert_eq!(plain.scale, 1.0);
+        let doubted = screen(true);
+        assert!((doubted.chi2 - plain.chi2).abs() < 1e-9);
+        assert!(doubted.scale < 0.5, "{}", doubted.scale);
     }
 
     /// Masking: 30 of 300 members (about a metal fit's share of second-basin fits) seeing

@@ -223,6 +223,7 @@ impl<'a> Planner<'a> {
                     u: [0.0; 2],
                     info: c.info,
                     key: 0,
+                    suspect: false,
                 };
                 Candidate {
                     site: c.site,
