@@ -407,12 +407,26 @@ fn every_export_gives_every_segment_a_speed_source_and_its_reason() {
     };
     let by_length = picks(&next);
     assert_eq!(by_length.len(), 3);
-    // A risk weight on one unmeasured pipe that length alone does not pick first: a weight a
-    // thousand times the network's length makes its own error dominate the sum (P83), so it
-    // is measured first, and the weight column shows it.
+    // A risk weight on one unmeasured plastic pipe (its speed error is per cent, not per mille
+    // as a metal pipe's) that length alone does not pick first: a weight a thousand times the
+    // network's length makes its own error dominate the sum (P83), so it is measured first,
+    // and the weight column shows it.
+    let mat_c = ci("material");
+    let plastic = |id: &String| {
+        rows.iter().any(|r| {
+            &r[id_c] == id.as_str()
+                && matches!(r[mat_c].to_uppercase().as_str(), "PVC" | "MDPE" | "HDPE")
+        })
+    };
     let r_id = ids
         .iter()
-        .find(|id| !measured.contains(id) && **id != g && **id != x && **id != by_length[0].0)
+        .find(|id| {
+            !measured.contains(id)
+                && **id != g
+                && **id != x
+                && **id != by_length[0].0
+                && plastic(id)
+        })
         .unwrap()
         .clone();
     let mut row = inventory.iter().find(|r| r[id_c] == r_id).unwrap().clone();
