@@ -269,11 +269,12 @@ struct FittedSoil {
 /// Whether a fit's own findings say its information may mislead the field
 /// ([`Observation::suspect`]): `near_grazing`, or `soil_undetermined` on a metal pipe.
 fn suspect_fit(material: &str, findings: &str) -> bool {
-    let has = |code: &str| findings.split(',').any(|c| c.trim() == code);
+    use crate::invert::flags::FlagCode;
+    let has = |code: FlagCode| findings.split(',').any(|c| c.trim() == code.as_str());
     let metal = material
         .parse::<crate::physics::Material>()
         .is_ok_and(|m| !m.is_plastic());
-    has("near_grazing") || (metal && has("soil_undetermined"))
+    has(FlagCode::NearGrazing) || (metal && has(FlagCode::SoilUndetermined))
 }
 
 /// A segment's site (its geometry reduced to a midpoint and a length) and its fit's soil.
