@@ -836,28 +836,38 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                         let unit = s.unit.expect("unit");
                         let stiff = unit == stiffest;
                         let tu = true_u(s);
-                        let mut score = |r: usize, mean: [f64; 2], cov: Sym2| {
-                            if cov.ss > 0.0 {
-                                rungs[r].zu.push((tu[1] - mean[1]) / cov.ss.sqrt());
-                            }
-                            let p = predict_speed(&data, opts.model, opts.contact_mode, mean, cov);
-                            if let Some(b) = p.band {
-                                let e = b.value / truth - 1.0;
-                                rungs[r].push(e, stiff, (b.value - truth).abs() <= 2.0 * b.std);
-                            }
-                        };
+                        // Each rung's field states its errors as it would (P92: widened where its
+                        // θ was estimated).
+                        let mut score =
+                            |r: usize, mean: [f64; 2], cov: Sym2, widening: [f64; 2]| {
+                                if cov.ss > 0.0 {
+                                    rungs[r].zu.push((tu[1] - mean[1]) / cov.ss.sqrt());
+                                }
+                                let p = predict_speed(
+                                    &data,
+                                    opts.model,
+                                    opts.contact_mode,
+                                    mean,
+                                    cov,
+                                    widening,
+                                );
+                                if let Some(b) = p.band {
+                                    let e = b.value / truth - 1.0;
+                                    rungs[r].push(e, stiff, (b.value - truth).abs() <= 2.0 * b.std);
+                                }
+                            };
                         let post = oracle.posterior(site.pos, unit, None);
-                        score(0, post.mean, post.cov);
+                        score(0, post.mean, post.cov, [1.0; 2]);
                         let post = oracle_means.posterior(site.pos, unit, None);
-                        score(1, post.mean, post.cov);
+                        score(1, post.mean, post.cov, [1.0; 2]);
                         let post = estimated.posterior(site.pos, unit, None);
-                        score(2, post.mean, post.cov);
+                        score(2, post.mean, post.cov, estimated.widening);
                         let post = if site.classes.is_empty() {
                             today.posterior(site.pos, site.class.unwrap_or(0), None)
                         } else {
                             today.mixture_posterior(site.pos, &site.classes, None)
                         };
-                        score(3, post.mean, post.cov);
+                        score(3, post.mean, post.cov, today.widening);
                         // Members labelled by their true unit, the target's class as today
                         // (today's class indices mapped to units by name).
                         let mapped: Vec<(usize, f64)> = if site.classes.is_empty() {
@@ -872,21 +882,21 @@ fn oracle(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) 
                         .collect();
                         if !mapped.is_empty() {
                             let post = estimated.mixture_posterior(site.pos, &mapped, None);
-                            score(10, post.mean, post.cov);
+                            score(10, post.mean, post.cov, estimated.widening);
                         }
                         if let Some(&k) = name_of_unit.get(&unit) {
                             let post = today.posterior(site.pos, k, None);
-                            score(11, post.mean, post.cov);
+                            score(11, post.mean, post.cov, today.widening);
                         }
-                        score(5, true_u(s), Sym2::default());
+                        score(5, true_u(s), Sym2::default(), [1.0; 2]);
                         let post = t_true.posterior(site.pos, unit, None);
-                        score(6, post.mean, post.cov);
+                        score(6, post.mean, post.cov, t_true.widening);
                         let post = bl_true.posterior(site.pos, unit, None);
-                        score(7, post.mean, post.cov);
+                        score(7, post.mean, post.cov, bl_true.widening);
                         let post = b_s.posterior(site.pos, unit, None);
-                        score(8, post.mean, post.cov);
+                        score(8, post.mean, post.cov, b_s.widening);
                         let post = a_s.posterior(site.pos, unit, None);
-                        score(9, post.mean, post.cov);
+                        score(9, post.mean, post.cov, a_s.widening);
                         if let Some(&(Some(c), Some(sd))) = pred.get(&s.id) {
                             rungs[4].push(c / truth - 1.0, stiff, (c - truth).abs() <= 2.0 * sd);
                         }

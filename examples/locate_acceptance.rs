@@ -217,10 +217,12 @@ fn main() {
                         let f = l.band_used_hz.0.max(100.0) + 15.0;
                         let ct = tc.at(f).0;
                         let kt = locator.korteweg(i).expect("korteweg");
+                        let (cs, rel, _) = cur.at(f);
                         speed_errs.push((
                             l.sources[k].as_str(),
-                            (cur.at(f).0 - ct) / ct,
+                            (cs - ct) / ct,
                             (kt - ct) / ct,
+                            (cs - ct) / (rel * cs),
                         ));
                     }
                     split.push(Split {
@@ -423,8 +425,9 @@ struct Split {
     /// With the stored curves and the noise-free delay.
     speeds_only: f64,
     /// Per plastic segment: its curve's source, its stored speed's relative error and the
-    /// table (Korteweg) speed's, near the low edge of the band used.
-    speed_errs: Vec<(&'static str, f64, f64)>,
+    /// table (Korteweg) speed's, near the low edge of the band used, and the stored speed's
+    /// error in units of its own σ (z).
+    speed_errs: Vec<(&'static str, f64, f64, f64)>,
 }
 
 fn report_split(split: &[Split]) {
@@ -453,6 +456,14 @@ fn report_split(split: &[Split]) {
             .filter(|e| e.0 == src)
             .map(|e| 100.0 * e.2.abs())
             .collect();
+        let z: Vec<f64> = split
+            .iter()
+            .flat_map(|s| s.speed_errs.iter())
+            .filter(|e| e.0 == src && e.3.is_finite())
+            .map(|e| e.3)
+            .collect();
+        let inside = z.iter().filter(|z| z.abs() <= 1.96).count();
+        let rms = (z.iter().map(|z| z * z).sum::<f64>() / z.len().max(1) as f64).sqrt();
         let n = stored.len();
         let p90 = |v: &mut Vec<f64>| {
             v.sort_by(|a, b| a.total_cmp(b));
@@ -462,11 +473,12 @@ fn report_split(split: &[Split]) {
         };
         println!(
             "  plastic segments on those paths with a {src}: {n}; speed error median {:.1} % \
-             (p90 {:.1} %), table speed's {:.1} % (p90 {:.1} %)",
+             (p90 {:.1} %), table speed's {:.1} % (p90 {:.1} %); within 1.96σ {inside}/{} (z rms {rms:.2})",
             median(&mut stored.clone()),
             p90(&mut stored),
             median(&mut table.clone()),
-            p90(&mut table)
+            p90(&mut table),
+            z.len()
         );
     }
     let worse: Vec<&Split> = split.iter().filter(|s| s.total > s.table / 3.0).collect();

@@ -3,7 +3,7 @@
 //! and the standard normal deviate the synthetic data draw.
 
 use rand::Rng;
-use statrs::distribution::{ChiSquared, ContinuousCDF};
+use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
 
 /// Upper-tail probability P(χ²_k > x); NaN for a non-finite x or k ≤ 0.
 pub fn chi2_upper_tail(x: f64, k: f64) -> f64 {
@@ -21,6 +21,18 @@ pub fn birge_ratio(chi2_min: f64, n_measured: usize, n_fitted: usize) -> f64 {
         return 1.0;
     }
     (chi2_min / (n_measured - n_fitted) as f64).sqrt().max(1.0)
+}
+
+/// The ratio of Student's t quantile with `dof` degrees of freedom to the standard normal's, at
+/// the two-sided `level` (e.g. 0.95): the factor by which a Gaussian standard deviation must be
+/// widened for its interval to be the t interval. 1 for infinite `dof`; NaN for `dof` ≤ 0.
+pub fn t_over_normal(dof: f64, level: f64) -> f64 {
+    let p = 0.5 + 0.5 * level;
+    let z = Normal::new(0.0, 1.0).map_or(f64::NAN, |n| n.inverse_cdf(p));
+    if dof.is_infinite() && dof > 0.0 {
+        return 1.0;
+    }
+    StudentsT::new(0.0, 1.0, dof).map_or(f64::NAN, |t| t.inverse_cdf(p) / z)
 }
 
 /// Linear-interpolated quantile `q` in [0, 1] of sorted finite values (type 7, as R's default

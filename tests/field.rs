@@ -143,6 +143,7 @@ fn predicted_speeds_cover_the_truth() {
             ContactMode::Reciprocal,
             post.mean,
             post.cov,
+            field.widening,
         );
         let b = pred.band.expect("a predicted speed");
         let truth = true_speed(&data, u[i], rng.gen_range(0.0..1.0));

@@ -239,6 +239,12 @@ pub fn joint_posterior(field: &Field, targets: &[Target]) -> JointPosterior {
         }
     }
     let mut cov = v + &z * &field.class_cov * z.transpose();
+    // The predictive covariance, widened per axis as each pipe's own (P92).
+    for r in 0..2 * m {
+        for c in 0..2 * m {
+            cov[(r, c)] *= field.widening[r % 2] * field.widening[c % 2];
+        }
+    }
     // Symmetric to rounding.
     let sym = 0.5 * (&cov + cov.transpose());
     cov = sym;
@@ -248,7 +254,7 @@ pub fn joint_posterior(field: &Field, targets: &[Target]) -> JointPosterior {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::model::{Observation, CLASS_PRIOR_SD, TYPICAL_LN_SPEEDS};
+    use crate::field::model::{widen, Observation, Posterior, CLASS_PRIOR_SD, TYPICAL_LN_SPEEDS};
     use nalgebra::DVector;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -313,7 +319,8 @@ mod tests {
         )
     }
 
-    /// One target: exactly the field's single-pipe posterior (mean and covariance).
+    /// One target: exactly the field's single-pipe posterior, its covariance widened as the
+    /// predictions' (P92).
     #[test]
     fn one_target_is_the_single_pipe_posterior() {
         let mut rng = ChaCha8Rng::seed_from_u64(3);
@@ -327,7 +334,11 @@ mod tests {
             (Some([5000.0, 5000.0]), 1),
             (None, 0),
         ] {
-            let single = field.posterior(pos, class, None);
+            let plain = field.posterior(pos, class, None);
+            let single = Posterior {
+                cov: widen(&plain.cov, field.widening),
+                ..plain
+            };
             let joint = joint_posterior(
                 &field,
                 &[Target {
@@ -411,8 +422,21 @@ mod tests {
         .noise()
         .cholesky()
         .unwrap();
-        // The formula does not depend on the data: take it once.
-        let formula = joint_posterior(&field_of(members(&[[5.4, 4.7]; 8])), &targets);
+        // The formula does not depend on the data: take it once. The draws use θ itself, so
+        // they follow the plug-in covariance: the predictive's widening for θ estimated (P92,
+        // greater than 1 on eight members) is divided out.
+        let fixed = field_of(members(&[[5.4, 4.7]; 8]));
+        assert!(
+            fixed.widening.iter().all(|q| *q > 1.01),
+            "{:?}",
+            fixed.widening
+        );
+        let mut formula = joint_posterior(&fixed, &targets);
+        for r in 0..4 {
+            for c in 0..4 {
+                formula.cov[(r, c)] /= fixed.widening[r % 2] * fixed.widening[c % 2];
+            }
+        }
         let draws = 4000;
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let mut errs: Vec<[f64; 4]> = Vec::with_capacity(draws);

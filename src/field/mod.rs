@@ -36,7 +36,7 @@ use model::{ClassMean, Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 8;
+pub const FIELD_ALGORITHM_VERSION: u32 = 9;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
@@ -645,6 +645,7 @@ fn site_result(
         settings.contact_mode,
         post.mean,
         post.cov,
+        field.widening,
     );
     let mut note = note_of(site, &post, field, class_name);
     if speed.band.is_some() && speed.band_hz != LEAK_BAND_HZ {
@@ -676,10 +677,15 @@ fn site_result(
         );
     }
     row.note.clone_from(&note);
+    // The soil's stated errors are the predictive ones (P92).
+    let stated = Posterior {
+        cov: crate::field::model::widen(&post.cov, field.widening),
+        ..post
+    };
     let pred = prediction_row(
         site,
         run_id,
-        &post,
+        &stated,
         &speed,
         data.soil_density,
         class_name,

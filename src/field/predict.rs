@@ -192,13 +192,18 @@ fn mirrored(
 }
 
 /// The speed of the pipe `data` (measurements ignored) under the run's `model` and
-/// `contact_mode`, averaged over u ~ N(`mean`, `cov`) and ξ ~ U[0, 1] (P81).
+/// `contact_mode`, averaged over u ~ N(`mean`, `cov`) and ξ ~ U[0, 1] (P81). The soil's part
+/// of the stated errors is widened for θ estimated from few members (P92): by `widening` per
+/// axis of u, taken along the band speed's gradient g as q² = gᵀ D S D g / gᵀ S g, D =
+/// diag(`widening`). The estimates themselves are the plug-in posterior's: the t distribution
+/// P92 stands for is centred where the Gaussian is.
 pub fn predict_speed(
     data: &SegmentData,
     model: Model,
     contact_mode: ContactMode,
     mean: [f64; 2],
     cov: Sym2,
+    widening: [f64; 2],
 ) -> SpeedPrediction {
     let problem = Problem::new(data, Method::Default, model, contact_mode, &[]);
     let spread = UT_DIM.sqrt();
@@ -318,14 +323,45 @@ pub fn predict_speed(
         (Some(a), Some(b)) => a - b,
         _ => 0.0,
     };
+    // Gradient: (b(+j) − b(−j)) / (2·spread) = g·L e_j, so g = L⁻ᵀ d.
+    let band_of = |i: usize| nodes.get(i).and_then(|n| n.2);
+    let band_gradient = match (band_of(0), band_of(1), band_of(2), band_of(3)) {
+        (Some(p1), Some(m1), Some(p2), Some(m2)) if l[0] > 0.0 && l[2] > 0.0 => {
+            let d = [(p1 - m1) / (2.0 * spread), (p2 - m2) / (2.0 * spread)];
+            // Lᵀ g = d with L = [[l0, 0], [l1, l2]]: g1 = d1/l2, g0 = (d0 − l1 g1)/l0.
+            let g1 = d[1] / l[2];
+            Some([(d[0] - l[1] * g1) / l[0], g1])
+        }
+        _ => None,
+    };
+    // P92 along g; without a gradient, the wider axis's.
+    let q2 = band_gradient
+        .and_then(|g| {
+            let plain = cov.quad(g);
+            let wide = super::model::widen(&cov, widening).quad(g);
+            (plain > 0.0 && wide.is_finite()).then(|| wide / plain)
+        })
+        .unwrap_or_else(|| widening[0].max(widening[1]).powi(2))
+        .max(1.0);
+    // The soil's nodes (the first four) carry q² of their squared deviation, the contact's 1.
+    let var_factor: Vec<f64> = (0..nodes.len())
+        .map(|j| if j < 4 { q2 } else { 1.0 })
+        .collect();
     let moments = |vals: &mut dyn Iterator<Item = (f64, Option<f64>)>| -> Option<WithError> {
-        let v: Vec<(f64, f64)> = vals.filter_map(|(w, x)| x.map(|x| (w, x))).collect();
+        let v: Vec<(f64, f64, f64)> = vals
+            .zip(&var_factor)
+            .filter_map(|((w, x), k)| x.map(|x| (w, x, *k)))
+            .collect();
         let wsum: f64 = v.iter().map(|p| p.0).sum();
         if wsum < 1.0 - MAX_LOST_WEIGHT {
             return None;
         }
-        let m = v.iter().map(|(w, x)| w * x).sum::<f64>() / wsum;
-        let var = v.iter().map(|(w, x)| w * (x - m).powi(2)).sum::<f64>() / wsum;
+        let m = v.iter().map(|(w, x, _)| w * x).sum::<f64>() / wsum;
+        let var = v
+            .iter()
+            .map(|(w, x, k)| w * k * (x - m).powi(2))
+            .sum::<f64>()
+            / wsum;
         Some(WithError {
             value: m,
             std: var.max(0.0).sqrt(),
@@ -390,17 +426,6 @@ pub fn predict_speed(
         value: b.value + offset,
         std: b.std,
     });
-    // Gradient: (b(+j) − b(−j)) / (2·spread) = g·L e_j, so g = L⁻ᵀ d.
-    let band_of = |i: usize| nodes.get(i).and_then(|n| n.2);
-    let band_gradient = match (band_of(0), band_of(1), band_of(2), band_of(3)) {
-        (Some(p1), Some(m1), Some(p2), Some(m2)) if l[0] > 0.0 && l[2] > 0.0 => {
-            let d = [(p1 - m1) / (2.0 * spread), (p2 - m2) / (2.0 * spread)];
-            // Lᵀ g = d with L = [[l0, 0], [l1, l2]]: g1 = d1/l2, g0 = (d0 − l1 g1)/l0.
-            let g1 = d[1] / l[2];
-            Some([(d[0] - l[1] * g1) / l[0], g1])
-        }
-        _ => None,
-    };
     SpeedPrediction {
         curve: curve_pts,
         band,
@@ -445,7 +470,14 @@ mod tests {
         let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
         let soft = [(250.0f64).ln(), (100.0f64).ln()];
         let cov = Sym2::new(0.01, 0.005, 0.01);
-        predict_speed(&pvc, Model::default(), ContactMode::default(), soft, cov)
+        predict_speed(
+            &pvc,
+            Model::default(),
+            ContactMode::default(),
+            soft,
+            cov,
+            [1.0; 2],
+        )
     }
 
     /// An HDPE pipe in stiff, nearly incompressible ground (c_P ≈ 1,300 m/s, c_S ≈ 300 m/s, a
@@ -454,7 +486,14 @@ mod tests {
         let hdpe = unmeasured(Material::Hdpe, 0.250, 0.0148, 2065.0);
         let mean = [7.164, 5.7158];
         let cov = Sym2::new(0.0604, -0.000405, 7.6e-5);
-        predict_speed(&hdpe, Model::default(), ContactMode::default(), mean, cov)
+        predict_speed(
+            &hdpe,
+            Model::default(),
+            ContactMode::default(),
+            mean,
+            cov,
+            [1.0; 2],
+        )
     }
 
     /// A pipe of `material` (outside diameter and wall in m) in soil of density `soil_density`,
