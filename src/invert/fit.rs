@@ -16,7 +16,7 @@ use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
 use super::provenance::{Provenance, SearchError, Stage, StageRecord, StageStop};
-use super::sweep::{self, GlobalStage};
+use super::speed_search;
 use super::uncertainty::{determine, propagate, Determined, Interval, WithError};
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, LmStopReason, Objective,
@@ -44,8 +44,6 @@ pub struct FitSettings {
     pub restarts: usize,
     /// Evaluation budget of one default-method DE run, per fitted parameter.
     pub evaluations_per_dimension: usize,
-    /// The default method's global stage (the DE runs, faces and probes, or the prototype sweep).
-    pub global: GlobalStage,
 }
 
 impl Default for FitSettings {
@@ -57,7 +55,6 @@ impl Default for FitSettings {
             effects: Vec::new(),
             restarts: DEFAULT_RESTARTS,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
-            global: GlobalStage::SpeedDe,
         }
     }
 }
@@ -72,7 +69,6 @@ impl FitSettings {
             effects: Vec::new(),
             restarts: 1,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
-            global: GlobalStage::SpeedDe,
         }
     }
 }
@@ -607,51 +603,14 @@ fn search(
     // The stage that found each optimum, and what each stage did.
     let mut found_by: Vec<Stage> = Vec::with_capacity(restarts + 1);
     let mut stages: Vec<StageRecord> = Vec::new();
-    // The prototype sweep in the speed coordinates instead of the DE runs and the probes.
-    let sweeping = settings.global == GlobalStage::SpeedSweep
-        && settings.method == Method::Default
-        && sweep::applies(problem);
-    if sweeping {
-        // The grid and its minima, the pieces between the cliffs, the ends of the best's
-        // valley: three stages of fixed cost, recorded apart.
-        let mut stage = |stage: Stage,
-                         found: Vec<(Optimum, bool)>,
-                         (e0, b0): (usize, f64),
-                         optima: &mut Vec<Optimum>| {
-            let n = found.len();
-            for (o, c) in found {
-                optima.push(o);
-                capped.push(c);
-                found_by.push(stage);
-            }
-            let stop = if n > 0 {
-                StageStop::Polished {
-                    starts: n,
-                    optima: n,
-                }
-            } else {
-                StageStop::NoFiniteOptimum
-            };
-            stages.push(record(problem, stage, stop, e0, b0, optima));
-        };
-        let before = (problem.evaluations(), f64::INFINITY);
-        let (grid, found) = sweep::sweep(problem, bounds);
-        stage(Stage::SpeedSweep, found, before, &mut optima);
-        let before = (problem.evaluations(), best_cost(&optima));
-        let found = sweep::gaps(problem, bounds, &grid);
-        stage(Stage::SpeedGaps, found, before, &mut optima);
-        let before = (problem.evaluations(), best_cost(&optima));
-        let ends = sweep::valley_ends(problem, bounds, &optima);
-        stage(Stage::SpeedValleyEnds, ends, before, &mut optima);
-    }
     // With the DE in the speed coordinates, the first run (and every other) samples the image
     // of the box uniformly in (ln c_P, r = c_S/c_P, …), the second in (log10 E_m, ν_m, …):
     // uniform in r, 39 % of a population lies at ν_m ≥ 0.45, uniform in ν_m 10 %, so the two
     // runs favour different basins (docs/performance.md, "The search's DE in speed coordinates").
-    let in_speeds = sweep::InSpeeds::new(problem, bounds)
-        .filter(|_| settings.global == GlobalStage::SpeedDe && settings.method == Method::Default);
+    let in_speeds =
+        speed_search::InSpeeds::new(problem, bounds).filter(|_| settings.method == Method::Default);
     let speed_bounds = in_speeds.as_ref().and_then(|s| s.speed_bounds());
-    for r in (0..restarts).filter(|_| !sweeping) {
+    for r in 0..restarts {
         let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
         let de = de_for(settings, problem)?;
@@ -697,15 +656,16 @@ fn search(
         };
         stages.push(record(problem, Stage::NestedStart, stop, e0, b0, &optima));
     }
-    let pieces =
-        probes::Pieces::new(problem).filter(|_| settings.method == Method::Default && !sweeping);
+    let pieces = probes::Pieces::new(problem).filter(|_| settings.method == Method::Default);
     let speed_faces = in_speeds.is_some() && speed_bounds.is_some();
     if let (Some(_), true) = (&pieces, speed_faces) {
         // The faces r = r_min and ξ ∈ {0, 1} at the best optimum, and the line on the face
         // r = r_min past grazing (P44).
         let (e0, b0) = (problem.evaluations(), best_cost(&optima));
         let best = (0..optima.len()).min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
-        let found = best.map_or_else(Vec::new, |i| sweep::faces(problem, bounds, &optima[i]));
+        let found = best.map_or_else(Vec::new, |i| {
+            speed_search::faces(problem, bounds, &optima[i])
+        });
         let n = found.len();
         for (o, c) in found {
             optima.push(o);
