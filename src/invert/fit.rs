@@ -89,6 +89,13 @@ pub const DEFAULT_RESTARTS: usize = 2;
 /// count of segments left above the global optimum does not fall with the budget between 90 and
 /// 140: which segments miss changes with the DE runs' paths.
 pub const DEFAULT_EVALUATIONS_PER_DIMENSION: usize = 110;
+/// The budget of each DE run in (log10 E_m, ν_m, …) that follows one in the speed coordinates,
+/// as a percentage of [`DEFAULT_EVALUATIONS_PER_DIMENSION`] (never below one population). The
+/// run in the speed coordinates, the faces and the probes find most answers; the second run
+/// adds a population spread uniformly in ν_m, which needs few generations: at 40 % a fit
+/// costs about 11 % fewer evaluations and no fresh or hard segment ends further from the
+/// yardstick (docs/performance.md, "Cost").
+pub const SECOND_RUN_BUDGET_PERCENT: usize = 40;
 /// Initial population of the default DE (L-SHADE, shrinking linearly to 4 over the budget).
 pub const DEFAULT_POPULATION: usize = 100;
 /// Spread test of the default DE: stop when the population's objective values agree within
@@ -644,7 +651,15 @@ fn search(
     for r in 0..settings.restarts.max(1) {
         let begun = s.begin(problem);
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
-        let de = de_for(settings, problem)?;
+        let mut de = de_for(settings, problem)?;
+        if r % 2 == 1 && speed_bounds.is_some() {
+            // The run in (log10 E_m, ν_m, …) after one in the speed coordinates: a second
+            // look at the basins the first under-samples, on a smaller budget.
+            let per_dimension =
+                settings.evaluations_per_dimension * SECOND_RUN_BUDGET_PERCENT / 100;
+            de =
+                de.max_evaluations((per_dimension * problem.specs.len()).max(DEFAULT_POPULATION))?;
+        }
         let res = match (&in_speeds, &speed_bounds) {
             (Some(sp), Some(yb)) if r % 2 == 0 => {
                 let mut res = de.minimize(sp, yb, &mut rng)?;
@@ -1818,9 +1833,9 @@ mod tests {
     use crate::invert::uncertainty::{soil_speeds, Z_95};
 
     /// A fit flagged `high_misfit` searches once more only up to
-    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from seed 10
-    /// (one of the seeds from which it does) the search ends at χ² 59.7 (χ²/dof 8.5), the
-    /// second search at 6.3. With its attenuations written in dB/m (8.7 × too large, a defect
+    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from some seeds
+    /// the search ends in a basin near χ² 60 (χ²/dof 8.5), the second search at 6.3; the
+    /// test takes the first such seed. With its attenuations written in dB/m (8.7 × too large, a defect
     /// of the sample network) χ²/dof is far above the limit, and the fit is the first search's,
     /// evaluation for evaluation.
     #[test]
@@ -1831,7 +1846,9 @@ mod tests {
             .find(|s| s.id == "WM10098")
             .expect("the segment");
         let settings = FitSettings::default();
-        let seed = 10;
+        let seed = (0..400)
+            .find(|&s| fit_once(&seg.data, &settings, s, None).misfit > 50.0)
+            .expect("a seed from which the first search ends in the high basin");
         let first_and_answer = |data: &SegmentData| {
             let first = fit_once(data, &settings, seed, None);
             (first, fit_segment(data, &settings, seed))
