@@ -3,26 +3,20 @@
 //! answer; with `exhaustive`, also how often the yardstick reaches the χ² of the default
 //! search run far longer (`bench::exhaustive_fit`).
 //!
-//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]
+//! search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]
 //!
-//! With `sweep` (the prototype sweep in the speed coordinates, `invert::sweep`), each segment
-//! is also fitted with that search, timed on the thread's CPU clock alternately with today's
-//! search, and both are judged against the yardstick.
+//! Each fit is timed on the thread's CPU clock.
 //!
 //! MIX is `default` or `plastic-heavy`; the networks have seeds SEED, SEED + 1, …. The figures
-//! do not depend on JOBS.
+//! do not depend on JOBS. With ROWS=1, every segment's χ² and evaluations are printed too.
 
 use std::time::Instant;
 
 use pipewave::bench::{exhaustive_fit, thread_cpu_ms, Distribution, VERIFY_DCHI2_MAX};
 use pipewave::invert::yardstick::yardstick;
-use pipewave::invert::{fit_segment, FitSettings, GlobalStage, StageStatistics};
+use pipewave::invert::{fit_segment, FitSettings, StageStatistics};
 use pipewave::synth::bench::{bench_network, MaterialMix};
 use rayon::prelude::*;
-
-/// The sweep's fit of a segment: χ², CPU ms, evaluations, provenance and where its optimum
-/// lies in (c_P, c_S/c_P, ξ).
-type Swept = (f64, f64, usize, pipewave::invert::Provenance, String);
 
 /// One segment's figures.
 struct Row {
@@ -33,19 +27,17 @@ struct Row {
     exhaustive: Option<f64>,
     /// Where the exhaustive search's and the yardstick's optima lie, in the speed coordinates.
     places: String,
-    /// Where today's fit lies.
-    today_place: String,
+    /// Where the fit lies.
+    place: String,
     yard_evaluations: usize,
     provenance: pipewave::invert::Provenance,
-    /// Today's fit: CPU ms and evaluations.
+    /// The fit's CPU ms and evaluations.
     cost: (f64, usize),
-    /// The sweep's fit.
-    sweep: Option<Swept>,
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive|sweep]";
+    let usage = "search_misses MIX SEED NETWORKS SEGMENTS JOBS [exhaustive]";
     let arg = |i: usize| args.get(i).map(String::as_str).unwrap_or("");
     let parsed = (|| -> Result<(MaterialMix, u64, u64, usize, usize), String> {
         Ok((
@@ -64,18 +56,7 @@ fn main() {
         }
     };
     let exhaustive = arg(6) == "exhaustive";
-    // The other search timed against today's: the sweep.
-    let other = match arg(6) {
-        "sweep" => Some(("speed sweep   ", GlobalStage::SpeedSweep)),
-        _ => None,
-    };
-    let sweeping = other.is_some();
-    let other_name = other.map_or("", |o| o.0);
     let settings = FitSettings::default();
-    let sweep_settings = FitSettings {
-        global: other.map_or(GlobalStage::SpeedDe, |o| o.1),
-        ..FitSettings::default()
-    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.max(1))
         .build()
@@ -90,24 +71,10 @@ fn main() {
         }
         rows.extend(pool.install(|| {
             net.par_iter()
-                .enumerate()
-                .map(|(i, seg)| {
-                    let timed = |s: &FitSettings| {
-                        let t = thread_cpu_ms();
-                        let r = fit_segment(&seg.data, s, seg.seed);
-                        (thread_cpu_ms() - t, r)
-                    };
-                    // Alternate which search runs first, so that a slow phase of a shared
-                    // machine hits both alike.
-                    let (mut today, mut swept) = (None, None);
-                    for k in 0..2 {
-                        if (i + k) % 2 == 0 {
-                            today = Some(timed(&settings));
-                        } else if sweeping {
-                            swept = Some(timed(&sweep_settings));
-                        }
-                    }
-                    let (ms, fit) = today.expect("today's fit ran");
+                .map(|seg| {
+                    let t = thread_cpu_ms();
+                    let fit = fit_segment(&seg.data, &settings, seg.seed);
+                    let ms = thread_cpu_ms() - t;
                     let yard = yardstick(&seg.data, &settings);
                     let ex = exhaustive.then(|| exhaustive_fit(seg));
                     Row {
@@ -118,13 +85,9 @@ fn main() {
                         yard_evaluations: yard.as_ref().map_or(0, |y| y.evaluations),
                         exhaustive: ex.as_ref().map(|e| e.misfit),
                         places: places(&seg.data, ex.as_ref(), yard.as_ref().ok()),
-                        today_place: place_of(&seg.data, &fit),
+                        place: place_of(&seg.data, &fit),
                         cost: (ms, fit.evaluations),
                         provenance: fit.provenance,
-                        sweep: swept.map(|(ms, r)| {
-                            let place = place_of(&seg.data, &r);
-                            (r.misfit, ms, r.evaluations, r.provenance, place)
-                        }),
                     }
                 })
                 .collect::<Vec<_>>()
@@ -151,9 +114,16 @@ fn main() {
     );
     for r in &misses {
         println!(
-            "    {} ({:?}) fit {:.4} yardstick {:.4} won by {:?}",
-            r.id, r.material, r.fit, r.yard, r.provenance.winner
+            "    {} ({:?}) fit {:.4} yardstick {:.4} won by {:?}\n{}\n      fit:        {}",
+            r.id, r.material, r.fit, r.yard, r.provenance.winner, r.places, r.place
         );
+    }
+    // ROWS=1: every segment's χ² and evaluations, to check that a change of the code leaves
+    // each fit unchanged to the evaluation.
+    if std::env::var("ROWS").is_ok_and(|v| v == "1") {
+        for r in &rows {
+            println!("    row {} chi2 {:e} evaluations {}", r.id, r.fit, r.cost.1);
+        }
     }
     let below = rows.iter().filter(|r| r.yard < r.fit - 1e-6).count();
     println!("  yardstick below the fit by more than 1e-6: {below}");
@@ -206,44 +176,6 @@ fn main() {
         rows.iter().map(|r| r.cost.0).collect(),
         rows.iter().map(|r| r.cost.1).collect(),
     );
-    if sweeping {
-        let swept: Vec<(&Row, &Swept)> = rows
-            .iter()
-            .filter_map(|r| r.sweep.as_ref().map(|s| (r, s)))
-            .collect();
-        cost(
-            other_name,
-            swept.iter().map(|(_, s)| s.1).collect(),
-            swept.iter().map(|(_, s)| s.2).collect(),
-        );
-        let mut stages = StageStatistics::default();
-        for (_, s) in &swept {
-            stages.observe(&s.3);
-        }
-        print!("  {}: {stages}", other_name.trim());
-        let over = |f: f64, y: f64| f.is_nan() || f - y.min(f) > VERIFY_DCHI2_MAX;
-        let misses: Vec<_> = swept.iter().filter(|(r, s)| over(s.0, r.yard)).collect();
-        println!(
-            "  {} more than {VERIFY_DCHI2_MAX} above the yardstick (or failed): {}; \
-             above today's fit by more than {VERIFY_DCHI2_MAX}: {}; below it: {}",
-            other_name.trim(),
-            misses.len(),
-            swept
-                .iter()
-                .filter(|(r, s)| s.0 > r.fit + VERIFY_DCHI2_MAX)
-                .count(),
-            swept
-                .iter()
-                .filter(|(r, s)| s.0 < r.fit - VERIFY_DCHI2_MAX)
-                .count()
-        );
-        for (r, s) in misses {
-            println!(
-                "    {} ({:?}) other {:.4} today {:.4} yardstick {:.4}\n{}\n      other:      {}\n      today:      {}",
-                r.id, r.material, s.0, r.fit, r.yard, r.places, s.4, r.today_place
-            );
-        }
-    }
 }
 
 /// A fit's optimum in (c_P, c_S/c_P, ξ) and its model phase speeds, m/s.

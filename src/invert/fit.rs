@@ -16,7 +16,7 @@ use super::problem::{
     Method, Param, Problem, SegmentData, SolvePath, Weighting, FAILED_SOLVE_OBJECTIVE,
 };
 use super::provenance::{Provenance, SearchError, Stage, StageRecord, StageStop};
-use super::sweep::{self, GlobalStage};
+use super::speed_search;
 use super::uncertainty::{determine, propagate, Determined, Interval, WithError};
 use crate::optimize::{
     DeMethod, DifferentialEvolution, FiniteDifference, LevenbergMarquardt, LmStopReason, Objective,
@@ -44,8 +44,6 @@ pub struct FitSettings {
     pub restarts: usize,
     /// Evaluation budget of one default-method DE run, per fitted parameter.
     pub evaluations_per_dimension: usize,
-    /// The default method's global stage (the DE runs, faces and probes, or the prototype sweep).
-    pub global: GlobalStage,
 }
 
 impl Default for FitSettings {
@@ -57,7 +55,6 @@ impl Default for FitSettings {
             effects: Vec::new(),
             restarts: DEFAULT_RESTARTS,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
-            global: GlobalStage::SpeedDe,
         }
     }
 }
@@ -72,7 +69,6 @@ impl FitSettings {
             effects: Vec::new(),
             restarts: 1,
             evaluations_per_dimension: DEFAULT_EVALUATIONS_PER_DIMENSION,
-            global: GlobalStage::SpeedDe,
         }
     }
 }
@@ -93,6 +89,13 @@ pub const DEFAULT_RESTARTS: usize = 2;
 /// count of segments left above the global optimum does not fall with the budget between 90 and
 /// 140: which segments miss changes with the DE runs' paths.
 pub const DEFAULT_EVALUATIONS_PER_DIMENSION: usize = 110;
+/// The budget of each DE run in (log10 E_m, ν_m, …) that follows one in the speed coordinates,
+/// as a percentage of [`DEFAULT_EVALUATIONS_PER_DIMENSION`] (never below one population). The
+/// run in the speed coordinates, the faces and the probes find most answers; the second run
+/// adds a population spread uniformly in ν_m, which needs few generations: at 40 % a fit
+/// costs about 11 % fewer evaluations and no fresh or hard segment ends further from the
+/// yardstick (docs/performance.md, "Cost").
+pub const SECOND_RUN_BUDGET_PERCENT: usize = 40;
 /// Initial population of the default DE (L-SHADE, shrinking linearly to 4 over the budget).
 pub const DEFAULT_POPULATION: usize = 100;
 /// Spread test of the default DE: stop when the population's objective values agree within
@@ -556,39 +559,76 @@ fn nested_start(problem: &Problem<'_>, base: &BaseOptimum) -> Option<Vec<f64>> {
         .collect()
 }
 
-/// A probe: polished (or walked) optima, with whether each polish was capped, from the best
-/// so far.
-type ProbeFn<'f> =
-    &'f dyn Fn(&probes::Pieces<'_, '_>, &crate::optimize::Bounds, &Optimum) -> Vec<(Optimum, bool)>;
-
-/// The best misfit among `optima` (+∞ when there is none).
-fn best_cost(optima: &[Optimum]) -> f64 {
-    optima.iter().map(|o| o.cost).fold(f64::INFINITY, f64::min)
-}
-
-/// What the search found: its optima, the stage that found each, and the record of every
-/// stage.
+/// What the search found: its optima, whether each one's polish stopped at its iteration cap
+/// (still descending), the stage that found each, and the record of every stage.
+#[derive(Default)]
 struct Searched {
     optima: Vec<Optimum>,
+    capped: Vec<bool>,
     found_by: Vec<Stage>,
     stages: Vec<StageRecord>,
 }
 
-/// The record of a stage that began with `best_before` and `evaluations_before` evaluations.
-fn record(
-    problem: &Problem<'_>,
-    stage: Stage,
-    stop: StageStop,
-    evaluations_before: usize,
-    best_before: f64,
-    optima: &[Optimum],
-) -> StageRecord {
-    StageRecord {
-        stage,
-        stop,
-        evaluations: problem.evaluations() - evaluations_before,
-        best_before,
-        best_after: best_cost(optima),
+impl Searched {
+    /// The index of the best optimum so far.
+    fn best(&self) -> Option<usize> {
+        (0..self.optima.len()).min_by(|&a, &b| self.optima[a].cost.total_cmp(&self.optima[b].cost))
+    }
+
+    /// The best misfit so far (+∞ when there is none).
+    fn best_cost(&self) -> f64 {
+        self.optima
+            .iter()
+            .map(|o| o.cost)
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Where a stage begins: the evaluations so far and the best misfit.
+    fn begin(&self, problem: &Problem<'_>) -> (usize, f64) {
+        (problem.evaluations(), self.best_cost())
+    }
+
+    /// Files the optima `stage` found.
+    fn push(&mut self, stage: Stage, found: impl IntoIterator<Item = (Optimum, bool)>) {
+        for (o, c) in found {
+            self.optima.push(o);
+            self.capped.push(c);
+            self.found_by.push(stage);
+        }
+    }
+
+    /// Records `stage`, begun at `begun` ([`Searched::begin`]), as stopped by `stop`.
+    fn close(&mut self, problem: &Problem<'_>, stage: Stage, stop: StageStop, begun: (usize, f64)) {
+        self.stages.push(StageRecord {
+            stage,
+            stop,
+            evaluations: problem.evaluations() - begun.0,
+            best_before: begun.1,
+            best_after: self.best_cost(),
+        });
+    }
+
+    /// Files the optima of a stage of polishes and records it: polished when it found any,
+    /// otherwise stopped by `none`.
+    fn polished(
+        &mut self,
+        problem: &Problem<'_>,
+        stage: Stage,
+        begun: (usize, f64),
+        found: Vec<(Optimum, bool)>,
+        none: StageStop,
+    ) {
+        let n = found.len();
+        self.push(stage, found);
+        let stop = if n > 0 {
+            StageStop::Polished {
+                starts: n,
+                optima: n,
+            }
+        } else {
+            none
+        };
+        self.close(problem, stage, stop, begun);
     }
 }
 
@@ -600,65 +640,30 @@ fn search(
     bounds: &crate::optimize::Bounds,
     start: Option<&[f64]>,
 ) -> Result<Searched, SearchError> {
-    let restarts = settings.restarts.max(1);
-    let mut optima: Vec<Optimum> = Vec::with_capacity(restarts + 1);
-    // Whether each optimum's polish stopped at its iteration cap, still descending.
-    let mut capped: Vec<bool> = Vec::with_capacity(restarts + 1);
-    // The stage that found each optimum, and what each stage did.
-    let mut found_by: Vec<Stage> = Vec::with_capacity(restarts + 1);
-    let mut stages: Vec<StageRecord> = Vec::new();
-    // The prototype sweep in the speed coordinates instead of the DE runs and the probes.
-    let sweeping = settings.global == GlobalStage::SpeedSweep
-        && settings.method == Method::Default
-        && sweep::applies(problem);
-    if sweeping {
-        // The grid and its minima, the pieces between the cliffs, the ends of the best's
-        // valley: three stages of fixed cost, recorded apart.
-        let mut stage = |stage: Stage,
-                         found: Vec<(Optimum, bool)>,
-                         (e0, b0): (usize, f64),
-                         optima: &mut Vec<Optimum>| {
-            let n = found.len();
-            for (o, c) in found {
-                optima.push(o);
-                capped.push(c);
-                found_by.push(stage);
-            }
-            let stop = if n > 0 {
-                StageStop::Polished {
-                    starts: n,
-                    optima: n,
-                }
-            } else {
-                StageStop::NoFiniteOptimum
-            };
-            stages.push(record(problem, stage, stop, e0, b0, optima));
-        };
-        let before = (problem.evaluations(), f64::INFINITY);
-        let (grid, found) = sweep::sweep(problem, bounds);
-        stage(Stage::SpeedSweep, found, before, &mut optima);
-        let before = (problem.evaluations(), best_cost(&optima));
-        let found = sweep::gaps(problem, bounds, &grid);
-        stage(Stage::SpeedGaps, found, before, &mut optima);
-        let before = (problem.evaluations(), best_cost(&optima));
-        let ends = sweep::valley_ends(problem, bounds, &optima);
-        stage(Stage::SpeedValleyEnds, ends, before, &mut optima);
-    }
+    let mut s = Searched::default();
     // With the DE in the speed coordinates, the first run (and every other) samples the image
     // of the box uniformly in (ln c_P, r = c_S/c_P, …), the second in (log10 E_m, ν_m, …):
     // uniform in r, 39 % of a population lies at ν_m ≥ 0.45, uniform in ν_m 10 %, so the two
     // runs favour different basins (docs/performance.md, "The search's DE in speed coordinates").
-    let in_speeds = sweep::InSpeeds::new(problem, bounds)
-        .filter(|_| settings.global == GlobalStage::SpeedDe && settings.method == Method::Default);
+    let in_speeds =
+        speed_search::InSpeeds::new(problem, bounds).filter(|_| settings.method == Method::Default);
     let speed_bounds = in_speeds.as_ref().and_then(|s| s.speed_bounds());
-    for r in (0..restarts).filter(|_| !sweeping) {
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+    for r in 0..settings.restarts.max(1) {
+        let begun = s.begin(problem);
         let mut rng = ChaCha8Rng::seed_from_u64(restart_seed(seed, r));
-        let de = de_for(settings, problem)?;
+        let mut de = de_for(settings, problem)?;
+        if r % 2 == 1 && speed_bounds.is_some() {
+            // The run in (log10 E_m, ν_m, …) after one in the speed coordinates: a second
+            // look at the basins the first under-samples, on a smaller budget.
+            let per_dimension =
+                settings.evaluations_per_dimension * SECOND_RUN_BUDGET_PERCENT / 100;
+            de =
+                de.max_evaluations((per_dimension * problem.specs.len()).max(DEFAULT_POPULATION))?;
+        }
         let res = match (&in_speeds, &speed_bounds) {
-            (Some(s), Some(yb)) if r % 2 == 0 => {
-                let mut res = de.minimize(s, yb, &mut rng)?;
-                match s.x(&res.x) {
+            (Some(sp), Some(yb)) if r % 2 == 0 => {
+                let mut res = de.minimize(sp, yb, &mut rng)?;
+                match sp.x(&res.x) {
                     Some(x) => res.x = x,
                     None => res.f = f64::INFINITY,
                 }
@@ -669,101 +674,59 @@ fn search(
         if !res.f.is_finite()
             || (settings.method == Method::Paper && res.f >= FAILED_SOLVE_OBJECTIVE)
         {
-            let stop = StageStop::NoFiniteOptimum;
-            stages.push(record(problem, Stage::Global, stop, e0, b0, &optima));
+            s.close(problem, Stage::Global, StageStop::NoFiniteOptimum, begun);
             continue;
         }
-        let (o, c) = refine(problem, settings, bounds, res.x, res.f);
-        optima.push(o);
-        capped.push(c);
-        found_by.push(Stage::Global);
+        s.push(
+            Stage::Global,
+            [refine(problem, settings, bounds, res.x, res.f)],
+        );
         let stop = StageStop::Population(res.stop_reason);
-        stages.push(record(problem, Stage::Global, stop, e0, b0, &optima));
+        s.close(problem, Stage::Global, stop, begun);
     }
     if let Some(x0) = start {
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+        let begun = s.begin(problem);
         let f0 = problem.value(x0);
-        let stop = if f0.is_finite() {
-            let (o, c) = refine(problem, settings, bounds, x0.to_vec(), f0);
-            optima.push(o);
-            capped.push(c);
-            found_by.push(Stage::NestedStart);
-            StageStop::Polished {
-                starts: 1,
-                optima: 1,
-            }
-        } else {
-            StageStop::NoFiniteOptimum
-        };
-        stages.push(record(problem, Stage::NestedStart, stop, e0, b0, &optima));
+        let found: Vec<_> = f0
+            .is_finite()
+            .then(|| refine(problem, settings, bounds, x0.to_vec(), f0))
+            .into_iter()
+            .collect();
+        let none = StageStop::NoFiniteOptimum;
+        s.polished(problem, Stage::NestedStart, begun, found, none);
     }
-    let pieces =
-        probes::Pieces::new(problem).filter(|_| settings.method == Method::Default && !sweeping);
-    let speed_faces = in_speeds.is_some() && speed_bounds.is_some();
-    if let (Some(_), true) = (&pieces, speed_faces) {
+    let pieces = probes::Pieces::new(problem).filter(|_| settings.method == Method::Default);
+    if let (Some(_), true) = (&pieces, in_speeds.is_some() && speed_bounds.is_some()) {
         // The faces r = r_min and ξ ∈ {0, 1} at the best optimum, and the line on the face
         // r = r_min past grazing (P44).
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
-        let best = (0..optima.len()).min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
-        let found = best.map_or_else(Vec::new, |i| sweep::faces(problem, bounds, &optima[i]));
-        let n = found.len();
-        for (o, c) in found {
-            optima.push(o);
-            capped.push(c);
-            found_by.push(Stage::SpeedFaces);
-        }
-        let stop = if n > 0 {
-            StageStop::Polished {
-                starts: n,
-                optima: n,
-            }
-        } else {
-            StageStop::NotApplicable
-        };
-        stages.push(record(problem, Stage::SpeedFaces, stop, e0, b0, &optima));
+        let begun = s.begin(problem);
+        let found = s.best().map_or_else(Vec::new, |i| {
+            speed_search::faces(problem, bounds, &s.optima[i])
+        });
+        let none = StageStop::NotApplicable;
+        s.polished(problem, Stage::SpeedFaces, begun, found, none);
     }
     if let Some(pieces) = pieces {
         // Each probe starts from the best optimum so far.
-        let best = |optima: &[Optimum]| {
-            optima
-                .iter()
-                .min_by(|a, b| a.cost.total_cmp(&b.cost))
-                .cloned()
+        let run_probe = |s: &mut Searched, stage: Stage, probe: &dyn Fn(&Optimum) -> Vec<_>| {
+            let begun = s.begin(problem);
+            let found = s.best().map_or_else(Vec::new, |i| probe(&s.optima[i]));
+            s.polished(problem, stage, begun, found, StageStop::NotApplicable);
         };
-        let mut run_probe = |stage: Stage, probe: ProbeFn, optima: &mut Vec<Optimum>| {
-            let (e0, b0) = (problem.evaluations(), best_cost(optima));
-            let mut found = 0;
-            if let Some(b) = best(optima) {
-                for (o, c) in probe(&pieces, bounds, &b) {
-                    optima.push(o);
-                    capped.push(c);
-                    found_by.push(stage);
-                    found += 1;
-                }
-            }
-            let stop = if found > 0 {
-                StageStop::Polished {
-                    starts: found,
-                    optima: found,
-                }
-            } else {
-                StageStop::NotApplicable
-            };
-            stages.push(record(problem, stage, stop, e0, b0, optima));
-        };
-        run_probe(Stage::ValleyEnd, &probes::valley_end_probe, &mut optima);
+        run_probe(&mut s, Stage::ValleyEnd, &|b| {
+            probes::valley_end_probe(&pieces, bounds, b)
+        });
         // The grazing and edge probes again from a best they moved: its pieces are others.
         // The first round with the gap scan's starts (`probes::gap_scan`).
         for round in 0..GRAZING_ROUNDS {
-            let before = best(&optima).map_or(f64::INFINITY, |o| o.cost);
-            run_probe(
-                Stage::Grazing,
-                &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, round == 0),
-                &mut optima,
-            );
-            run_probe(Stage::Edge, &probes::edge_probe, &mut optima);
-            let after = best(&optima).map_or(f64::INFINITY, |o| o.cost);
-            if after >= before - GRAZING_ROUND_GAIN {
+            let before = s.best_cost();
+            run_probe(&mut s, Stage::Grazing, &|b| {
+                probes::grazing_probe(&pieces, bounds, b, round == 0)
+            });
+            run_probe(&mut s, Stage::Edge, &|b| {
+                probes::edge_probe(&pieces, bounds, b)
+            });
+            if s.best_cost() >= before - GRAZING_ROUND_GAIN {
                 break;
             }
         }
@@ -774,19 +737,18 @@ fn search(
         // this halved the segments left more than 0.1 above the global optimum, for 35–50
         // evaluations a fit more; the whole probe sequence again, or a longer DE run with its
         // own probes, cost more and mended no more.
-        if best(&optima).is_some_and(|b| pieces.near_grazing(&b.x)) {
-            run_probe(
-                Stage::GrazingRescan,
-                &|pieces, bounds, best| probes::grazing_probe(pieces, bounds, best, true),
-                &mut optima,
-            );
+        if s.best()
+            .is_some_and(|i| pieces.near_grazing(&s.optima[i].x))
+        {
+            run_probe(&mut s, Stage::GrazingRescan, &|b| {
+                probes::grazing_probe(&pieces, bounds, b, true)
+            });
         }
     }
     // The best optimum's polish goes on where it stopped still descending: only the best's,
     // since only the answer needs the bottom of its valley. Central differences there: in a
     // narrow curved valley a forward-difference Jacobian's error across the valley swamps the
     // gradient along it, and the polish stops short (by 0.13 in χ² on an MDPE pipe).
-    let best = (0..optima.len()).min_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
     // The candidates' polishes stop at a loose tolerance ([`CANDIDATE_POLISH_RTOL`]); the
     // best's goes on to LM's own, with forward differences where it stopped on that
     // tolerance. Where it stopped at its iteration cap, still descending, it goes on with
@@ -794,32 +756,35 @@ fn search(
     // where the search path and the reference path rate the soil differently (χ² 5.4 against
     // 19.6 on a ductile-iron pipe), and the answer falls back to a worse basin, while the
     // central polish ends within 0.1 of the exhaustive search.
-    if let Some(i) = best {
-        let (e0, b0) = (problem.evaluations(), best_cost(&optima));
+    if let Some(i) = s.best() {
+        let begun = s.begin(problem);
         let mut polished = 0;
         for (iterations, fd) in [
             (POLISH_ITERATIONS, FiniteDifference::Forward),
             (POLISH_MORE_ITERATIONS, FiniteDifference::Central),
         ] {
             let go = match fd {
-                FiniteDifference::Forward => settings.method == Method::Default && !capped[i],
-                FiniteDifference::Central => capped[i],
+                FiniteDifference::Forward => settings.method == Method::Default && !s.capped[i],
+                FiniteDifference::Central => s.capped[i],
             };
             if !go {
                 continue;
             }
             polished += 1;
-            let Some((o, c)) =
-                polish_with(problem, &optima[i].x, bounds, iterations, fd, Depth::Answer)
-            else {
-                continue;
-            };
-            if o.cost < optima[i].cost {
-                optima[i] = o;
-                capped[i] = c;
+            let found = polish_with(
+                problem,
+                &s.optima[i].x,
+                bounds,
+                iterations,
+                fd,
+                Depth::Answer,
+            );
+            if let Some((o, c)) = found.filter(|(o, _)| o.cost < s.optima[i].cost) {
+                s.optima[i] = o;
+                s.capped[i] = c;
             }
         }
-        let stop = match (polished, capped[i]) {
+        let stop = match (polished, s.capped[i]) {
             (0, _) => StageStop::NotApplicable,
             (_, true) => StageStop::PolishCapped,
             (n, false) => StageStop::Polished {
@@ -827,20 +792,9 @@ fn search(
                 optima: 0,
             },
         };
-        stages.push(record(
-            problem,
-            Stage::ContinuedPolish,
-            stop,
-            e0,
-            b0,
-            &optima,
-        ));
+        s.close(problem, Stage::ContinuedPolish, stop, begun);
     }
-    Ok(Searched {
-        optima,
-        found_by,
-        stages,
-    })
+    Ok(s)
 }
 
 /// Rounds of the grazing and edge probes at most: another round runs from the best optimum
@@ -889,6 +843,7 @@ fn run(
         mut optima,
         found_by,
         stages,
+        ..
     } = search(problem, settings, seed, &bounds, start)?;
     let mut order: Vec<usize> = (0..optima.len()).collect();
     order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
@@ -1878,9 +1833,9 @@ mod tests {
     use crate::invert::uncertainty::{soil_speeds, Z_95};
 
     /// A fit flagged `high_misfit` searches once more only up to
-    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from seed 10
-    /// (one of the seeds from which it does) the search ends at χ² 59.7 (χ²/dof 8.5), the
-    /// second search at 6.3. With its attenuations written in dB/m (8.7 × too large, a defect
+    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from some seeds
+    /// the search ends in a basin near χ² 60 (χ²/dof 8.5), the second search at 6.3; the
+    /// test takes the first such seed. With its attenuations written in dB/m (8.7 × too large, a defect
     /// of the sample network) χ²/dof is far above the limit, and the fit is the first search's,
     /// evaluation for evaluation.
     #[test]
@@ -1891,7 +1846,9 @@ mod tests {
             .find(|s| s.id == "WM10098")
             .expect("the segment");
         let settings = FitSettings::default();
-        let seed = 10;
+        let seed = (0..400)
+            .find(|&s| fit_once(&seg.data, &settings, s, None).misfit > 50.0)
+            .expect("a seed from which the first search ends in the high basin");
         let first_and_answer = |data: &SegmentData| {
             let first = fit_once(data, &settings, seed, None);
             (first, fit_segment(data, &settings, seed))

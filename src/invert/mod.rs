@@ -10,7 +10,7 @@
 //!   95 % intervals of every parameter, the predicted curve with errors;
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
-//! `fit` searches and builds the result once; `sweep` holds the search's speed coordinates and
+//! `fit` searches and builds the result once; `speed_search` holds the search's speed coordinates and
 //! the faces of their box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search
 //! leaves unvisited (across a grazing cliff, back along a valley of constant c_P, along the
 //! edge of a cliff); `uncertainty` and `flags` are pure
@@ -24,7 +24,7 @@ pub mod probes;
 pub mod problem;
 pub mod provenance;
 pub mod speed;
-pub mod sweep;
+pub mod speed_search;
 pub mod uncertainty;
 pub mod yardstick;
 
@@ -35,5 +35,4 @@ pub use fit::{
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
 pub use provenance::{Provenance, SearchError, Stage, StageStatistics, StageStop};
-pub use sweep::GlobalStage;
 pub use uncertainty::{Interval, WithError};

@@ -1,6 +1,6 @@
 //! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
 //! candidates built from the best optimum so far and polished (the valley-end and grazing
-//! probes; the faces of the box in the speed coordinates are in [`super::sweep::faces`]), the walk along a cliff's edge from a best optimum on one
+//! probes; the faces of the box in the speed coordinates are in [`super::speed_search::faces`]), the walk along a cliff's edge from a best optimum on one
 //! (the edge probe), and the step off a grazing cliff that lets the reference path confirm an
 //! optimum on its edge.
 
@@ -16,7 +16,7 @@ use super::uncertainty::{
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, NelderMead, Objective};
 
 /// The valley-end probe: when the best optimum lies at the upper bound of ν_m (the fluid-like
-/// end of a valley of constant c_P, c_S → 0, which the polish from the face r = r_min often finds, `sweep::faces`), a
+/// end of a valley of constant c_P, c_S → 0, which the polish from the face r = r_min often finds, `speed_search::faces`), a
 /// polish from the valley's other end, the same c_P at ν_m's lower bound (c_S = c_P/√2 at
 /// ν_m = 0). The data of a metal pipe fix c_P and barely c_S, so χ² changes little along the
 /// valley, and a polish from one end does not cross it: a ductile-iron pipe ended at χ² 13.43

@@ -27,13 +27,6 @@ pub enum Stage {
     GrazingRescan,
     /// The answer's continued polish (it refines an optimum another stage found).
     ContinuedPolish,
-    /// The prototype sweep over c_P in the speed coordinates ([`super::sweep`]): its grid's
-    /// minima, polished.
-    SpeedSweep,
-    /// The sweep's pieces between cliffs: polished with c_P held, then fully.
-    SpeedGaps,
-    /// The ends of the best's valley in (r, ξ) at its c_P, polished.
-    SpeedValleyEnds,
     /// Polishes from the faces r = r_min and ξ ∈ {0, 1} of the speed coordinates at the best
     /// optimum of the DE runs in those coordinates.
     SpeedFaces,
@@ -41,7 +34,7 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 11] = [
+    pub const ALL: [Stage; 8] = [
         Stage::Global,
         Stage::NestedStart,
         Stage::ValleyEnd,
@@ -49,9 +42,6 @@ impl Stage {
         Stage::Edge,
         Stage::GrazingRescan,
         Stage::ContinuedPolish,
-        Stage::SpeedSweep,
-        Stage::SpeedGaps,
-        Stage::SpeedValleyEnds,
         Stage::SpeedFaces,
     ];
 
@@ -65,9 +55,6 @@ impl Stage {
             Stage::Edge => "edge",
             Stage::GrazingRescan => "grazing rescan",
             Stage::ContinuedPolish => "continued polish",
-            Stage::SpeedSweep => "speed sweep",
-            Stage::SpeedGaps => "speed gaps",
-            Stage::SpeedValleyEnds => "speed valley ends",
             Stage::SpeedFaces => "speed faces",
         }
     }
