@@ -659,6 +659,41 @@ mod tests {
         assert_eq!(m[2], Some((290.0, 0.2)));
     }
 
+    /// P92 in the quadrature: a widening moves no speed, and widens only the soil's share of
+    /// the variance (q² of it), not the contact's: var(q) = q² A + C with C > 0.
+    #[test]
+    fn a_widening_widens_the_soils_share_of_the_error_only() {
+        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
+        let soft = [(250.0f64).ln(), (100.0f64).ln()];
+        let cov = Sym2::new(0.01, 0.005, 0.01);
+        let at = |q: f64| {
+            predict_speed(
+                &pvc,
+                Model::default(),
+                ContactMode::default(),
+                soft,
+                cov,
+                [q, q],
+            )
+        };
+        let (p1, p2, p3) = (at(1.0), at(2.0), at(1.3));
+        let (b1, b2, b3) = (p1.band.unwrap(), p2.band.unwrap(), p3.band.unwrap());
+        assert_eq!(b1.value, b3.value);
+        for (a, b) in p1.curve.iter().zip(&p3.curve) {
+            assert_eq!(a.phase_speed_m_per_s, b.phase_speed_m_per_s);
+        }
+        let (v1, v2, v3) = (b1.std.powi(2), b2.std.powi(2), b3.std.powi(2));
+        let soil = (v2 - v1) / 3.0;
+        let contact = v1 - soil;
+        assert!(
+            soil > 0.0 && contact > 0.0,
+            "soil {soil}, contact {contact}"
+        );
+        let expected = 1.69 * soil + contact;
+        assert!((v3 - expected).abs() < 1e-9 * v3, "{v3} vs {expected}");
+        assert!(v3 < 1.69 * v1 && v3 > v1, "{v3} vs {v1}");
+    }
+
     /// The curve's relative shift and spread off the sigma frequencies: linear in ln f between
     /// them (at √(100·200) Hz halfway between their values), held beyond the band's ends.
     #[test]
