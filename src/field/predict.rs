@@ -467,6 +467,11 @@ mod tests {
     /// A PVC pipe in ordinary soft soil (c_P 250 m/s, c_S 100 m/s, a posterior 10 % wide): its
     /// wave crosses the whole leak band.
     fn pvc_in_soft_soil() -> SpeedPrediction {
+        pvc_in_soft_soil_widened(1.0)
+    }
+
+    /// [`pvc_in_soft_soil`] with its soil's error widened by `q` on both axes (P92).
+    fn pvc_in_soft_soil_widened(q: f64) -> SpeedPrediction {
         let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
         let soft = [(250.0f64).ln(), (100.0f64).ln()];
         let cov = Sym2::new(0.01, 0.005, 0.01);
@@ -476,7 +481,7 @@ mod tests {
             ContactMode::default(),
             soft,
             cov,
-            [1.0; 2],
+            [q, q],
         )
     }
 
@@ -663,19 +668,7 @@ mod tests {
     /// the variance (q² of it), not the contact's: var(q) = q² A + C with C > 0.
     #[test]
     fn a_widening_widens_the_soils_share_of_the_error_only() {
-        let pvc = unmeasured(Material::Pvc, 0.110, 0.0053, 1900.0);
-        let soft = [(250.0f64).ln(), (100.0f64).ln()];
-        let cov = Sym2::new(0.01, 0.005, 0.01);
-        let at = |q: f64| {
-            predict_speed(
-                &pvc,
-                Model::default(),
-                ContactMode::default(),
-                soft,
-                cov,
-                [q, q],
-            )
-        };
+        let at = pvc_in_soft_soil_widened;
         let (p1, p2, p3) = (at(1.0), at(2.0), at(1.3));
         let (b1, b2, b3) = (p1.band.unwrap(), p2.band.unwrap(), p3.band.unwrap());
         assert_eq!(b1.value, b3.value);
