@@ -52,9 +52,9 @@ const SPEED_E: f64 = 1000.0;
 /// Relative one-sigma error of the flat curves.
 const REL_STD: f64 = 0.01;
 
-/// The expected slowness E[1/c] ≈ (1 + (σ/c)²)/c of a stored speed `c` ± REL_STD (model §11).
+/// The slowness a stored speed `c` ± REL_STD enters the delay by: its median 1/c (model §11).
 fn slowness(c: f64) -> f64 {
-    (1.0 + REL_STD * REL_STD) / c
+    1.0 / c
 }
 
 fn street() -> Street {

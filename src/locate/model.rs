@@ -214,11 +214,13 @@ impl DelayModel {
             let mut kf = Vec::with_capacity(freqs_hz.len());
             for (&f, &w) in freqs_hz.iter().zip(&omega) {
                 let (c, rel, att) = c.at(f);
-                // The expected wavenumber ω E[1/c] ≈ (ω/ĉ)(1 + (σ/ĉ)²) of a speed ĉ ± σ
-                // (model §11, under P85).
-                let k_mean = w / c * (1.0 + rel * rel);
-                ks.push(Complex64::new(k_mean, -att));
-                kf.push(k_mean / (1.0 + rel));
+                // The wavenumber ω/ĉ of the speed's estimate: for a speed error symmetric about
+                // ĉ, 1/ĉ is the median slowness, so T(x̂) = τ puts x̂ at the median of the
+                // position's posterior, the point of least expected distance in error (model
+                // §11, under P85).
+                let k_median = w / c;
+                ks.push(Complex64::new(k_median, -att));
+                kf.push(k_median / (1.0 + rel));
             }
             k.push(ks);
             k_fast.push(kf);
@@ -698,8 +700,8 @@ mod tests {
                     length_m: 200.0,
                 }],
             );
-            // The expected slowness of 1200 ± 1 %: (1 + 0.01²)/1200.
-            let slowness = 1.0001 / 1200.0;
+            // The median slowness of 1200 ± 1 %: 1/1200.
+            let slowness = 1.0 / 1200.0;
             for x in [0.0, 37.2, 100.0, 163.0, 200.0] {
                 let t = m.delay(x);
                 assert!((t - (200.0 - 2.0 * x) * slowness).abs() < 1e-9, "{x}: {t}");
@@ -716,8 +718,8 @@ mod tests {
                 "{speed} {expect}"
             );
             assert!((shift(TermKind::Span) - 1.0).abs() < 1e-6);
-            // σ_τ / (2 × slowness) = 1200 m/s × 0.1 ms / 2 / 1.0001.
-            assert!((shift(TermKind::Delay) - 0.06 / 1.0001).abs() < 1e-6);
+            // σ_τ / (2 × slowness) = 1200 m/s × 0.1 ms / 2.
+            assert!((shift(TermKind::Delay) - 0.06).abs() < 1e-6);
         }
     }
 
@@ -744,8 +746,8 @@ mod tests {
             ],
         );
         let x = 25.0;
-        // Expected slownesses of 400 ± 2 % and 1250 ± 0.2 %.
-        let (sa, sb) = (1.0004 / 400.0, 1.000_004 / 1250.0);
+        // The median slownesses of 400 ± 2 % and 1250 ± 0.2 %.
+        let (sa, sb) = (1.0 / 400.0, 1.0 / 1250.0);
         let expect = (35.0 * sa + 140.0 * sb) - 25.0 * sa;
         assert!((m.delay(x) - expect).abs() < 1e-9);
         let p = solve(&m, expect, 1e-4, 0.0, &[0, 1]).unwrap();
@@ -841,10 +843,11 @@ mod tests {
         assert!(mid > 320.0 && mid < 330.0, "{mid}");
     }
 
-    /// An uncertain speed enters the delay by its expected slowness: a uniform 400 m/s pipe
-    /// known to ±10 % gives the delay of one at 400/1.01 m/s, a known one that of 400 m/s.
+    /// An uncertain speed enters the delay by its median slowness 1/ĉ, not its mean
+    /// (1 + (σ/ĉ)²)/ĉ: a uniform 400 m/s pipe known to ±10 % gives the delay of a known one,
+    /// so the position solved is the median of its posterior (model §11).
     #[test]
-    fn an_uncertain_speed_enters_by_its_expected_slowness() {
+    fn an_uncertain_speed_enters_by_its_median_slowness() {
         let curve = |std: Option<f64>| {
             let pts: Vec<CurvePoint> = [100.0, 300.0, 600.0]
                 .iter()
@@ -873,9 +876,7 @@ mod tests {
         let t_known = delay(&known);
         let t_uncertain = delay(&uncertain);
         assert!((t_known - 60.0 / 400.0).abs() < 1e-6, "{t_known}");
-        assert!(
-            (t_uncertain - 60.0 * 1.01 / 400.0).abs() < 1e-6,
-            "{t_uncertain}"
-        );
+        // The mean slowness would give 60 × 1.01/400.
+        assert!((t_uncertain - 60.0 / 400.0).abs() < 1e-6, "{t_uncertain}");
     }
 }
