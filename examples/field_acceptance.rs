@@ -18,8 +18,10 @@
 //! the table's errors on the same segments, and the leave-one-out z (P82) of the measured.
 //!
 //! `cargo run --release --example field_acceptance -- zones [NETWORKS] [SEGMENTS] [SEED] [JOBS]
-//! [FRACTION]` (default 10 600 640001 1 0.15): zoned networks (`synth --zones 16`, no units), the
-//! segments without measurements against the truth, per network and pooled. The environment
+//! [FRACTION] [ZONES]` (default 10 600 640001 1 0.15 16): zoned networks (`synth --zones 16`, no
+//! units), the segments without measurements against the truth, per network and pooled. With
+//! ZONES 0, `synth`'s plain networks: each segment's soil class drawn on its own, its label
+//! right, so the labels are not contiguous. The environment
 //! variable `PIPEWAVE_BIN` names another `pipewave` binary to import and calibrate with (e.g. an
 //! older build, for a before/after comparison); every mode honours it.
 //!
@@ -449,10 +451,10 @@ fn grid(networks: u64, segments: usize, seed0: u64, jobs: usize, cells: &str) {
 }
 
 /// Zoned networks (`synth --zones`: each zone one soil with a per-segment scatter, no
-/// correlated field, no wrong labels) at measured fraction `frac`: the predictions of the
-/// segments without measurements against the truth, pooled over the networks.
-fn zones_check(networks: u64, segments: usize, seed0: u64, jobs: usize, frac: f64) {
-    let zones = 16;
+/// correlated field, no wrong labels), or with `zones` 0 plain ones (each segment's class on
+/// its own), at measured fraction `frac`: the predictions of the segments without
+/// measurements against the truth, pooled over the networks.
+fn zones_check(networks: u64, segments: usize, seed0: u64, jobs: usize, frac: f64, zones: usize) {
     println!(
         "zones: {networks} networks of {segments} segments in {zones} zones, measured \
          {:.0} %, seeds from {seed0}; errors as median / p90 of |ĉ/c − 1|",
@@ -997,6 +999,7 @@ fn main() {
             arg(&args, 3, 640_001),
             arg(&args, 4, 1),
             arg(&args, 5, 0.15),
+            arg(&args, 6, 16),
         ),
         Some(other) => {
             eprintln!("unknown mode '{other}' (baseline, grid, plan, oracle or zones)");

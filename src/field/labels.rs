@@ -16,6 +16,19 @@
 //! neighbourhood rejects when its likeliest class is not its label. ε is the network's own:
 //! the expectation–maximisation estimate, the mean over the labelled segments of
 //! 1 − q_i(label_i).
+//!
+//! Contiguity is a property of a geological map, not of every inventory: labels from per-pipe
+//! records or scattered trial pits need not agree with their neighbours at all. It is
+//! therefore checked on the labels first. Where they disagree with their neighbours more often
+//! than contiguity at the largest label error rate explains, and their join count (the number
+//! of neighbour pairs with the same label) is no larger than with the labels permuted among the
+//! labelled segments (which keeps each class's share and breaks any spatial pattern; p ≥ 0.01),
+//! the map carries no contiguity to use: each label is taken as given, none is rejected, and ε,
+//! which only the disagreement with contiguous neighbours identifies, is not estimated.
+
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 use super::model::index_of;
 
@@ -36,6 +49,13 @@ pub const POTTS_COUPLING: f64 = 1.2;
 /// Bounds of the label error rate ε: at least one label in a hundred is taken as possibly
 /// wrong, at most three in ten.
 pub const LABEL_ERROR_RANGE: (f64, f64) = (0.01, 0.3);
+
+/// Permutations of the labels in the contiguity test: the labels count as contiguous when
+/// their join count exceeds that of every one of them (one-sided p < 0.01).
+pub const CONTIGUITY_PERMUTATIONS: usize = 99;
+
+/// The seed of the test's permutations (fixed: the same labels give the same answer).
+const CONTIGUITY_SEED: u64 = 0x636f_6e74_6967;
 
 /// Mean-field sweeps (each damped by a half; the posteriors change by less than 1e-6 after
 /// about 20 on a network with 10 % wrong labels) and the ε updates between them.
@@ -67,7 +87,8 @@ fn likelihood(own: Option<usize>, k: usize, eps: f64, c: usize) -> f64 {
 struct MeanField {
     q: Vec<f64>,
     k: usize,
-    eps: f64,
+    /// The label error rate; `None` when the labels are not contiguous.
+    eps: Option<f64>,
 }
 
 impl MeanField {
@@ -108,6 +129,62 @@ impl Hoods {
     }
 }
 
+/// The join count of `labels`: ordered pairs (i, j), j among i's neighbours, both labelled
+/// with the same class.
+fn join_count(labels: &[Option<usize>], hoods: &Hoods) -> usize {
+    (0..labels.len())
+        .filter_map(|i| labels[i].map(|l| (i, l)))
+        .map(|(i, l)| {
+            hoods
+                .of_site(i)
+                .iter()
+                .filter(|&&j| labels[j as usize] == Some(l))
+                .count()
+        })
+        .sum()
+}
+
+/// Whether the labels are contiguous among `k` classes. Contiguity is the map's prior and is
+/// dropped only where the labels contradict it on both counts:
+///
+/// * they disagree with their neighbours more often than contiguity explains at the largest
+///   label error rate ε_max of [`LABEL_ERROR_RANGE`]: inside a unit two labels disagree with
+///   probability 1 − (1 − ε)² − ε²/(K − 1) (both right, or both wrong alike, agree); and
+/// * their join count does not exceed that of each of [`CONTIGUITY_PERMUTATIONS`]
+///   permutations of the labels among the labelled segments.
+///
+/// A map of one class with a few odd labels thus stays contiguous (its labels cannot tell),
+/// and so does one with no two labelled neighbours.
+fn labels_are_contiguous(labels: &[Option<usize>], hoods: &Hoods, k: usize) -> bool {
+    let observed = join_count(labels, hoods);
+    let labelled: Vec<usize> = (0..labels.len()).filter(|&i| labels[i].is_some()).collect();
+    let pairs: usize = labelled
+        .iter()
+        .map(|&i| {
+            hoods
+                .of_site(i)
+                .iter()
+                .filter(|&&j| labels[j as usize].is_some())
+                .count()
+        })
+        .sum();
+    let eps = LABEL_ERROR_RANGE.1;
+    let explained = 1.0 - (1.0 - eps).powi(2) - eps * eps / (k.max(2) - 1) as f64;
+    if pairs == 0 || (pairs - observed) as f64 <= explained * pairs as f64 {
+        return true;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(CONTIGUITY_SEED);
+    let mut values: Vec<Option<usize>> = labelled.iter().map(|&i| labels[i]).collect();
+    let mut permuted = labels.to_vec();
+    (0..CONTIGUITY_PERMUTATIONS).all(|_| {
+        values.shuffle(&mut rng);
+        for (&i, &v) in labelled.iter().zip(&values) {
+            permuted[i] = v;
+        }
+        join_count(&permuted, hoods) < observed
+    })
+}
+
 /// The mean-field posteriors and the label error rate (arguments as for [`posteriors`]).
 fn mean_field(
     labels: &[Option<usize>],
@@ -116,8 +193,24 @@ fn mean_field(
     n_classes: usize,
 ) -> MeanField {
     let k = n_classes.max(2);
-    let n = labels.len();
     let hoods = Hoods::of(pos);
+    if labels_are_contiguous(labels, &hoods, k) {
+        smoothed(labels, forced, &hoods, k)
+    } else {
+        // No contiguity to use: each label as given; an unlabelled segment has no class.
+        let mut q = vec![0.0; labels.len() * k];
+        for (i, l) in labels.iter().enumerate() {
+            if let Some(c) = l {
+                q[i * k + c] = 1.0;
+            }
+        }
+        MeanField { q, k, eps: None }
+    }
+}
+
+/// The mean field under the contiguity prior, `k` ≥ 2 classes.
+fn smoothed(labels: &[Option<usize>], forced: &[bool], hoods: &Hoods, k: usize) -> MeanField {
+    let n = labels.len();
     let mut eps = 0.1_f64;
     // Start from the labels alone; a segment without a label starts uniform.
     let mut w = vec![0.0; k];
@@ -184,11 +277,15 @@ fn mean_field(
             }
         }
     }
-    MeanField { q, k, eps }
+    MeanField {
+        q,
+        k,
+        eps: Some(eps),
+    }
 }
 
 /// The mean-field posteriors q_i (length `k`; all zero for a segment with no evidence at all)
-/// and the label error rate. `labels[i]` is segment i's label (a class index, `None` when it
+/// and the label error rate (`None` when the labels are not contiguous). `labels[i]` is segment i's label (a class index, `None` when it
 /// has none), `forced[i]` whether that label is the engineer's override (the class is then
 /// certain, never rejected, and counts as a neighbour's evidence at full weight), `pos[i]` its
 /// midpoint.
@@ -197,20 +294,20 @@ pub fn posteriors(
     forced: &[bool],
     pos: &[Option<[f64; 2]>],
     n_classes: usize,
-) -> (Vec<Vec<f64>>, f64) {
+) -> (Vec<Vec<f64>>, Option<f64>) {
     let m = mean_field(labels, forced, pos, n_classes);
     (m.q.chunks_exact(m.k).map(<[f64]>::to_vec).collect(), m.eps)
 }
 
-/// Every segment's [`ClassBelief`] and the network's label error rate (arguments as for
-/// [`posteriors`]).
+/// Every segment's [`ClassBelief`] and the network's label error rate, `None` when the labels
+/// are not contiguous (arguments as for [`posteriors`]).
 pub fn classes(
     labels: &[Option<usize>],
     forced: &[bool],
     pos: &[Option<[f64; 2]>],
     n_classes: usize,
     min_share: f64,
-) -> (Vec<ClassBelief>, f64) {
+) -> (Vec<ClassBelief>, Option<f64>) {
     let m = mean_field(labels, forced, pos, n_classes);
     let beliefs = labels
         .iter()
@@ -336,6 +433,7 @@ mod tests {
         }
         let share = wrong.len() as f64 / (n * n) as f64;
         let (beliefs, eps) = classes(&labels, &vec![false; labels.len()], &pos, 2, 0.01);
+        let eps = eps.expect("contiguous labels");
         assert!(
             (0.5 * share..2.0 * share).contains(&eps),
             "ε {eps} for a wrong share {share}"
@@ -358,6 +456,47 @@ mod tests {
             q[12],
             q[5 * n + 5]
         );
+    }
+
+    /// Labels drawn independently for each segment of a 20 × 20 grid (three classes, all
+    /// right: a per-pipe survey, not a map): they agree with their neighbours no more than
+    /// chance, so each is taken as given and none is rejected, where the contiguity prior
+    /// would overrule more than a third of them. The same labels sorted into three bands by column
+    /// are contiguous again.
+    #[test]
+    fn labels_without_contiguity_are_taken_as_given() {
+        let n: usize = 20;
+        let pos: Vec<Option<[f64; 2]>> = (0..n * n)
+            .map(|i| Some([(i % n) as f64 * 40.0, (i / n) as f64 * 40.0]))
+            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let labels: Vec<Option<usize>> = (0..n * n)
+            .map(|_| Some(rand::Rng::gen_range(&mut rng, 0..3)))
+            .collect();
+        let forced = vec![false; labels.len()];
+        let hoods = Hoods::of(&pos);
+        assert!(!labels_are_contiguous(&labels, &hoods, 3));
+        let (b, eps) = classes(&labels, &forced, &pos, 3, 0.01);
+        assert_eq!(eps, None);
+        assert!(b.iter().all(|x| !x.rejected));
+        for (x, l) in b.iter().zip(&labels) {
+            assert_eq!(x.class, *l);
+            assert_eq!(x.probabilities, vec![(l.unwrap(), 1.0)]);
+        }
+        // What the contiguity prior alone would have done with them.
+        let m = smoothed(&labels, &forced, &hoods, 3);
+        let overruled = (0..n * n)
+            .filter(|&i| {
+                let q = m.row(i);
+                (0..3).any(|c| q[c] > q[labels[i].unwrap()])
+            })
+            .count();
+        assert!(overruled * 3 > n * n, "{overruled} of {}", n * n);
+        let banded: Vec<Option<usize>> = (0..n * n).map(|i| Some(3 * (i % n) / n)).collect();
+        assert!(labels_are_contiguous(&banded, &hoods, 3));
+        let (b, eps) = classes(&banded, &forced, &pos, 3, 0.01);
+        assert!(eps.is_some());
+        assert_eq!(b.iter().filter(|x| x.rejected).count(), 0);
     }
 
     /// Without a position a segment keeps its label, certain; with neither a label nor

@@ -36,7 +36,7 @@ use model::{ClassMean, Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS
 use predict::{predict_speed, soil_of, SpeedPrediction};
 
 /// Version of the field's method, part of its fingerprint: a new version rebuilds the field.
-pub const FIELD_ALGORITHM_VERSION: u32 = 9;
+pub const FIELD_ALGORITHM_VERSION: u32 = 10;
 
 /// |z| of the leave-one-out check (P82) beyond which a measured segment is flagged
 /// `field_outlier`: the two-sided 0.1 % point of N(0, 1), so that a network of a thousand
