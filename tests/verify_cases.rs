@@ -96,7 +96,7 @@ fn confirms_an_optimum_on_the_edge_of_a_cliff() {
 /// An MDPE segment whose optimum lies on the edge of a cliff, at the end of a valley that runs
 /// along it: Levenberg–Marquardt's finite differences cross the cliff, and the polish stopped
 /// where it met the edge, χ² 8.74 at ξ = 0.77; along the edge the misfit falls to 8.38 at
-/// ξ = 0.69. The edge probe walks there by the downhill simplex.
+/// ξ = 0.69.
 #[test]
 fn reaches_the_low_end_of_a_valley_along_a_cliff_edge() {
     verify_below(
@@ -153,8 +153,8 @@ fn confirms_an_optimum_where_the_reference_path_takes_another_root() {
 
 /// A ductile-iron segment whose search ended at the fluid-like end of its valley of constant
 /// c_P (ν_m = 0.499, c_S = 8 m/s, χ² 13.43, on the face r = c_S/c_P → its lower bound), while the
-/// valley's other end (ν_m = 0, c_S 132 m/s) has 13.21. The valley-end probe polishes from
-/// the same c_P at ν_m = 0.
+/// valley's other end (ν_m = 0, c_S 132 m/s) has 13.21. The faces of the speed coordinates
+/// polish from that end: r = r_max at the same c_P.
 #[test]
 fn reaches_the_low_end_of_a_valley_of_constant_c_p() {
     verify_below(848873, "WM10013", 13.3, "the fluid-like end is at 13.43");

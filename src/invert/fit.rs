@@ -713,18 +713,12 @@ fn search(
             let found = s.best().map_or_else(Vec::new, |i| probe(&s.optima[i]));
             s.polished(problem, stage, begun, found, StageStop::NotApplicable);
         };
-        run_probe(&mut s, Stage::ValleyEnd, &|b| {
-            probes::valley_end_probe(&pieces, bounds, b)
-        });
-        // The grazing and edge probes again from a best they moved: its pieces are others.
-        // The first round with the gap scan's starts (`probes::gap_scan`).
+        // The grazing probe again from a best it moved: its pieces are others. The first
+        // round with the gap scan's starts (`probes::gap_scan`).
         for round in 0..GRAZING_ROUNDS {
             let before = s.best_cost();
             run_probe(&mut s, Stage::Grazing, &|b| {
                 probes::grazing_probe(&pieces, bounds, b, round == 0)
-            });
-            run_probe(&mut s, Stage::Edge, &|b| {
-                probes::edge_probe(&pieces, bounds, b)
             });
             if s.best_cost() >= before - GRAZING_ROUND_GAIN {
                 break;
@@ -797,7 +791,7 @@ fn search(
     Ok(s)
 }
 
-/// Rounds of the grazing and edge probes at most: another round runs from the best optimum
+/// Rounds of the grazing probe at most: another round runs from the best optimum
 /// when the last improved it by more than [`GRAZING_ROUND_GAIN`] in χ², since the pieces
 /// next to a new best are others. A first round can move the best to a piece from which the
 /// soil, moved between two measured phase speeds, walks to a far better optimum (χ² 10.3 →

@@ -1,8 +1,8 @@
-//! The search's probes: where the DE runs and their polishes leave a deeper basin unvisited,
-//! candidates built from the best optimum so far and polished (the valley-end and grazing
-//! probes; the faces of the box in the speed coordinates are in [`super::speed_search::faces`]), the walk along a cliff's edge from a best optimum on one
-//! (the edge probe), and the step off a grazing cliff that lets the reference path confirm an
-//! optimum on its edge.
+//! The search's probes near grazing (P44): where the DE runs, their polishes and the faces of
+//! the box in the speed coordinates ([`super::speed_search::faces`]) leave a deeper basin
+//! unvisited, candidates across the grazing cliffs and in their gaps, built from the best
+//! optimum so far, polished and walked from (the grazing probe); and the step off a grazing
+//! cliff that lets the reference path confirm an optimum on its edge.
 
 use std::cell::RefCell;
 
@@ -10,38 +10,8 @@ use num_complex::Complex64;
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem};
-use super::uncertainty::{
-    shear_to_compressional, soil_from_speeds, soil_moduli, soil_speeds, youngs_from_p_wave_modulus,
-};
+use super::uncertainty::{shear_to_compressional, soil_from_speeds, soil_speeds};
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, NelderMead, Objective};
-
-/// The valley-end probe: when the best optimum lies at the upper bound of ν_m (the fluid-like
-/// end of a valley of constant c_P, c_S → 0, which the polish from the face r = r_min often finds, `speed_search::faces`), a
-/// polish from the valley's other end, the same c_P at ν_m's lower bound (c_S = c_P/√2 at
-/// ν_m = 0). The data of a metal pipe fix c_P and barely c_S, so χ² changes little along the
-/// valley, and a polish from one end does not cross it: a ductile-iron pipe ended at χ² 13.43
-/// with ν_m = 0.499 and c_S = 8 m/s, while the other end has 13.21 (ν_m = 0, c_S 132 m/s, the
-/// exhaustive search's).
-pub(super) fn valley_end_probe(
-    pieces: &Pieces<'_, '_>,
-    bounds: &Bounds,
-    best: &Optimum,
-) -> Vec<(Optimum, bool)> {
-    let problem = pieces.problem;
-    let (je, jn) = (pieces.je, pieces.jn);
-    let (e_spec, n_spec) = (&problem.specs[je], &problem.specs[jn]);
-    if best.x[jn] < n_spec.upper - ON_BOUND_RTOL * (n_spec.upper - n_spec.lower) {
-        return Vec::new();
-    }
-    // The best soil's c_P at the lower bound of ν_m: its P-wave modulus M kept (P63).
-    let (m, _) = soil_moduli(e_spec.value(best.x[je]), best.x[jn]);
-    let nu = n_spec.lower;
-    let e = youngs_from_p_wave_modulus(m, nu);
-    let mut x = best.x.clone();
-    x[je] = e_spec.coordinate(e).clamp(e_spec.lower, e_spec.upper);
-    x[jn] = nu;
-    pieces.polish(bounds, &x).into_iter().collect()
-}
 
 /// Which measured frequencies radiate compressional waves into the soil at a point: those whose
 /// model phase speed lies above the soil's c_P (§7.8 item 3). χ² jumps where one of them
@@ -65,8 +35,7 @@ pub(super) struct Pieces<'p, 'a> {
 /// and a walk are deterministic functions of their start and box (the problem being the
 /// search's), and the probes often start them from the same point again: a later round of the
 /// grazing probe, or its scan again near grazing, from a best that did not move starts its own
-/// polishes and walks where the round before did, and the edge probe walks from that best once
-/// a round. Answered from here, each fit's result is the same to the bit, with fewer
+/// polishes and walks where the round before did. Answered from here, each fit's result is the same to the bit, with fewer
 /// evaluations; the saving is largest near grazing, where a walk's evaluation costs 10–25 times
 /// one of the DE runs' (the root's continuation halves its steps, see
 /// `physics::solver::NEWTON_MAX_ITER`).
@@ -216,7 +185,7 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// differs from the best's, or if it is better than the best (then a cliff of another kind,
 /// e.g. a change of root, lies between them). The best candidate of
 /// each pattern is a start, and the [`GRAZING_PROBE_POLISHES`] best starts are polished, and
-/// walked from by the downhill simplex (as the edge probe, [`edge_probe`]; the walk's optimum
+/// walked from by the downhill simplex ([`walk`]; the walk's optimum
 /// polished in turn). A polish from inside a narrow piece often leaves it downhill, into the
 /// basin it came from, where the simplex stays in the piece and follows its edges: a PVC pipe
 /// ended at χ² 4.11 (c_P 349 m/s), and the walk from the soil at c_P 527 m/s and ξ = 1 reaches
@@ -529,45 +498,7 @@ fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec
     out
 }
 
-/// The edge probe: when the best optimum sits on the edge of a cliff, a walk along the edge
-/// by the downhill simplex ([`NelderMead`]). Where the misfit falls towards a jump (a root
-/// crossing a branch cut of q_P or q_S, or switching roots, see [`Pieces`]) the optimum of
-/// the piece lies on its edge, often at the end of a valley running along it. There a
-/// finite-difference Jacobian is taken across the jump, and Levenberg–Marquardt stops where
-/// it first meets the edge: it can stop at χ² 8.74 while the misfit falls steadily along the
-/// edge to 8.38, at ξ 0.69 instead of 0.77 (log10 E_m and ν_m nearly the same), or at 6.60
-/// where the edge leads to 5.92.
-///
-/// The best optimum is on an edge when a step of [`EDGE_PROBE_DETECT_STEP`] (relative, as the
-/// polish's finite differences) along one parameter changes χ² by more than
-/// [`EDGE_PROBE_JUMP`]. The walk is [`walk`]'s; its optimum counts if it is better than the
-/// best.
-pub(super) fn edge_probe(
-    pieces: &Pieces<'_, '_>,
-    bounds: &Bounds,
-    best: &Optimum,
-) -> Vec<(Optimum, bool)> {
-    let problem = pieces.problem;
-    let x = &best.x;
-    let on_edge = (0..x.len()).any(|j| {
-        [-1.0, 1.0].into_iter().any(|side| {
-            let mut y = x.clone();
-            y[j] += side * EDGE_PROBE_DETECT_STEP * x[j].abs().max(1.0);
-            bounds.contains(&y) && (problem.value(&y) - best.cost).abs() > EDGE_PROBE_JUMP
-        })
-    });
-    if !on_edge {
-        return Vec::new();
-    }
-    pieces
-        .walk(bounds, x)
-        .filter(|o| o.cost < best.cost)
-        .map(|o| (o, false))
-        .into_iter()
-        .collect()
-}
-
-/// A walk by the downhill simplex from `x`, for the edge probe and the grazing probe's starts:
+/// A walk by the downhill simplex from `x`, for the grazing probe's starts:
 /// initial steps of [`WALK_STEP`] times each parameter's range, at most
 /// [`WALK_EVALUATIONS`], stopping when χ² fell by less than [`WALK_STALL`]`.1` over the last
 /// [`WALK_STALL`]`.0` evaluations.
@@ -581,23 +512,16 @@ fn walk(problem: &Problem<'_>, bounds: &Bounds, x: &[f64]) -> Option<Optimum> {
     Some(Optimum { x: r.x, cost: r.f })
 }
 
-/// The edge probe's test for an edge: the relative step along each parameter.
-pub const EDGE_PROBE_DETECT_STEP: f64 = 1e-6;
-/// A change of χ² above this over [`EDGE_PROBE_DETECT_STEP`] is a jump: the best optimum is
-/// on an edge.
-pub const EDGE_PROBE_JUMP: f64 = 0.5;
-/// A walk's initial simplex: steps of this fraction of each parameter's range. On the two
-/// edges of `edge_probe`'s description, steps of 1e-4, 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46,
-/// 8.38 and 8.42 on the first; on the second steps of 3e-2 stall at the start and the others
-/// reach 5.92.
+/// A walk's initial simplex: steps of this fraction of each parameter's range. Along two
+/// cliff edges of realistic pipes (χ² 8.74 and 6.60 where a polish stopped), steps of 1e-4,
+/// 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and 8.42 on the first; on the second steps of
+/// 3e-2 stall at the start and the others reach 5.92.
 pub const WALK_STEP: f64 = 1e-2;
 /// A walk's budget of evaluations.
 pub const WALK_EVALUATIONS: usize = 400;
-/// A walk stops when χ² fell by less than `.1` over the last `.0` evaluations: most
-/// best optima on an edge are where the edge's valley ends, and the walk gains nothing. With
-/// this test the edge probe alone added 8–12 evaluations per fit on average on realistic
-/// networks; stopping after 40 evaluations without gain left the first edge of `edge_probe`'s
-/// description at 8.70.
+/// A walk stops when χ² fell by less than `.1` over the last `.0` evaluations: most walks
+/// start where a valley ends, and gain nothing; stopping after 40 evaluations without gain left
+/// the first edge of [`WALK_STEP`]'s description at 8.70.
 pub const WALK_STALL: (usize, f64) = (80, 1e-4);
 
 /// The grazing probe's c_P just outside the range of the measured phase speeds, relative.
@@ -651,10 +575,6 @@ pub const GRAZING_PROBE_POLISHES: usize = 2;
 /// 2,719 polishes, 14 improved on the best by more than 0.01 in χ², all from starts at most
 /// 1.43 times the best's misfit; the limit skips about 9 in 10.
 pub const GRAZING_PROBE_GATE: f64 = 2.0;
-
-/// An optimum whose coordinate is within this fraction of its range from a bound lies on that
-/// bound (ν_m's, for the valley-end probe).
-pub const ON_BOUND_RTOL: f64 = 1e-9;
 
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
 pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
@@ -983,50 +903,6 @@ mod tests {
         let moved = |r: f64| pieces.with_speeds(&x, highest * r, c_s).expect("soil");
         assert!(pieces.near_grazing(&moved(1.01)));
         assert!(!pieces.near_grazing(&moved(1.05)));
-    }
-
-    /// A bench-network pipe where a search without the edge probe ended (χ² 8.74): on the edge of a cliff, which a polish does not leave, while the edge probe
-    /// walks along it to within 0.1 of the exhaustive search's 8.376, moving mostly ξ. At a
-    /// smooth minimum (another pipe's, at ξ's upper bound) the probe finds no edge
-    /// and spends only its test's evaluations.
-    #[test]
-    fn the_edge_probe_walks_along_a_cliff_where_the_polish_stops() {
-        let data = bench_segment(848782, MaterialMix::Default, "WM10103");
-        let p = default_fit_problem(&data);
-        let bounds = p.bounds().expect("bounds");
-        let Optimum { x, cost } = optimum_at(
-            &p,
-            vec![8.57576422250044, 0.3661846857057161, 0.7674302151472805],
-            8.739,
-        );
-        let polished = polish(&p, &x, &bounds, POLISH_ITERATIONS).map_or(cost, |(o, _)| o.cost);
-        assert!(
-            polished > cost - 0.01,
-            "the polish stops on the edge: {polished}"
-        );
-        let pieces = Pieces::new(&p).expect("soil parameters");
-        let walked = edge_probe(&pieces, &bounds, &Optimum { x: x.clone(), cost });
-        assert_eq!(walked.len(), 1);
-        let (o, capped) = &walked[0];
-        assert!(o.cost < 8.376 + 0.1, "{}", o.cost);
-        assert!(!capped);
-        assert!((o.x[0] - x[0]).abs() < 0.01 && (o.x[1] - x[1]).abs() < 0.01);
-        assert!(o.x[2] < x[2] - 0.05, "ξ {} from {}", o.x[2], x[2]);
-
-        let data = bench_segment(848607, MaterialMix::Default, "WM10110");
-        let p = default_fit_problem(&data);
-        let bounds = p.bounds().expect("bounds");
-        let x = vec![8.398152620503835, 0.15482784654154558, 1.0];
-        let cost = p.value(&x);
-        assert!(cost.is_finite());
-        let before = p.evaluations();
-        let pieces = Pieces::new(&p).expect("soil parameters");
-        assert!(edge_probe(&pieces, &bounds, &Optimum { x, cost }).is_empty());
-        assert_eq!(
-            p.evaluations() - before,
-            5,
-            "both sides along log E and ν, below ξ = 1 only"
-        );
     }
 
     /// A start is the same to the bit in the same box: once per start the work runs, and

@@ -17,29 +17,23 @@ pub enum Stage {
     Global,
     /// The polish from a base fit's optimum (a fit with effects).
     NestedStart,
-    /// The polish from the other end of a valley of constant c_P.
-    ValleyEnd,
     /// Candidates across a grazing cliff (P44) and in its gaps, polished and walked from.
     Grazing,
-    /// The walk along a cliff's edge.
-    Edge,
     /// The gap scan again from a best near grazing.
     GrazingRescan,
     /// The answer's continued polish (it refines an optimum another stage found).
     ContinuedPolish,
-    /// Polishes from the faces r = r_min and ξ ∈ {0, 1} of the speed coordinates at the best
-    /// optimum of the DE runs in those coordinates.
+    /// Polishes from the faces of r and ξ of the speed coordinates at the best optimum of the
+    /// DE runs in those coordinates.
     SpeedFaces,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 6] = [
         Stage::Global,
         Stage::NestedStart,
-        Stage::ValleyEnd,
         Stage::Grazing,
-        Stage::Edge,
         Stage::GrazingRescan,
         Stage::ContinuedPolish,
         Stage::SpeedFaces,
@@ -50,9 +44,7 @@ impl Stage {
         match self {
             Stage::Global => "global",
             Stage::NestedStart => "nested start",
-            Stage::ValleyEnd => "valley end",
             Stage::Grazing => "grazing",
-            Stage::Edge => "edge",
             Stage::GrazingRescan => "grazing rescan",
             Stage::ContinuedPolish => "continued polish",
             Stage::SpeedFaces => "speed faces",

@@ -111,7 +111,7 @@ pub const FACE_LN_CP_STEP: f64 = 0.2;
 /// Step in ln c_P of the line's stiffest end, the last [`FACE_STIFF_WIDTH`] below the box's
 /// top (0.05 in log10 E_m).
 pub const FACE_STIFF_STEP: f64 = 0.0576;
-/// An optimum within this fraction of ξ's range of one of its bounds lies on that face.
+/// An optimum within this fraction of r's or ξ's range of one of its bounds lies on that face.
 pub const FACE_ON_BOUND_RTOL: f64 = 1e-9;
 /// Width in ln c_P of the line's stiffest end: log10 E_m ≥ 9.7 at ν_m's upper bound.
 pub const FACE_STIFF_WIDTH: f64 = 0.345;
@@ -126,7 +126,10 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 /// Levenberg–Marquardt polishes
 ///
 /// * from its soil at the same c_P moved to r = r_min (ν_m → ½, the incompressible face: the
-///   fluid-like end of a valley of constant c_P, c_S → 0);
+///   fluid-like end of a valley of constant c_P, c_S → 0), and, when it lies on that face, to
+///   r = r_max (ν_m = 0: the valley's other end; the data of a metal pipe fix c_P and barely
+///   c_S, so χ² changes little along the valley, and a polish from one end does not cross it:
+///   a ductile-iron pipe ended at χ² 13.43 at ν_m 0.499, the other end has 13.21);
 /// * when it lies on a face of ξ, from its soil at the opposite face (ξ enters the soil's
 ///   stiffness as a weight, §4.10, so a misfit falling towards one face can have a deeper
 ///   basin at the other);
@@ -145,12 +148,21 @@ pub(super) fn faces(
     };
     let (je, jn) = (speeds.je, speeds.jn);
     let jx = problem.specs.iter().position(|s| s.param == Param::Contact);
-    let r_min = speeds.region.r_range().0;
+    let (r_min, r_max) = speeds.region.r_range();
     let y_best = speeds.y(&best.x);
     let mut starts: Vec<Vec<f64>> = Vec::new();
     let mut y = y_best.clone();
     y[jn] = r_min;
     starts.extend(speeds.x(&y));
+    if let (true, Some((lo, hi))) = (
+        y_best[jn] <= r_min + FACE_ON_BOUND_RTOL * (r_max - r_min),
+        speeds.region.ln_cp_range_at(r_max),
+    ) {
+        // On the face r = r_min: the valley's other end, c_P kept as far as the box allows.
+        let mut y = y_best.clone();
+        (y[je], y[jn]) = (y_best[je].clamp(lo, hi), r_max);
+        starts.extend(speeds.x(&y));
+    }
     let mut xis = vec![None];
     if let Some(j) = jx {
         let (lo, hi) = (bounds.lower()[j], bounds.upper()[j]);

@@ -853,7 +853,7 @@ mod tests {
         assert!((e / 2e7 - 1.0).abs() < 1e-12 && (nu - 0.3).abs() < 1e-12);
         // c_S ≥ c_P·√(3/4) has no soil (ν ≤ −1).
         assert!(soil_from_speeds(100.0, 90.0, 1800.0).is_none());
-        // The same c_P at another ν_m (the valley-end probe's and the face r = r_min's moves): at
+        // The same c_P at another ν_m (the moves to the faces r = r_min and r = r_max): at
         // ν = 0, E = M = 2.6923e7; at ν = 0.49, E = M·1.49·0.02/0.51.
         let m = 2e7 * 0.7 / (1.3 * 0.4);
         assert!((youngs_from_p_wave_modulus(m, 0.0) / m - 1.0).abs() < 1e-15);
