@@ -254,7 +254,7 @@ pub fn joint_posterior(field: &Field, targets: &[Target]) -> JointPosterior {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::model::{widen, Observation, Posterior, CLASS_PRIOR_SD, TYPICAL_LN_SPEEDS};
+    use crate::field::model::{Observation, Posterior, CLASS_PRIOR_SD, TYPICAL_LN_SPEEDS};
     use nalgebra::DVector;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -336,7 +336,7 @@ mod tests {
         ] {
             let plain = field.posterior(pos, class, None);
             let single = Posterior {
-                cov: widen(&plain.cov, field.widening),
+                cov: plain.cov.scale_axes(field.widening),
                 ..plain
             };
             let joint = joint_posterior(

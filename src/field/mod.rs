@@ -679,7 +679,7 @@ fn site_result(
     row.note.clone_from(&note);
     // The soil's stated errors are the predictive ones (P92).
     let stated = Posterior {
-        cov: crate::field::model::widen(&post.cov, field.widening),
+        cov: post.cov.scale_axes(field.widening),
         ..post
     };
     let pred = prediction_row(

@@ -185,6 +185,16 @@ impl Sym2 {
         Sym2::new(k * self.pp, k * self.ps, k * self.ss)
     }
 
+    /// D S D with D = diag(`d`): a covariance's standard deviations multiplied by `d` per axis,
+    /// its correlation kept.
+    pub fn scale_axes(&self, d: [f64; 2]) -> Sym2 {
+        Sym2::new(
+            self.pp * d[0] * d[0],
+            self.ps * d[0] * d[1],
+            self.ss * d[1] * d[1],
+        )
+    }
+
     /// Determinant.
     pub fn det(&self) -> f64 {
         self.pp * self.ss - self.ps * self.ps
@@ -1114,15 +1124,6 @@ pub fn predictive_widening(
         };
     }
     out
-}
-
-/// `cov` with its standard deviations multiplied by `factor` per axis (correlation kept).
-pub fn widen(cov: &Sym2, factor: [f64; 2]) -> Sym2 {
-    Sym2::new(
-        cov.pp * factor[0] * factor[0],
-        cov.ps * factor[0] * factor[1],
-        cov.ss * factor[1] * factor[1],
-    )
 }
 
 /// The number of directions of `info` with an eigenvalue of at least [`SEEN_INFORMATION`].
@@ -2083,7 +2084,7 @@ mod tests {
             }
             let p = field.mixture_posterior(target.pos, &[(target.class, 1.0)], None);
             // The target is observed with its own noise: add it to the predictive variance.
-            let var = widen(&p.cov, field.widening).ss + target.noise().ss;
+            let var = p.cov.scale_axes(field.widening).ss + target.noise().ss;
             let var_plain = p.cov.ss + target.noise().ss;
             let d = (target.u[1] - p.mean[1]).abs();
             n += 1;

@@ -338,7 +338,7 @@ pub fn predict_speed(
     let q2 = band_gradient
         .and_then(|g| {
             let plain = cov.quad(g);
-            let wide = super::model::widen(&cov, widening).quad(g);
+            let wide = cov.scale_axes(widening).quad(g);
             (plain > 0.0 && wide.is_finite()).then(|| wide / plain)
         })
         .unwrap_or_else(|| widening[0].max(widening[1]).powi(2))
