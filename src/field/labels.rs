@@ -416,12 +416,18 @@ mod tests {
         assert_eq!((b[2].class, b[2].rejected), (Some(0), false));
     }
 
+    /// Midpoints of an n × n grid of segments 40 m apart, row by row (segment i in column
+    /// i mod n).
+    fn grid(n: usize) -> Vec<Option<[f64; 2]>> {
+        (0..n * n)
+            .map(|i| Some([(i % n) as f64 * 40.0, (i / n) as f64 * 40.0]))
+            .collect()
+    }
+
     #[test]
     fn wrong_labels_are_rejected_and_boundaries_kept_on_a_grid() {
         let n: usize = 30;
-        let pos: Vec<Option<[f64; 2]>> = (0..n * n)
-            .map(|i| Some([(i % n) as f64 * 40.0, (i / n) as f64 * 40.0]))
-            .collect();
+        let pos = grid(n);
         let truth: Vec<usize> = (0..n * n).map(|i| usize::from(i % n >= 13)).collect();
         let mut labels: Vec<Option<usize>> = truth.iter().map(|&t| Some(t)).collect();
         let wrong: Vec<usize> = (0..n * n)
@@ -461,14 +467,12 @@ mod tests {
     /// Labels drawn independently for each segment of a 20 × 20 grid (three classes, all
     /// right: a per-pipe survey, not a map): they agree with their neighbours no more than
     /// chance, so each is taken as given and none is rejected, where the contiguity prior
-    /// would overrule more than a third of them. The same labels sorted into three bands by column
-    /// are contiguous again.
+    /// would overrule more than a third of them. Labels in three bands by column are
+    /// contiguous, and smoothed.
     #[test]
     fn labels_without_contiguity_are_taken_as_given() {
         let n: usize = 20;
-        let pos: Vec<Option<[f64; 2]>> = (0..n * n)
-            .map(|i| Some([(i % n) as f64 * 40.0, (i / n) as f64 * 40.0]))
-            .collect();
+        let pos = grid(n);
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let labels: Vec<Option<usize>> = (0..n * n)
             .map(|_| Some(rand::Rng::gen_range(&mut rng, 0..3)))
