@@ -148,6 +148,22 @@ fn sample_network_recovery() {
     for (k, c) in r.coverage().iter().enumerate() {
         assert!(*c >= 0.9, "coverage {k}: {c:.2}\n{r}");
     }
+    // The field flags the two records whose soil its neighbours contradict (a wrong material
+    // and an outlying record, truth.csv) and states its leave-one-out spread over the rest:
+    // near 1 when the field's errors are honest (P82). With the two in it the spread is 5.9.
+    let (spread, outliers): (f64, i64) = database
+        .conn()
+        .query_row(
+            "SELECT loo_z_std, n_field_outliers FROM field_runs ORDER BY id DESC LIMIT 1",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?)),
+        )
+        .unwrap();
+    assert_eq!(outliers, 2);
+    assert!(
+        (0.7..1.3).contains(&spread),
+        "leave-one-out z spread {spread}"
+    );
     // Every fitted segment states its intervals and soil speeds.
     for f in fits.iter().filter(|f| f.status != db::FitStatus::Failed) {
         for v in [

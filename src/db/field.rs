@@ -150,7 +150,8 @@ pub struct FieldRunRow {
     pub log_likelihood: Option<f64>,
     /// `marginal_likelihood` or `defaults`.
     pub hyper_source: String,
-    /// Standard deviation of the leave-one-out z.
+    /// Standard deviation of the leave-one-out z of the measured segments that are not
+    /// `field_outlier`s (P82).
     pub loo_z_std: Option<f64>,
     /// Segments flagged `field_outlier`.
     pub n_field_outliers: i64,
