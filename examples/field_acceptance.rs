@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use pipewave::field::model::{Hyper, Sym2};
-use pipewave::invert::fit::leak_band_speed_of;
+use pipewave::invert::assemble::leak_band_speed_of;
 use pipewave::physics::{Fluid, Soil, System};
 use pipewave::synth::field::moduli;
 use pipewave::synth::network::recovery::quantile;

@@ -17,7 +17,7 @@ pub mod recordings;
 pub mod trial;
 pub mod zones;
 
-use crate::invert::fit::leak_band_speed_of;
+use crate::invert::assemble::leak_band_speed_of;
 use crate::physics::effects::Effect;
 use crate::physics::solver::{solve_curve, Continuation};
 use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};

@@ -6,7 +6,7 @@ use std::collections::HashSet;
 use std::path::Path;
 use std::process::Command;
 
-use pipewave::invert::fit::leak_band_speed_of;
+use pipewave::invert::assemble::leak_band_speed_of;
 use pipewave::physics::{Fluid, Soil, System};
 use pipewave::synth::network::{read_truth, NetworkTables, MEASUREMENTS_CSV, TRUTH_CSV};
 use pipewave::synth::{

@@ -601,7 +601,7 @@ pub fn extended_fit(
 
 /// χ² of a diagnosed segment's data under its base model with `e` added and its parameter
 /// held at `value` (physical units), every other parameter minimised
-/// ([`crate::invert::fit::predicted_with_effect_at`]) from the segment's own refit with `e`
+/// ([`crate::invert::assemble::predicted_with_effect_at`]) from the segment's own refit with `e`
 /// where it has one (the nearest optimum), else from the base. `None` when the base failed,
 /// the value is outside the effect's range, or the model gives no prediction.
 pub fn chi2_with_effect_at(
@@ -633,7 +633,7 @@ pub fn chi2_with_effect_from(
     effects.push(e);
     effects.sort();
     effects.dedup();
-    let k = crate::invert::fit::predicted_with_effect_at(
+    let k = crate::invert::assemble::predicted_with_effect_at(
         &diag.data,
         &fit_settings(settings, effects),
         start

@@ -10,13 +10,14 @@
 //!   95 % intervals of every parameter, the predicted curve with errors;
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
-//! `fit` searches and builds the result once; `speed_search` holds the search's speed coordinates and
-//! the faces of their box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search
-//! leaves unvisited (across a grazing cliff, back along a valley of constant c_P, along the
-//! edge of a cliff); `uncertainty` and `flags` are pure
-//! functions of what the search found; `provenance` records which stage found the answer and
-//! why each stage stopped; `speed` maps the soil to (ln c_P, c_S/c_P); `yardstick` is the
-//! independent dense-grid search `bench --verify` judges the fit against.
+//! `fit` searches and checks its optima on the reference path; `assemble` builds the result
+//! once from them; `speed_search` holds the search's speed coordinates and the faces of their
+//! box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search leaves unvisited
+//! across a grazing cliff, and steps an optimum off a cliff's edge; `uncertainty` and `flags`
+//! are pure functions of what the search found; `provenance` records which stage found the
+//! answer and why each stage stopped; `speed` maps the soil to (ln c_P, c_S/c_P); `yardstick`
+//! is the independent dense-grid search `bench --verify` judges the fit against.
+pub mod assemble;
 pub mod discrepancy;
 pub mod fit;
 pub mod flags;

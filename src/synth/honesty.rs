@@ -11,7 +11,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use crate::invert::fit::{fit_segment, leak_band_speed_of, CurveSource, FitResult, FitSettings};
+use crate::invert::assemble::leak_band_speed_of;
+use crate::invert::fit::{fit_segment, CurveSource, FitResult, FitSettings};
 use crate::invert::uncertainty::WithError;
 use crate::physics::curves::curve;
 use crate::physics::effects::Effect;
