@@ -193,6 +193,13 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// while the polish from there returns to 4.11. (A polish held within its start's piece did
 /// no better: a piece is not always connected, and its walls stop the polish short.)
 ///
+/// Also the best candidate (by the same rule) at the middle in ln c_P of each outer piece, c_S
+/// kept: below the measured phase speeds down to c_P = √2 c_S (ν_m = 0), and above them up to
+/// c_S/r(ν_max). Where the data fix c_S and leave c_P nearly free, a piece's basin can lie far
+/// from its edge, and the polish from just outside the measured speeds stops at the cliff. As
+/// a start of its own it does not displace the gaps' (in their place it cost an
+/// HDPE pipe near grazing 0.9 in χ²); it is polished and walked from in the same way.
+///
 /// With `scan`, also the best of the gap scan's starts ([`gap_scan`]), polished and walked
 /// from in the same way (the search scans in the probe's first round).
 pub(super) fn grazing_probe(
@@ -225,20 +232,41 @@ pub(super) fn grazing_probe(
     };
     let mut targets: Vec<f64> = v.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
     targets.extend(&outside);
-    let mut starts: Vec<Vec<f64>> = Vec::new();
+    // The middle in ln c_P of each outer piece (every frequency radiates below the measured
+    // phase speeds, none above, P63), c_S kept: from √2 c_S (ν_m = 0) and to c_S/r(ν_max).
+    let nu = (
+        problem.specs[pieces.jn].lower,
+        problem.specs[pieces.jn].upper,
+    );
+    let ends = [
+        c_s / shear_to_compressional(nu.0),
+        c_s / shear_to_compressional(nu.1),
+    ];
+    let middles: Vec<f64> = outside
+        .iter()
+        .zip(ends)
+        .zip([true, false])
+        .filter(|&((&edge, end), below)| end.is_finite() && end > 0.0 && (end < edge) == below)
+        .map(|((&edge, end), _)| (edge * end).sqrt())
+        .collect();
     let xis = pieces.contacts(&best.x);
-    for &c_p in &targets {
-        let Some(x) = pieces.with_speeds(&best.x, c_p, c_s) else {
-            continue;
-        };
-        for &xi in &xis {
-            let mut x = x.clone();
-            if let (Some(j), Some(xi)) = (jx, xi) {
-                x[j] = xi;
+    let soil_starts = |targets: &[f64]| -> Vec<Vec<f64>> {
+        let mut starts = Vec::new();
+        for &c_p in targets {
+            let Some(x) = pieces.with_speeds(&best.x, c_p, c_s) else {
+                continue;
+            };
+            for &xi in &xis {
+                let mut x = x.clone();
+                if let (Some(j), Some(xi)) = (jx, xi) {
+                    x[j] = xi;
+                }
+                starts.push(x);
             }
-            starts.push(x);
         }
-    }
+        starts
+    };
+    let mut starts = soil_starts(&targets);
     if let Some(j) = jx {
         let (lo, hi) = (problem.specs[j].lower, problem.specs[j].upper);
         for &t in &GRAZING_PROBE_CONTACTS {
@@ -268,6 +296,8 @@ pub(super) fn grazing_probe(
     };
     let mut chosen = by_pattern(starts);
     chosen.truncate(GRAZING_PROBE_POLISHES);
+    // The outer pieces' middles compete among themselves, as another start.
+    chosen.extend(by_pattern(soil_starts(&middles)).into_iter().take(1));
     if scan {
         // The gap scan's starts compete among themselves, not with the others: a start of the
         // same pattern with the piece's own c_S and ξ is another start.
