@@ -1,7 +1,7 @@
 //! The result of a fit, built once from the search's optima: what the data determine at the
 //! answer (model §7.10: the soil's speeds and every parameter's interval, widened along a flat
 //! valley and to rival optima), the predicted curve with its errors (P65), corrected by a
-//! discrepancy where the model does not explain the data (P75), and the findings (flags and
+//! discrepancy where the model does not explain the data (P89), and the findings (flags and
 //! notes). Pure functions of what the search ([`super::fit`]) found.
 
 use num_complex::Complex64;

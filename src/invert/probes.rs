@@ -35,10 +35,10 @@ pub(super) struct Pieces<'p, 'a> {
 /// and a walk are deterministic functions of their start and box (the problem being the
 /// search's), and the probes often start them from the same point again: a later round of the
 /// grazing probe, or its scan again near grazing, from a best that did not move starts its own
-/// polishes and walks where the round before did. Answered from here, each fit's result is the same to the bit, with fewer
-/// evaluations; the saving is largest near grazing, where a walk's evaluation costs 10–25 times
-/// one of the DE runs' (the root's continuation halves its steps, see
-/// `physics::solver::NEWTON_MAX_ITER`).
+/// polishes and walks where the round before did. Answered from here, each fit's result is
+/// the same to the bit, with fewer evaluations; the saving is largest near grazing, where a
+/// walk's evaluation costs 10–25 times one of the DE runs' (the root's continuation halves its
+/// steps, see `physics::solver::NEWTON_MAX_ITER`).
 struct Trodden<T> {
     seen: RefCell<Vec<(Vec<u64>, Bounds, T)>>,
 }
@@ -233,7 +233,8 @@ pub(super) fn grazing_probe(
     let mut targets: Vec<f64> = v.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
     targets.extend(&outside);
     // The middle in ln c_P of each outer piece (every frequency radiates below the measured
-    // phase speeds, none above, P63), c_S kept: from √2 c_S (ν_m = 0) and to c_S/r(ν_max).
+    // phase speeds, none above, P63), c_S kept: the piece below reaches down to c_S/r(0) =
+    // √2 c_S, the one above up to c_S/r(ν_max), r(ν) = c_S/c_P of P63–P64.
     let nu = (
         problem.specs[pieces.jn].lower,
         problem.specs[pieces.jn].upper,
