@@ -209,9 +209,11 @@ pub struct FitResult {
     pub p_wave_speed: Option<WithError>,
     /// The soil's shear speed c_S, m/s (P64, P65).
     pub s_wave_speed: Option<WithError>,
-    /// The predicted curve on [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ) with errors (empty when failed).
+    /// The predicted curve on [`STANDARD_GRID_HZ`](crate::physics::curves::STANDARD_GRID_HZ)
+    /// with errors (empty when failed).
     pub curve: Vec<PredictedPoint>,
-    /// Mean phase speed over [`LEAK_BAND_HZ`](crate::physics::curves::LEAK_BAND_HZ), m/s, with its error.
+    /// Mean phase speed over [`LEAK_BAND_HZ`](crate::physics::curves::LEAK_BAND_HZ), m/s, with
+    /// its error.
     pub leak_band_speed: Option<WithError>,
     /// The information about (ln c_P, ln c_S) with ξ and the effects profiled out, divided by
     /// the misfit's variance factor (R_B², P88): (I_PP, I_PS, I_SS), eq. P79. What the soil
@@ -219,7 +221,8 @@ pub struct FitResult {
     pub soil_information: Option<[f64; 3]>,
     /// Whether `curve` and `leak_band_speed` are the model's or corrected by a discrepancy.
     pub curve_source: CurveSource,
-    /// How far [`LEAK_BAND_HZ`](crate::physics::curves::LEAK_BAND_HZ) reaches beyond the measured frequencies, octaves.
+    /// How far [`LEAK_BAND_HZ`](crate::physics::curves::LEAK_BAND_HZ) reaches beyond the
+    /// measured frequencies, octaves.
     pub leak_band_extrapolation_octaves: Option<f64>,
     /// Wall-clock time of building the result after the search (uncertainty, curve with
     /// errors, findings), s: what reporting what the data determine costs (`pipewave bench`).
