@@ -311,3 +311,18 @@ fn reaches_the_optimum_of_an_hdpe_pipe_near_grazing() {
         "the search ended at 18.57",
     );
 }
+
+/// An MDPE segment whose data fix c_S and leave c_P nearly free: the search ended at χ² 3.26
+/// with c_P 555 m/s, above the measured phase speeds (463–493 m/s), while the global optimum
+/// (the yardstick's 3.08, c_S within 2 %) lies deep in the piece below them, at c_P 303 m/s,
+/// where every frequency radiates. The grazing probe starts from the middle in ln c_P of each
+/// outer piece (fit algorithm 24).
+#[test]
+fn finds_a_basin_deep_in_the_piece_below_the_measured_phase_speeds() {
+    verify_below(
+        981003,
+        "WM10106",
+        3.15,
+        "the search ended at 3.26 above the measured speeds",
+    );
+}
