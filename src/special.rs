@@ -2,7 +2,7 @@
 //! the fluid-loading factor ψ of eq. P24 and the branch rule of eq. P3.
 //!
 //! The Bessel and Hankel functions come from `complex-bessel`, a pure-Rust port of Amos'
-//! TOMS 644 [R17]. We always use the exponentially scaled forms: the scale factor cancels in
+//! TOMS 644 \[R17\]. We always use the exponentially scaled forms: the scale factor cancels in
 //! every ratio we form, and the unscaled H⁽²⁾ underflows silently for large |Im z| (model §5.7:
 //! H⁽²⁾(1 − 800i) returns 0 and the ratio becomes NaN).
 
@@ -27,7 +27,7 @@ pub enum SpecialError {
 /// Square root with the branch cut on the positive imaginary axis of w, eq. P3.
 ///
 /// r = principal √w; return r if Re r ≥ Im r, otherwise −r. Radiating fields (w > 0) get q > 0,
-/// evanescent ones (w < 0) get q = −i√|w|. Same as Kalkowski's `root_sign` [R12].
+/// evanescent ones (w < 0) get q = −i√|w|. Same as Kalkowski's `root_sign` \[R12\].
 #[inline]
 pub fn sqrt_plus(w: Complex64) -> Complex64 {
     let r = principal_sqrt(w);
@@ -77,7 +77,7 @@ pub fn abs(z: Complex64) -> f64 {
 /// P(z) = H₀(z)/H₀′(z) = −H₀⁽²⁾(z)/H₁⁽²⁾(z), eq. P16 (second kind, principal branch).
 ///
 /// In the sector the model uses (−π < arg z ≤ π/4 and a little beyond, see
-/// [`in_modified_bessel_sector`]) P comes from the modified Bessel functions of w = iz:
+/// `in_modified_bessel_sector`) P comes from the modified Bessel functions of w = iz:
 /// H_ν⁽²⁾(z) = (2i/π)·e^{iνπ/2}·K_ν(iz) (DLMF 10.27.8), so P(z) = i·K₀(w)/K₁(w), computed by
 /// [`k0_over_k1`] without any Amos call. Elsewhere, and if that fails, [`hankel_ratio_amos`].
 pub fn hankel_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
@@ -123,7 +123,7 @@ pub const K_CF_MAX_TERMS: usize = 400;
 ///
 /// |w| < [`K_SERIES_MAX_ABS`] (or up to [`K_SERIES_MAX_ABS_NEAR_IMAGINARY`] near the imaginary
 /// axis): the ascending series of K₀ and K₁ (DLMF 10.31.1 with n = 0, 1). Otherwise the
-/// continued fraction of Temme's method with order μ = 0 ([`k0_over_k1_cf`]); the
+/// continued fraction of Temme's method with order μ = 0 (`k0_over_k1_cf`); the
 /// normalisation sum of that method is not needed for a ratio.
 pub fn k0_over_k1(w: Complex64) -> Option<Complex64> {
     let r2 = w.norm_sqr();
@@ -291,7 +291,7 @@ pub fn bessel_j_ratio(z: Complex64) -> Result<Complex64, SpecialError> {
 /// Fluid-loading factor ψ(z) = z J₀(z) / (2 J₁(z)) as a function of w = z², eq. P24.
 ///
 /// ψ is even in z, so it is a function of w alone. For |w| < [`PSI_SERIES_Z2`] the series
-/// 1 − w/8 − w²/192 is used; ψ(0) = 1. Otherwise the continued fraction of [`psi_cf`].
+/// 1 − w/8 − w²/192 is used; ψ(0) = 1. Otherwise the continued fraction of `psi_cf`.
 pub fn psi(z2: Complex64) -> Result<Complex64, SpecialError> {
     psi_d(z2).map(|(p, _)| p)
 }

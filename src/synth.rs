@@ -409,7 +409,7 @@ fn log_uniform<R: Rng + ?Sized>(rng: &mut R, lo: f64, hi: f64) -> f64 {
 }
 
 /// The measurement band of a material, Hz: iron, steel and AC carry leak noise to 1.5 kHz;
-/// plastics attenuate strongly above a few hundred Hz (model §1, [R8]).
+/// plastics attenuate strongly above a few hundred Hz (model §1, \[R8\]).
 pub fn band_hz(material: Material) -> (f64, f64) {
     if material.is_plastic() {
         (60.0, 600.0)

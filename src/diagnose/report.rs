@@ -362,7 +362,7 @@ pub fn evidence(d: &Diagnosis) -> String {
 
 /// Write `diagnosis.csv`. `ids[i]` and `groups[i]` belong to `diags[i]`. Safe to open in a
 /// spreadsheet: text quoted, a formula-like id or group prefixed with `'`
-/// ([`spreadsheet`](crate::spreadsheet)).
+/// ([`spreadsheet`]).
 pub fn write_csv(
     path: &Path,
     ids: &[String],

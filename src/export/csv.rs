@@ -1,4 +1,4 @@
-//! CSV writer: one row per segment, the columns of [`PROPERTIES`] in the order of
+//! CSV writer: one row per segment, the columns of [`super::PROPERTIES`] in the order of
 //! [`columns`] (first `segment_id`, the key to join onto an existing pipe layer, then the
 //! leak-band speed and its error), no geometry. Numbers as [`Precision`] says: rounded for
 //! people by default, or in Rust's shortest round-trip form (read back bit for bit) with

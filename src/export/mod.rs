@@ -18,7 +18,7 @@
 //! end, so a failed export never leaves a half-written file, and it refuses to replace the
 //! pipewave database itself (or any other pipewave database). A symlink is followed (its
 //! target is written, the link kept); a character device or FIFO (`/dev/null`, a pipe to
-//! another program) is written directly, never replaced ([`resolve_out`]).
+//! another program) is written directly, never replaced (`resolve_out`).
 
 pub mod csv;
 pub mod field;
@@ -176,7 +176,7 @@ pub fn write(
     write_paged(db, format, out_path, PAGE_SIZE)
 }
 
-/// [`write`] with the CSV's and GeoJSON's numbers printed at `precision` (the GeoPackage
+/// [`write()`] with the CSV's and GeoJSON's numbers printed at `precision` (the GeoPackage
 /// always keeps every digit).
 pub fn write_with_precision(
     db: &Database,
@@ -187,7 +187,7 @@ pub fn write_with_precision(
     write_pages(db, format, out_path, PAGE_SIZE, precision)
 }
 
-/// [`write`], reading the database `page_size` segments at a time: the file is the same for
+/// [`write()`], reading the database `page_size` segments at a time: the file is the same for
 /// every page size; what the export holds is one page of records (with their curves) and a few
 /// numbers per segment (the leak-band speed for the style's classes, the GeoPackage's spatial
 /// index).

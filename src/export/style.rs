@@ -188,7 +188,7 @@ const KINDS: [(Trust, &str, &str); 3] = [
 ];
 
 /// The QML document (QGIS 3.28 LTR and later): a rule-based renderer with one rule per kind of
-/// segment ([`KINDS`]: trusted, predicted, distrusted), each holding one rule per class of
+/// segment (`KINDS`: trusted, predicted, distrusted), each holding one rule per class of
 /// [`STYLE_FIELD`] ([`class_breaks`], labelled `LOW – HIGH m/s`, coloured by [`CLASS_COLOURS`],
 /// interpolated down to fewer colours when there are fewer classes) and one for segments
 /// without a speed (grey). A flagged segment keeps its class colour, dashed over a dark casing,

@@ -108,7 +108,7 @@ pub struct SpeedPrediction {
     /// The leak-band speed's mean and standard deviation, m/s.
     pub band: Option<WithError>,
     /// The band `band` is the mean over, Hz: the leak band, or its part below the frequency
-    /// where the pipe's wave ends for most of the posterior ([`propagating_band`]).
+    /// where the pipe's wave ends for most of the posterior (`propagating_band`).
     pub band_hz: (f64, f64),
     /// ∂(band speed)/∂u at the posterior mean, averaged over ξ (m/s per ln unit), from the
     /// sigma points: how the speed error follows the soil's (for `plan`).

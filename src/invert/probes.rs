@@ -1,5 +1,5 @@
 //! The search's probes near grazing (P44): where the DE runs, their polishes and the faces of
-//! the box in the speed coordinates ([`super::speed_search::faces`]) leave a deeper basin
+//! the box in the speed coordinates (`super::speed_search::faces`) leave a deeper basin
 //! unvisited, candidates across the grazing cliffs and in their gaps, built from the best
 //! optimum so far, polished and walked from (the grazing probe); and the step off a grazing
 //! cliff that lets the reference path confirm an optimum on its edge.

@@ -700,7 +700,7 @@ impl LeastSquares for Problem<'_> {
     }
 
     /// The roots one Newton step from those at `base` when `base` is the last point predicted
-    /// on the fast path ([`Problem::predict_near`]), else [`Self::residuals`]. The point is
+    /// on the fast path (`Problem::predict_near`), else [`Self::residuals`]. The point is
     /// not remembered, so every step of a Jacobian starts from its centre.
     fn residuals_near(&self, base: &[f64], x: &[f64], out: &mut [f64]) -> bool {
         let k = self

@@ -1,6 +1,6 @@
 //! The search's coordinates where the data determine the soil: the problem in (ln c_P,
-//! r = c_S/c_P, ξ, …) that every other DE run of the default search minimises ([`InSpeeds`]),
-//! and the polishes from the faces of that box at the best optimum ([`faces`]).
+//! r = c_S/c_P, ξ, …) that every other DE run of the default search minimises (`InSpeeds`),
+//! and the polishes from the faces of that box at the best optimum (`faces`).
 //!
 //! χ² jumps where c_P crosses a model phase speed (the cliffs of P44), so in these coordinates
 //! the cliffs are (nearly) planes of constant ln c_P, and the misfit is smooth in (r, ξ) between
@@ -106,7 +106,7 @@ impl Objective for InSpeeds<'_, '_> {
     }
 }
 
-/// Step in ln c_P of the line on the face r = r_min past grazing ([`faces`]): 22 % in c_P.
+/// Step in ln c_P of the line on the face r = r_min past grazing (`faces`): 22 % in c_P.
 pub const FACE_LN_CP_STEP: f64 = 0.2;
 /// Step in ln c_P of the line's stiffest end, the last [`FACE_STIFF_WIDTH`] below the box's
 /// top (0.05 in log10 E_m).

@@ -25,7 +25,7 @@ pub const DCHI2_95: f64 = 3.841_458_820_694_124;
 /// z of a two-sided 95 % normal interval (√3.84).
 pub const Z_95: f64 = 1.959_963_984_540_054;
 /// Points of the coarse scan of the 95 % ellipse's boundary in (ln c_P, ln c_S) whose local
-/// extremes of ln E_m are then refined to the stationary point ([`soil_intervals`]).
+/// extremes of ln E_m are then refined to the stationary point (`soil_intervals`).
 pub const ELLIPSE_POINTS: usize = 48;
 /// Halvings of the bracket (one scan step, 7.5°) of a stationary point of ln E_m on the
 /// ellipse: 2⁻⁴⁰ of it, far below where the range of E_m changes in double precision.
@@ -415,7 +415,7 @@ pub fn determine(
 
 /// The information about (ln c_P, ln c_S) of an information matrix `info_x` in the search
 /// coordinates, with the other coordinates profiled out (eq. P79): I_u = T⁻ᵀ I_x T⁻¹ carried to
-/// the speed coordinates by the inverse `ti` of [`speed_map`], then the Schur complement
+/// the speed coordinates by the inverse `ti` of `speed_map`, then the Schur complement
 /// I_aa − I_ab I_bb⁺ I_ba of the speed block a = {E_m, ν_m} against the rest b (pseudo-inverse:
 /// a coordinate the data do not see, such as an effect without signal, profiles out as zero).
 /// Returns (I_PP, I_PS, I_SS).
@@ -686,7 +686,7 @@ fn ellipse_extremes(p0: f64, s0: f64, l: [f64; 3], r: f64, rho: f64) -> Vec<(f64
 
 /// 95 % intervals of E_m and ν_m of a soil known through u = (ln c_P, ln c_S) with covariance
 /// `cov` (row-major 2 × 2), inside the default search box: the range of each over the
-/// Δχ² ≤ 3.84 ellipse, as for a fit ([`soil_intervals`]). `None` where u is no soil.
+/// Δχ² ≤ 3.84 ellipse, as for a fit (`soil_intervals`). `None` where u is no soil.
 pub fn soil_intervals_of_speeds(
     u: [f64; 2],
     cov: [f64; 4],

@@ -28,7 +28,7 @@
 //! polished point and its grid point are rated on the reference path (model §5.3–5.4). An
 //! optimum on a cliff's edge (P44) stops the polish short, its finite differences crossing the
 //! cliff; so the [`ZOOMED`] best rated points are also zoomed into by a derivative-free pattern
-//! search in (ln c_P, r, ξ) ([`zoom`]) and rated. The yardstick is the lowest of those misfits.
+//! search in (ln c_P, r, ξ) (`zoom`) and rated. The yardstick is the lowest of those misfits.
 
 use crate::optimize::{Bounds, FiniteDifference, LevenbergMarquardt, Objective};
 
@@ -53,7 +53,7 @@ pub const GAP_XI_POINTS: usize = 11;
 pub const POLISHED: usize = 12;
 /// Levenberg–Marquardt iterations of each polish at most.
 pub const POLISH_ITERATIONS: usize = 150;
-/// Best rated points zoomed into ([`zoom`]).
+/// Best rated points zoomed into (`zoom`).
 pub const ZOOMED: usize = 4;
 /// Levels of the zoom.
 pub const ZOOM_LEVELS: usize = 8;

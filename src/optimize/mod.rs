@@ -3,7 +3,7 @@
 //! This module knows nothing about pipes: it minimises any [`Objective`] over a box
 //! ([`Bounds`]) by differential evolution ([`de`]), refines least-squares problems by a
 //! bounded Levenberg–Marquardt method ([`lm`]), searches locally where the objective jumps by
-//! the downhill simplex ([`simplex`]), brackets a monotone crossing by bisection ([`bisect`]),
+//! the downhill simplex ([`simplex`]), brackets a monotone crossing by bisection ([`bisect()`]),
 //! and offers the small dense linear algebra
 //! both need, including parameter covariances from a Jacobian ([`linalg`]).
 //!

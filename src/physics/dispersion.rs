@@ -374,7 +374,7 @@ pub fn in_vacuo_root(system: &System, omega: f64) -> Complex64 {
     Evaluator::new(system, omega).in_vacuo_root()
 }
 
-/// Korteweg's speed c_K = c_f/√(1 + 2aB_f/(E_p h)) with the real E_p, eq. P45 [R21].
+/// Korteweg's speed c_K = c_f/√(1 + 2aB_f/(E_p h)) with the real E_p, eq. P45 \[R21\].
 pub fn korteweg_speed(system: &System) -> f64 {
     let (f, p) = (&system.fluid, &system.pipe);
     f.sound_speed()

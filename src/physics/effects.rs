@@ -86,7 +86,7 @@ impl AirContent {
         )
     }
 
-    /// The bubbly mixture by Wood's equation [R19]: 1/B_eff = (1 − φ)/B_w + φ/(γ p_abs) (P60),
+    /// The bubbly mixture by Wood's equation \[R19\]: 1/B_eff = (1 − φ)/B_w + φ/(γ p_abs) (P60),
     /// ρ_eff = (1 − φ)ρ_w + φ p_abs/(R_air T) (P61). Lossless, below bubble resonance.
     pub fn mix(&self, water: &Fluid) -> Fluid {
         let phi = self.fraction;

@@ -654,10 +654,10 @@ impl Material {
         matches!(self, Material::Pvc | Material::Mdpe | Material::Hdpe)
     }
 
-    /// Typical properties, model §3.3. Sources: [M1] Fuji Tecom LC-50 manual; [M2] AMES Web;
-    /// [M3] MakeItFrom; [M4] ASTM A48 table; [M5] steel constants; [M6] Uni-Bell / PPI via
-    /// Aegion; [M7] asbestos-cement density; [M8] Muggleton group MDPE fits [R3, R4];
-    /// [M9] Graf et al. 2014 (HDPE). Loss factors of DI, ST, PVC and AC are assumed (no source).
+    /// Typical properties, model §3.3. Sources: \[M1\] Fuji Tecom LC-50 manual; \[M2\] AMES Web;
+    /// \[M3\] MakeItFrom; \[M4\] ASTM A48 table; \[M5\] steel constants; \[M6\] Uni-Bell / PPI via
+    /// Aegion; \[M7\] asbestos-cement density; \[M8\] Muggleton group MDPE fits [R3, R4];
+    /// \[M9\] Graf et al. 2014 (HDPE). Loss factors of DI, ST, PVC and AC are assumed (no source).
     pub fn typical(self) -> MaterialProps {
         let (youngs_modulus, poisson, density, loss_factor) = match self {
             Material::CastIron => (1.10e11, 0.26, 7200.0, 0.01),

@@ -41,7 +41,7 @@ pub const GROWING_RTOL: f64 = 1e-12;
 /// relative amount: both numerator and denominator are then rounding noise.
 pub const RATIO_MIN_STEP_RTOL: f64 = 1e-9;
 /// A continuation that fails within this relative distance of a soil wave speed
-/// (|c/c_soil − 1|, eq. P44) is restarted beyond the grazing point ([`restart_past_grazing`]).
+/// (|c/c_soil − 1|, eq. P44) is restarted beyond the grazing point (`restart_past_grazing`).
 pub const GRAZING_RESTART_RTOL: f64 = 0.05;
 /// Geometric ramp points below the lowest requested frequency, eq. P41 (the reference's 29).
 pub const RAMP_POINTS: usize = 29;

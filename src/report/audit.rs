@@ -76,9 +76,9 @@ pub fn write(db: &Database, out_path: &Path) -> Result<ExportSummary, ExportErro
     write_paged(db, out_path, PAGE_SIZE)
 }
 
-/// [`write`], reading the database `page_size` segments at a time: the page is the same for
+/// [`write()`], reading the database `page_size` segments at a time: the page is the same for
 /// every page size. The report's figures come from one pass over the records that keeps a few
-/// numbers per segment ([`Tally`]: no curve, no measurement), the map from a second pass over
+/// numbers per segment (`Tally`: no curve, no measurement), the map from a second pass over
 /// the geometries alone, and the worst fits' curves are read again for those shown.
 pub fn write_paged(
     db: &Database,

@@ -294,7 +294,7 @@ fn no_tighter_than(h: [f64; 4], rstd: [Option<f64>; 2]) -> [f64; 4] {
 }
 
 /// Relative one-sigma error of a member's single-fit c_P or c_S above which that speed gives
-/// the zone no information ([`no_tighter_than`]): a speed known that loosely lies on the
+/// the zone no information (`no_tighter_than`): a speed known that loosely lies on the
 /// misfit valley's far, curved part, where the member's Gaussian information misstates it.
 /// Chosen on three zoned networks by the mixed zones' E_m error p90 against the efficient
 /// estimator's bound, and by the metal-only zones' coverage (the figures, per limit and

@@ -5,7 +5,7 @@
 
 use crate::physics::{InputError, Material};
 
-/// Spellings, compared after [`normalise`] (lower case, no spaces, hyphens, underscores or
+/// Spellings, compared after `normalise` (lower case, no spaces, hyphens, underscores or
 /// dots), and the material each one means. The codes themselves (`CI`, `DI`, ...) are read by
 /// `Material::from_str`.
 ///

@@ -354,7 +354,7 @@ pub struct ImportReport {
 /// report, not as `Err`; `Err` means the database itself failed.
 ///
 /// Memory does not grow with the files: a CSV is read a record at a time, and the checked rows
-/// are staged in temporary tables ([`staging`]) that the checks and the writes then query in
+/// are staged in temporary tables (`staging`) that the checks and the writes then query in
 /// order.
 pub fn import(
     conn: &mut Connection,
