@@ -17,12 +17,7 @@
 
 use super::uncertainty::{shear_to_compressional, soil_moduli, youngs_from_p_wave_modulus};
 
-/// c_S/c_P of a soil with Poisson's ratio ν_m (P63–P64): √((1 − 2ν)/(2(1 − ν))).
-pub fn ratio_of_poisson(nu: f64) -> f64 {
-    shear_to_compressional(nu)
-}
-
-/// Poisson's ratio ν_m of a soil with c_S/c_P = r, the inverse of [`ratio_of_poisson`]:
+/// Poisson's ratio ν_m of a soil with c_S/c_P = r, the inverse of [`shear_to_compressional`]:
 /// (1 − 2r²)/(2(1 − r²)); `None` outside 0 < r ≤ 1/√2 (ν_m ≥ 0, ν_m < ½).
 pub fn poisson_of_ratio(r: f64) -> Option<f64> {
     let r2 = r * r;
@@ -33,7 +28,7 @@ pub fn poisson_of_ratio(r: f64) -> Option<f64> {
 /// (P63–P64).
 pub fn speeds_of(e: f64, nu: f64, rho: f64) -> (f64, f64) {
     let (m, _) = soil_moduli(e, nu);
-    (0.5 * (m / rho).ln(), ratio_of_poisson(nu))
+    (0.5 * (m / rho).ln(), shear_to_compressional(nu))
 }
 
 /// (E_m in Pa, ν_m) of the soil with ln c_P = `ln_cp` and c_S/c_P = `r`, density `rho`: the
@@ -63,7 +58,10 @@ impl SpeedBox {
 
     /// The range of r: [r(ν_hi), r(ν_lo)] (r falls as ν_m grows).
     pub fn r_range(&self) -> (f64, f64) {
-        (ratio_of_poisson(self.nu.1), ratio_of_poisson(self.nu.0))
+        (
+            shear_to_compressional(self.nu.1),
+            shear_to_compressional(self.nu.0),
+        )
     }
 
     /// The range of ln c_P of the soils in the box with c_S/c_P = r: E_m's range at the ν_m
@@ -159,7 +157,7 @@ mod tests {
         // A soft soil at ν_m = 0 (large r) exists only down to E_min; at ν_m = 0.499 the same c_P
         // needs E_m far below it.
         let (l0, r0) = speeds_of(E_BOUNDS.0, 0.0, rho);
-        let r_incompressible = ratio_of_poisson(MAX_SOIL_POISSON);
+        let r_incompressible = shear_to_compressional(MAX_SOIL_POISSON);
         assert!(b.contains(l0, r0));
         assert!(!b.contains(l0, r_incompressible));
         let (e, _) = soil_of(l0, r_incompressible, rho).unwrap();
