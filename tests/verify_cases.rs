@@ -326,3 +326,30 @@ fn finds_a_basin_deep_in_the_piece_below_the_measured_phase_speeds() {
         "the search ended at 3.26 above the measured speeds",
     );
 }
+
+/// A ductile-iron segment whose optimum lies on the face ν_m = 0 (r = 1/√2) with almost no
+/// contact, c_P 1,270 m/s, just below the measured phase speeds (1,349–1,360 m/s): χ² 2.44.
+/// The search ended on the same face with ξ = 0 at c_P 313 m/s, χ² 10.05: with ξ → 0 the misfit
+/// depends on c_P nearly alone and has basins of its own along it. The faces stage rates a line
+/// along that face below grazing and polishes its local minima.
+#[test]
+fn finds_a_basin_along_the_face_nu_zero_below_grazing() {
+    verify_below(
+        982008,
+        "WM10194",
+        2.5,
+        "the search ended at 10.05 at c_P 313 m/s",
+    );
+}
+
+/// A steel segment whose optimum lies on the same face at c_P 356 m/s (χ² 2.92), while the
+/// search ended past grazing at c_P 1,746 m/s, r 0.20, ξ = 0 (χ² 3.22).
+#[test]
+fn finds_a_soft_basin_along_the_face_nu_zero() {
+    verify_below(
+        982011,
+        "WM10086",
+        3.0,
+        "the search ended at 3.22 past grazing",
+    );
+}

@@ -118,6 +118,11 @@ pub const FACE_STIFF_WIDTH: f64 = 0.345;
 /// The line's classes of c_P: past grazing up to this multiple of the mean measured phase
 /// speed, and beyond.
 pub const FACE_FAR_PAST_GRAZING: f64 = 2.0;
+/// The line along the face r = r_max below grazing reaches down to the mean measured phase
+/// speed divided by this.
+pub const FACE_BELOW_SPAN: f64 = 8.0;
+/// Local minima of that line polished at most.
+pub const FACE_BELOW_STARTS: usize = 2;
 /// The best of the stiffest end is polished only when its misfit is at most this multiple of
 /// the best optimum's.
 pub const FACE_STIFF_GATE: f64 = 2.0;
@@ -137,7 +142,12 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 ///   above the mean measured phase speed v̄, where compressional radiation switches off, model
 ///   §7.8 item 3, P44), at ξ ∈ {its own, 0, 1}: c_P up to [`FACE_FAR_PAST_GRAZING`] v̄, above
 ///   it, and the stiffest end of the box (gated by [`FACE_STIFF_GATE`]). Those basins are
-///   narrow in r (c_P² ∝ 1/(1 − 2ν_m)) and in c_P, and a population seldom lands in them.
+///   narrow in r (c_P² ∝ 1/(1 − 2ν_m)) and in c_P, and a population seldom lands in them;
+/// * from the best [`FACE_BELOW_STARTS`] local minima of a line along the face r = r_max
+///   below grazing (c_P from v̄/[`FACE_BELOW_SPAN`] to v̄, where every soil wave radiates),
+///   each point the best over the same values of ξ. Towards ξ = 0 the shear coupling fades
+///   and the misfit depends on c_P nearly alone; its basins along c_P lie far from the best
+///   optimum's c_P, where no other start reaches them.
 pub(super) fn faces(
     problem: &Problem<'_>,
     bounds: &Bounds,
@@ -229,6 +239,40 @@ pub(super) fn faces(
             best_of[2] = None;
         }
         starts.extend(best_of.into_iter().flatten().map(|(_, x)| x));
+    }
+    if let (true, Some((bottom, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_max)) {
+        // The line along the face r = r_max below grazing, every FACE_LN_CP_STEP from just
+        // below v̄ down to v̄/FACE_BELOW_SPAN; its local minima, best first.
+        let mut line: Vec<(f64, Option<Vec<f64>>)> = Vec::new();
+        let mut l = (v.ln() - 0.5 * FACE_LN_CP_STEP).min(top);
+        while l >= (v / FACE_BELOW_SPAN).ln().max(bottom) {
+            let mut at = (f64::INFINITY, None);
+            for &xi in &xis {
+                let mut y = y_best.clone();
+                (y[je], y[jn]) = (l, r_max);
+                if let (Some(j), Some(xi)) = (jx, xi) {
+                    y[j] = xi;
+                }
+                let Some(x) = speeds.x(&y) else { continue };
+                let f = problem.value(&x);
+                if f < at.0 {
+                    at = (f, Some(x));
+                }
+            }
+            line.push(at);
+            l -= FACE_LN_CP_STEP;
+        }
+        let f = |i: usize| line.get(i).map_or(f64::INFINITY, |p| p.0);
+        let mut minima: Vec<usize> = (0..line.len())
+            .filter(|&i| f(i).is_finite() && f(i) <= f(i + 1) && (i == 0 || f(i) <= f(i - 1)))
+            .collect();
+        minima.sort_by(|&a, &b| f(a).total_cmp(&f(b)));
+        starts.extend(
+            minima
+                .into_iter()
+                .take(FACE_BELOW_STARTS)
+                .filter_map(|i| line[i].1.clone()),
+        );
     }
     starts
         .iter()
