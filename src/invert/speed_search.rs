@@ -204,19 +204,30 @@ pub(super) fn faces(
         .map(|m| m.phase_speed())
         .sum::<f64>()
         / n;
+    // The best soil with ln c_P = l and c_S/c_P = r over the values of ξ tried (the first of
+    // equals), with its misfit; `None` where none has a finite one.
+    let best_over_xi = |l: f64, r: f64| -> Option<(f64, Vec<f64>)> {
+        let mut at: Option<(f64, Vec<f64>)> = None;
+        for &xi in &xis {
+            let mut y = y_best.clone();
+            (y[je], y[jn]) = (l, r);
+            if let (Some(j), Some(xi)) = (jx, xi) {
+                y[j] = xi;
+            }
+            let Some(x) = speeds.x(&y) else { continue };
+            let f = problem.value(&x);
+            if f.is_finite() && at.as_ref().is_none_or(|(g, _)| f < *g) {
+                at = Some((f, x));
+            }
+        }
+        at
+    };
     if let (true, Some((_, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_min)) {
         // The best point of each class: [up to FACE_FAR_PAST_GRAZING v̄, beyond, stiffest].
         let mut best_of: [Option<(f64, Vec<f64>)>; 3] = [None, None, None];
         let mut rate = |l: f64, class: usize| {
-            for &xi in &xis {
-                let mut y = y_best.clone();
-                (y[je], y[jn]) = (l, r_min);
-                if let (Some(j), Some(xi)) = (jx, xi) {
-                    y[j] = xi;
-                }
-                let Some(x) = speeds.x(&y) else { continue };
-                let f = problem.value(&x);
-                if f.is_finite() && best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
+            if let Some((f, x)) = best_over_xi(l, r_min) {
+                if best_of[class].as_ref().is_none_or(|(g, _)| f < *g) {
                     best_of[class] = Some((f, x));
                 }
             }
@@ -243,26 +254,17 @@ pub(super) fn faces(
     if let (true, Some((bottom, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_max)) {
         // The line along the face r = r_max below grazing, every FACE_LN_CP_STEP from just
         // below v̄ down to v̄/FACE_BELOW_SPAN; its local minima, best first.
-        let mut line: Vec<(f64, Option<Vec<f64>>)> = Vec::new();
+        let mut line: Vec<Option<(f64, Vec<f64>)>> = Vec::new();
         let mut l = (v.ln() - 0.5 * FACE_LN_CP_STEP).min(top);
         while l >= (v / FACE_BELOW_SPAN).ln().max(bottom) {
-            let mut at = (f64::INFINITY, None);
-            for &xi in &xis {
-                let mut y = y_best.clone();
-                (y[je], y[jn]) = (l, r_max);
-                if let (Some(j), Some(xi)) = (jx, xi) {
-                    y[j] = xi;
-                }
-                let Some(x) = speeds.x(&y) else { continue };
-                let f = problem.value(&x);
-                if f < at.0 {
-                    at = (f, Some(x));
-                }
-            }
-            line.push(at);
+            line.push(best_over_xi(l, r_max));
             l -= FACE_LN_CP_STEP;
         }
-        let f = |i: usize| line.get(i).map_or(f64::INFINITY, |p| p.0);
+        let f = |i: usize| {
+            line.get(i)
+                .and_then(Option::as_ref)
+                .map_or(f64::INFINITY, |p| p.0)
+        };
         let mut minima: Vec<usize> = (0..line.len())
             .filter(|&i| f(i).is_finite() && f(i) <= f(i + 1) && (i == 0 || f(i) <= f(i - 1)))
             .collect();
@@ -271,7 +273,7 @@ pub(super) fn faces(
             minima
                 .into_iter()
                 .take(FACE_BELOW_STARTS)
-                .filter_map(|i| line[i].1.clone()),
+                .filter_map(|i| line[i].as_ref().map(|(_, x)| x.clone())),
         );
     }
     starts
