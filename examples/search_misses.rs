@@ -180,7 +180,7 @@ fn main() {
 
 /// A fit's optimum in (c_P, c_S/c_P, ξ) and its model phase speeds, m/s.
 fn place_of(data: &pipewave::invert::SegmentData, f: &pipewave::invert::FitResult) -> String {
-    use pipewave::invert::speed::speeds_of;
+    use pipewave::physics::soil::speeds_of;
     let (l, r) = speeds_of(
         f.soil_modulus().unwrap_or(f64::NAN),
         f.soil_poisson().unwrap_or(f64::NAN),
@@ -208,7 +208,7 @@ fn places(
     ex: Option<&pipewave::invert::FitResult>,
     yard: Option<&pipewave::invert::yardstick::Yardstick>,
 ) -> String {
-    use pipewave::invert::speed::speeds_of;
+    use pipewave::physics::soil::speeds_of;
     let rho = data.soil_density;
     let measured: Vec<String> = data
         .measurements

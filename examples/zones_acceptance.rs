@@ -204,7 +204,7 @@ fn bound_only(args: &[u64]) {
 
 /// Members of the zones whose E_m is off by more than 20 % (set ZONES_DEBUG=1).
 pub fn debug(r: &pipewave::synth::zones::ZonedRun) {
-    use pipewave::invert::uncertainty::soil_speeds;
+    use pipewave::physics::soil::soil_speeds;
     for z in r.zones.iter().filter(|z| z.modulus_error() > 0.2) {
         println!("zone {}:", z.zone);
         for m in &z.estimate.members {

@@ -51,7 +51,8 @@ fn recovery_over_100_synthetic_segments() {
         for f in r.flags.iter().chain(&r.notes) {
             *flag_counts.entry(f.code.as_str()).or_insert(0usize) += 1;
         }
-        let (cp, cs) = uncertainty::soil_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
+        let (cp, cs) =
+            pipewave::physics::soil::soil_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
         let (fcp, fcs) = (r.p_wave_speed.unwrap(), r.s_wave_speed.unwrap());
         assert!(fcp.std.is_finite() && fcs.std.is_finite(), "{}", s.id);
         cp_err.push((fcp.value / cp - 1.0).abs());

@@ -28,8 +28,9 @@ use crate::db::field::{
 use crate::db::hash::{fnv1a64, fnv1a64_update, FNV1A64_START};
 use crate::db::wkt::LineString;
 use crate::db::{pages, DbError, SegmentRecord};
-use crate::invert::uncertainty::{soil_intervals_of_speeds, soil_speeds};
+use crate::invert::uncertainty::soil_intervals_of_speeds;
 use crate::physics::curves::LEAK_BAND_HZ;
+use crate::physics::soil::soil_speeds;
 use crate::physics::{ContactMode, Model};
 
 use model::{ClassMean, Field, Observation, Posterior, Screened, Sym2, NEIGHBOURS};

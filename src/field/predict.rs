@@ -10,10 +10,11 @@
 
 use crate::db::CurvePoint;
 use crate::invert::problem::INVERSION_RAMP_POINTS;
-use crate::invert::uncertainty::{shear_to_compressional, soil_from_speeds, WithError};
+use crate::invert::uncertainty::WithError;
 use crate::invert::{Method, Param, Problem, SegmentData};
 use crate::physics::curves::{band_mean, carried_band, LEAK_BAND_HZ, STANDARD_GRID_HZ};
 use crate::physics::inputs::MAX_SOIL_POISSON;
+use crate::physics::soil::{shear_to_compressional, soil_from_speeds};
 use crate::physics::solver::{solve_from_guess_tol, RootMethod, Tolerance};
 use crate::physics::{solve_curve, ContactMode, Continuation, Model, System};
 use crate::units::{hz_to_omega, np_to_db};

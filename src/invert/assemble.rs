@@ -715,7 +715,8 @@ fn separated_minima(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::invert::uncertainty::{soil_speeds, Interval, Z_95};
+    use crate::invert::uncertainty::{Interval, Z_95};
+    use crate::physics::soil::soil_speeds;
     use crate::physics::{ContactMode, Model};
 
     /// Where no finite-difference Jacobian exists on any path or step, the curvature is

@@ -15,7 +15,7 @@
 //! box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search leaves unvisited
 //! across a grazing cliff, and steps an optimum off a cliff's edge; `uncertainty` and `flags`
 //! are pure functions of what the search found; `provenance` records which stage found the
-//! answer and why each stage stopped; `speed` maps the soil to (ln c_P, c_S/c_P); `yardstick`
+//! answer and why each stage stopped; `speed` is the image of the search box in (ln c_P, c_S/c_P); `yardstick`
 //! is the independent dense-grid search `bench --verify` judges the fit against.
 pub mod assemble;
 pub mod discrepancy;

@@ -10,8 +10,8 @@ use num_complex::Complex64;
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem};
-use super::uncertainty::{shear_to_compressional, soil_from_speeds, soil_speeds};
 use crate::optimize::{Bounds, LeastSquares, LevenbergMarquardt, NelderMead, Objective};
+use crate::physics::soil::{shear_to_compressional, soil_from_speeds, soil_speeds};
 
 /// Which measured frequencies radiate compressional waves into the soil at a point: those whose
 /// model phase speed lies above the soil's c_P (§7.8 item 3). χ² jumps where one of them

@@ -1,10 +1,6 @@
-//! The soil in the coordinates the data determine: (ln c_P, r = c_S/c_P) instead of
-//! (E_m, ν_m), given the soil density ρ_m (fixed, model §7.5).
-//!
-//! The map is exact and one-to-one on ν_m ∈ [0, ½): c_P = √(M/ρ_m) with the P-wave modulus M of
-//! P63, c_S = √(G/ρ_m) with the shear modulus G of P64, and r depends on ν_m alone,
-//! r² = (1 − 2ν_m)/(2(1 − ν_m)). Its inverse: ν_m = (1 − 2r²)/(2(1 − r²)), M = ρ_m c_P² and
-//! E_m from M at that ν_m.
+//! The search box in the coordinates the data determine, (ln c_P, r = c_S/c_P) instead of
+//! (E_m, ν_m), given the soil density ρ_m (fixed, model §7.5); the map itself is
+//! [`crate::physics::soil`].
 //!
 //! The search box of P51, E_m ∈ [1e3, 1e10] Pa and ν_m ∈ [0, 0.499], maps to the region
 //! r ∈ [r(0.499), r(0)] = [0.04468, 1/√2] and, at each r, ln c_P between ½ ln(E_min f(ν_m)/ρ_m)
@@ -15,29 +11,7 @@
 //! large r (small ν_m) or a stiff one at small r lies outside the search range, which
 //! [`SpeedBox::contains`] tells.
 
-use super::uncertainty::{shear_to_compressional, soil_moduli, youngs_from_p_wave_modulus};
-
-/// Poisson's ratio ν_m of a soil with c_S/c_P = r, the inverse of [`shear_to_compressional`]:
-/// (1 − 2r²)/(2(1 − r²)); `None` outside 0 < r ≤ 1/√2 (ν_m ≥ 0, ν_m < ½).
-pub fn poisson_of_ratio(r: f64) -> Option<f64> {
-    let r2 = r * r;
-    (r > 0.0 && r2 <= 0.5 + 1e-15).then(|| ((1.0 - 2.0 * r2) / (2.0 * (1.0 - r2))).max(0.0))
-}
-
-/// (ln c_P, r) of a soil with Young's modulus `e` (Pa) and Poisson's ratio `nu`, density `rho`
-/// (P63–P64).
-pub fn speeds_of(e: f64, nu: f64, rho: f64) -> (f64, f64) {
-    let (m, _) = soil_moduli(e, nu);
-    (0.5 * (m / rho).ln(), shear_to_compressional(nu))
-}
-
-/// (E_m in Pa, ν_m) of the soil with ln c_P = `ln_cp` and c_S/c_P = `r`, density `rho`: the
-/// inverse of [`speeds_of`]. `None` where r gives no Poisson's ratio in [0, ½).
-pub fn soil_of(ln_cp: f64, r: f64, rho: f64) -> Option<(f64, f64)> {
-    let nu = poisson_of_ratio(r)?;
-    let m = rho * (2.0 * ln_cp).exp();
-    Some((youngs_from_p_wave_modulus(m, nu), nu))
-}
+use crate::physics::soil::{poisson_of_ratio, shear_to_compressional, speeds_of};
 
 /// The image of a box of (E_m, ν_m) in (ln c_P, r) at one soil density.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,29 +71,8 @@ impl SpeedBox {
 mod tests {
     use super::*;
     use crate::invert::problem::E_BOUNDS;
-    use crate::invert::uncertainty::soil_speeds;
     use crate::physics::inputs::MAX_SOIL_POISSON;
-
-    /// (E_m, ν_m) → (ln c_P, r) → (E_m, ν_m) returns the soil to 1e-12 relative over the whole
-    /// search box, and the speeds agree with P63–P64 computed directly.
-    #[test]
-    fn the_map_round_trips_over_the_search_box() {
-        let rho = 1_900.0;
-        for i in 0..=40 {
-            let log10_e = 3.0 + 7.0 * i as f64 / 40.0;
-            let e = 10f64.powf(log10_e);
-            for j in 0..=40 {
-                let nu = MAX_SOIL_POISSON * j as f64 / 40.0;
-                let (ln_cp, r) = speeds_of(e, nu, rho);
-                let (cp, cs) = soil_speeds(e, nu, rho);
-                assert!((ln_cp.exp() / cp - 1.0).abs() < 1e-12, "{e} {nu}");
-                assert!((r * cp / cs - 1.0).abs() < 1e-12, "{e} {nu}");
-                let (e2, nu2) = soil_of(ln_cp, r, rho).expect("a soil");
-                assert!((e2 / e - 1.0).abs() < 1e-10, "{e} {nu}: {e2}");
-                assert!((nu2 - nu).abs() < 1e-10, "{e} {nu}: {nu2}");
-            }
-        }
-    }
+    use crate::physics::soil::soil_of;
 
     /// The ratio's range over ν_m ∈ [0, 0.499] is [0.04468, 1/√2], and r outside (0, 1/√2]
     /// has no Poisson's ratio.

@@ -10,7 +10,8 @@ use crate::optimize::{Bounds, Objective};
 
 use super::fit::{polish, Optimum, POLISH_ITERATIONS};
 use super::problem::{Param, Problem};
-use super::speed::{soil_of, speeds_of, SpeedBox};
+use super::speed::SpeedBox;
+use crate::physics::soil::{soil_of, speeds_of};
 
 /// The problem in the speed coordinates: the soil's (E_m, ν_m) replaced by (ln c_P, r =
 /// c_S/c_P) through the exact map of P63–P64 ([`super::speed`]), every other parameter (ξ, the

@@ -33,8 +33,9 @@
 use crate::optimize::{Bounds, FiniteDifference, LevenbergMarquardt, Objective};
 
 use super::problem::{Method, Param, Problem, Scale, SegmentData};
-use super::speed::{soil_of, SpeedBox};
+use super::speed::SpeedBox;
 use super::FitSettings;
+use crate::physics::soil::soil_of;
 
 /// Spacing of the regular grid in ln c_P (4 % in c_P).
 pub const LN_CP_STEP: f64 = 0.04;
@@ -328,7 +329,7 @@ pub fn yardstick(data: &SegmentData, settings: &FitSettings) -> Result<Yardstick
 /// [`ZOOM_STEPS`] (halved at each level, unless the best lies on the pattern's rim), inside the
 /// box.
 fn zoom(problem: &Problem<'_>, region: &SpeedBox, bounds: &Bounds, x0: &[f64]) -> Vec<f64> {
-    let (l0, r0) = super::speed::speeds_of(10f64.powf(x0[0]), x0[1], region.rho);
+    let (l0, r0) = crate::physics::soil::speeds_of(10f64.powf(x0[0]), x0[1], region.rho);
     let mut centre = [l0, r0, x0[2]];
     let mut best_x = x0.to_vec();
     let mut best_f = problem.value(x0);
@@ -392,7 +393,7 @@ fn rate(problem: &Problem<'_>, bounds: &Bounds, x: &[f64]) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::invert::problem::Measurement;
-    use crate::invert::speed::speeds_of;
+    use crate::physics::soil::speeds_of;
     use crate::physics::solver::{solve_curve, Continuation};
     use crate::physics::{ContactMode, Fluid, Material, Model, Pipe, Soil, System};
 

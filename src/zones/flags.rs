@@ -9,7 +9,7 @@
 
 use crate::db::zones::{ZoneFitRow, ZoneMemberRow};
 use crate::db::FitRow;
-use crate::invert::uncertainty::soil_speeds;
+use crate::physics::soil::soil_speeds;
 
 use super::model::OUTLIER_CHI2;
 

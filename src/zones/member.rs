@@ -7,10 +7,11 @@
 //! model checked against the real misfit there.
 
 use crate::invert::problem::{Param, Problem, Weighting};
-use crate::invert::uncertainty::{coordinates_from_speeds, dln_cp_dnu, dln_cs_dnu, soil_speeds};
+use crate::invert::uncertainty::coordinates_from_speeds;
 use crate::invert::{Method, SegmentData};
 use crate::optimize::lm::{jacobian_fd, FiniteDifference};
 use crate::physics::effects::Effect;
+use crate::physics::soil::{dln_cp_dnu, dln_cs_dnu, soil_speeds};
 use crate::physics::{ContactMode, Model};
 
 use super::model::{eigen, Axis, Member};

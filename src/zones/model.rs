@@ -16,8 +16,9 @@
 //! quantile is an outlier: reported and left out of the zone estimate.
 
 use crate::invert::problem::E_BOUNDS;
-use crate::invert::uncertainty::{dln_cp_dnu, dln_cs_dnu, soil_from_speeds, soil_speeds, DCHI2_95};
+use crate::invert::uncertainty::DCHI2_95;
 use crate::physics::inputs::MAX_SOIL_POISSON;
+use crate::physics::soil::{dln_cp_dnu, dln_cs_dnu, soil_from_speeds, soil_speeds};
 
 /// Typical scatter of log10 E_m between segments of one soil unit, decades (model §7.11:
 /// "about 0.04 decade", i.e. about 10 % in E).
@@ -822,7 +823,7 @@ mod tests {
         // Same c_P, different (E, ν): move along c_P = const to ν = 0.05.
         let m_mod = 1900.0 * cp * cp;
         let nu_far: f64 = 0.05;
-        let e_far = crate::invert::uncertainty::youngs_from_p_wave_modulus(m_mod, nu_far);
+        let e_far = crate::physics::soil::youngs_from_p_wave_modulus(m_mod, nu_far);
         far.single = (e_far.log10(), nu_far);
         let (_, cs_far) = soil_speeds(e_far, nu_far, 1900.0);
         far.u_hat[1] = cs_far.ln();

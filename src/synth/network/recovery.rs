@@ -173,7 +173,7 @@ pub fn compare(
             soil_density.get(&t.segment_id),
             f.status != FitStatus::Failed,
         ) {
-            let (cp, cs) = crate::invert::uncertainty::soil_speeds(e_true, nu, rho);
+            let (cp, cs) = crate::physics::soil::soil_speeds(e_true, nu, rho);
             let within = |v: Option<f64>, s: Option<f64>, truth: f64| matches!((v, s), (Some(v), Some(s)) if (v - truth).abs() <= 2.0 * s);
             let between = |lo: Option<f64>, hi: Option<f64>, truth: f64| matches!((lo, hi), (Some(lo), Some(hi)) if lo <= truth && truth <= hi);
             if let Some(v) = f.soil_p_wave_speed_m_per_s {

@@ -250,11 +250,8 @@ pub fn run_chain(spec: &ChainSpec, dir: &Path) -> Result<ChainResult, String> {
         .zip(&recorded)
         .map(|(s, rec)| {
             let r = results.iter().find(|r| r.segment_id == s.id);
-            let (cp_true, _) = crate::invert::uncertainty::soil_speeds(
-                s.soil_modulus,
-                s.soil_poisson,
-                s.soil_density,
-            );
+            let (cp_true, _) =
+                crate::physics::soil::soil_speeds(s.soil_modulus, s.soil_poisson, s.soil_density);
             ChainPipe {
                 segment_id: s.id.clone(),
                 material: s.material,
