@@ -39,7 +39,7 @@ use pipewave::diagnose::group::{
 };
 use pipewave::diagnose::stats::sum_chibar_sf;
 use pipewave::diagnose::{diagnose_segment, DiagnoseSettings, Diagnosis};
-use pipewave::invert::fit::FitResult;
+use pipewave::invert::FitResult;
 use pipewave::physics::effects::Effect;
 use pipewave::physics::Material;
 use pipewave::stats::normal;

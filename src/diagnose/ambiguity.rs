@@ -4,8 +4,8 @@
 
 use num_complex::Complex64;
 
-use crate::invert::fit::FitResult;
 use crate::invert::problem::{predict, SegmentData};
+use crate::invert::FitResult;
 use crate::physics::effects::Effect;
 
 /// Two fitted models are told apart at a frequency where their predictions of Re k or of the

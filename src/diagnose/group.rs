@@ -53,7 +53,7 @@
 use std::collections::BTreeMap;
 
 use super::stats::sum_chibar_sf;
-use crate::invert::fit::FitResult;
+use crate::invert::FitResult;
 use crate::physics::effects::Effect;
 
 /// Family-wise false-alarm rate of the pooled test over one run: over all candidate effects and

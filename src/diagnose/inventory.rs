@@ -14,8 +14,8 @@
 
 use rayon::prelude::*;
 
-use crate::invert::fit::{fit_segment, FitResult, FitSettings};
 use crate::invert::problem::SegmentData;
+use crate::invert::{fit_segment, FitResult, FitSettings};
 use crate::physics::{InputError, Material, MaterialProps, Pipe};
 use crate::types::FitStatus;
 

@@ -28,8 +28,8 @@ pub mod units;
 
 use num_complex::Complex64;
 
-use crate::invert::fit::{fit_segment, FitResult, FitSettings};
 use crate::invert::problem::{predict, Measurement, Param, Problem, SegmentData};
+use crate::invert::{fit_segment, FitResult, FitSettings};
 use crate::optimize::{FiniteDifference, LevenbergMarquardt};
 use crate::physics::effects::Effect;
 use crate::physics::{ContactMode, Model};

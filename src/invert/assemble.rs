@@ -10,13 +10,11 @@ use super::discrepancy::{
     extrapolation_octaves, Discrepancy, Residual, ASSUMED_RELATIVE_ATTENUATION_STD,
     ASSUMED_RELATIVE_SPEED_STD,
 };
-use super::fit::{
-    nested_start, problem_for, BaseOptimum, CurveSource, Estimate, FitResult, FitSettings, Optimum,
-    PredictedPoint,
-};
+use super::fit::{nested_start, problem_for, BaseOptimum, FitSettings, Optimum};
 use super::flags::{assess, Evidence, Flag, FlagCode, Separated, Severity};
 use super::problem::{Method, Param, Problem, SegmentData, SolvePath, Weighting};
 use super::provenance::{Provenance, SearchError};
+use super::result::{CurveSource, Estimate, FitResult, PredictedPoint};
 use super::uncertainty::{determine, propagate, Determined, WithError};
 use crate::optimize::{FiniteDifference, LevenbergMarquardt};
 use crate::physics::curves::{band_mean, curve, LEAK_BAND_HZ, STANDARD_GRID_HZ};

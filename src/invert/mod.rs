@@ -11,12 +11,13 @@
 //! * findings (`flags`): flags to act on, notes on what the data leave undetermined.
 //!
 //! `fit` searches and checks its optima on the reference path; `assemble` builds the result
-//! once from them; `speed_search` holds the search's speed coordinates and the faces of their
-//! box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search leaves unvisited
-//! across a grazing cliff, and steps an optimum off a cliff's edge; `uncertainty` and `flags`
-//! are pure functions of what the search found; `provenance` records which stage found the
-//! answer and why each stage stopped; `speed` is the image of the search box in (ln c_P, c_S/c_P); `yardstick`
-//! is the independent dense-grid search `bench --verify` judges the fit against.
+//! (`result`) once from them; `speed_search` holds the search's speed coordinates and the
+//! faces of their box (ν_m → ½, the faces of ξ); `probes` looks for the basins a search leaves
+//! unvisited across a grazing cliff, and steps an optimum off a cliff's edge; `uncertainty` and
+//! `flags` are pure functions of what the search found; `provenance` records which stage found
+//! the answer and why each stage stopped; `speed` is the image of the search box in
+//! (ln c_P, c_S/c_P); `yardstick` is the independent dense-grid search `bench --verify` judges
+//! the fit against.
 pub mod assemble;
 pub mod discrepancy;
 pub mod fit;
@@ -24,16 +25,15 @@ pub mod flags;
 pub mod probes;
 pub mod problem;
 pub mod provenance;
+pub mod result;
 pub mod speed;
 pub mod speed_search;
 pub mod uncertainty;
 pub mod yardstick;
 
-pub use fit::{
-    fit_extended, fit_segment, fit_with_effects, BaseOptimum, CurveSource, Estimate, FitResult,
-    FitSettings, PredictedPoint,
-};
+pub use fit::{fit_extended, fit_segment, fit_with_effects, BaseOptimum, FitSettings};
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
 pub use provenance::{Provenance, SearchError, Stage, StageStatistics, StageStop};
+pub use result::{CurveSource, Estimate, FitResult, PredictedPoint};
 pub use uncertainty::{Interval, WithError};

@@ -12,8 +12,8 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::invert::assemble::leak_band_speed_of;
-use crate::invert::fit::{fit_segment, CurveSource, FitResult, FitSettings};
 use crate::invert::uncertainty::WithError;
+use crate::invert::{fit_segment, CurveSource, FitResult, FitSettings};
 use crate::physics::curves::curve;
 use crate::physics::effects::Effect;
 use crate::physics::{Material, System};
