@@ -190,6 +190,65 @@ fn every_section_the_code_cites_is_a_section_of_the_model() {
     );
 }
 
+/// The titles `T` of the citations `docs/search.md, "T"` in `text`, whose comment markers
+/// (`//`, `///`, `//!`) and line breaks are already folded into single spaces.
+fn search_citations(text: &str) -> Vec<String> {
+    const CITE: &str = "docs/search.md, \"";
+    let mut out = Vec::new();
+    let mut rest = text;
+    while let Some(at) = rest.find(CITE) {
+        rest = &rest[at + CITE.len()..];
+        let end = rest.find('"').unwrap_or(rest.len());
+        out.push(rest[..end].to_string());
+        rest = &rest[end..];
+    }
+    out
+}
+
+/// The comments of a source file as one line: each comment's text after its markers, joined
+/// by single spaces, so that a citation broken across lines reads whole.
+fn folded_comments(source: &str) -> String {
+    source
+        .lines()
+        .filter_map(|l| {
+            l.find("//")
+                .map(|at| l[at..].trim_start_matches(['/', '!']))
+        })
+        .flat_map(str::split_whitespace)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[test]
+fn every_search_section_the_code_cites_is_a_heading_of_docs_search() {
+    let doc = read(&root().join("docs/search.md"));
+    let headings: Vec<&str> = doc
+        .lines()
+        .filter_map(|l| l.strip_prefix("## ").or_else(|| l.strip_prefix("### ")))
+        .collect();
+    let mut cited = 0;
+    let mut unresolved = Vec::new();
+    for path in rust_files(&root().join("src")) {
+        for title in search_citations(&folded_comments(&read(&path))) {
+            cited += 1;
+            if !headings.contains(&title.as_str()) {
+                unresolved.push(format!("{}: \"{title}\"", path.display()));
+            }
+        }
+    }
+    assert!(cited >= 5, "only {cited} citations of docs/search.md found");
+    assert!(
+        unresolved.is_empty(),
+        "not a heading of docs/search.md:\n{}",
+        unresolved.join("\n")
+    );
+    // The parser reads a citation broken across comment lines, and only the title.
+    let folded = folded_comments(
+        "/// as measured (evidence:\n    /// docs/search.md, \"The DE\n/// runs\").",
+    );
+    assert_eq!(search_citations(&folded), ["The DE runs"]);
+}
+
 /// Whether `text` holds `WM` followed by four or more digits (the synthetic networks' segment
 /// ids).
 fn has_segment_id(text: &str) -> bool {

@@ -75,22 +75,14 @@ pub const PATH_AGREEMENT_RTOL: f64 = 1e-6;
 
 /// Independent DE runs of the default method.
 pub const DEFAULT_RESTARTS: usize = 2;
-/// Evaluation budget of one default DE run per fitted parameter. On the paper's cast-iron case,
-/// whose global basin is narrow (model §7.8), 2 restarts of 3 × 170 evaluations from 100 members
-/// found the global optimum from 100 of 100 seeds (with 20 members single runs found it in only
-/// 51 of 80). Since the probes look where the DE runs do not, and the gap scan
-/// (`probes::gap_scan`) finds the narrow pieces of the misfit surface itself, 110 suffices: the
-/// three bench cases reach the global optimum from 100 of 100 seeds with any budget from 90 to
-/// 140 (`examples/budget_scan B 2 100`). Against exhaustive searches of realistic networks the
-/// count of segments left above the global optimum does not fall with the budget between 90 and
-/// 140: which segments miss changes with the DE runs' paths.
+/// Evaluation budget of one default DE run per fitted parameter: enough to find the basins the
+/// faces and probes do not, which look where the DE runs do not (evidence: docs/search.md,
+/// "The DE runs").
 pub const DEFAULT_EVALUATIONS_PER_DIMENSION: usize = 110;
 /// The budget of each DE run in (log10 E_m, ν_m, …) that follows one in the speed coordinates,
-/// as a percentage of [`DEFAULT_EVALUATIONS_PER_DIMENSION`] (never below one population). The
-/// run in the speed coordinates, the faces and the probes find most answers; the second run
-/// adds a population spread uniformly in ν_m, which needs few generations: at 40 % a fit
-/// costs about 11 % fewer evaluations and no fresh or hard segment ends further from the
-/// yardstick (docs/performance.md, "Cost").
+/// as a percentage of [`DEFAULT_EVALUATIONS_PER_DIMENSION`] (never below one population): it
+/// adds a population spread uniformly in ν_m, which needs few generations (evidence:
+/// docs/search.md, "The DE runs").
 pub const SECOND_RUN_BUDGET_PERCENT: usize = 40;
 /// Initial population of the default DE (L-SHADE, shrinking linearly to 4 over the budget).
 pub const DEFAULT_POPULATION: usize = 100;
@@ -249,19 +241,17 @@ fn fit_from(
 
 /// Seed stream of the second search of a fit flagged `high_misfit` (far from the restarts'
 /// streams 0, 1, …; the same fit whatever the thread count). Rarely, both DE runs and every
-/// probe end in a basin far above the global one (χ² 60 against 6.3 on a PVC pipe, whose global
-/// optimum the default fit reaches from nearly every other seed). A misfit that high is flagged
-/// (p < [`MISFIT_P_VALUE`](super::flags::MISFIT_P_VALUE)); up to
+/// probe end in a basin far above the global one. A misfit that high is flagged (p <
+/// [`MISFIT_P_VALUE`](super::flags::MISFIT_P_VALUE)); up to
 /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`] a second search runs, so that the flag means the
-/// model, not the search, fails to explain the data.
+/// model, not the search, fails to explain the data (evidence: docs/search.md, "The second
+/// search of a high misfit").
 pub const HIGH_MISFIT_RETRY_STREAM: u64 = 0x6869_6768;
 
 /// χ²/dof up to which a fit flagged `high_misfit` searches once more. Further up the data are
-/// mostly defective (a unit error, an outlier, a wrong record), and no search mends them: on a
-/// 10,000-segment synthetic network with the generator's defects, retrying every such fit took
-/// the run about 10 % longer and brought none within the noise. A search that missed its global
-/// optimum can still end at χ²/dof 10–15 (13.8 on an MDPE pipe without defect), so the limit is
-/// 20, above which nearly every such fit is defective.
+/// mostly defective (a unit error, an outlier, a wrong record), and no search mends them; a
+/// search that missed its global optimum can still end at χ²/dof 10–15 (evidence:
+/// docs/search.md, "The second search of a high misfit").
 pub const HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF: f64 = 20.0;
 
 /// The problem of fitting `data` with `settings`.
@@ -505,10 +495,7 @@ fn search(
         // Where the best the probes leave lies near grazing (`Pieces::near_grazing`), the gap
         // scan once more from it: its targets follow the best's model phase speeds, and the
         // best has moved since the first scan, often along a flat valley, by less in χ² than
-        // the rounds above need to go on. Against exhaustive searches of realistic networks
-        // this halved the segments left more than 0.1 above the global optimum, for 35–50
-        // evaluations a fit more; the whole probe sequence again, or a longer DE run with its
-        // own probes, cost more and mended no more.
+        // the rounds above need to go on (evidence: docs/search.md, "The rescan near grazing").
         if s.best()
             .is_some_and(|i| pieces.near_grazing(&s.optima[i].x))
         {
@@ -517,17 +504,14 @@ fn search(
             });
         }
     }
-    // The best optimum's polish goes on where it stopped still descending: only the best's,
-    // since only the answer needs the bottom of its valley. Central differences there: in a
-    // narrow curved valley a forward-difference Jacobian's error across the valley swamps the
-    // gradient along it, and the polish stops short (by 0.13 in χ² on an MDPE pipe).
-    // The candidates' polishes stop at a loose tolerance ([`CANDIDATE_POLISH_RTOL`]); the
-    // best's goes on to LM's own, with forward differences where it stopped on that
-    // tolerance. Where it stopped at its iteration cap, still descending, it goes on with
-    // central differences below instead: forward iterations can cross onto a grazing cliff
-    // where the search path and the reference path rate the soil differently (χ² 5.4 against
-    // 19.6 on a ductile-iron pipe), and the answer falls back to a worse basin, while the
-    // central polish ends within 0.1 of the exhaustive search.
+    // The best optimum's polish goes on: only the best's, since only the answer needs the
+    // bottom of its valley. The candidates' polishes stop at a loose tolerance
+    // ([`CANDIDATE_POLISH_RTOL`]); the best's goes on to LM's own, with forward differences
+    // where it stopped on that tolerance, and with central differences where it stopped at
+    // its iteration cap, still descending. In a narrow curved valley a forward-difference
+    // Jacobian's error across the valley swamps the gradient along it, and forward iterations
+    // can cross onto a grazing cliff (P44) where the search path and the reference path rate
+    // the soil differently (evidence: docs/search.md, "The continued polish").
     if let Some(i) = s.best() {
         let begun = s.begin(problem);
         let mut polished = 0;
@@ -571,9 +555,9 @@ fn search(
 
 /// Rounds of the grazing probe at most: another round runs from the best optimum
 /// when the last improved it by more than [`GRAZING_ROUND_GAIN`] in χ², since the pieces
-/// next to a new best are others. A first round can move the best to a piece from which the
-/// soil, moved between two measured phase speeds, walks to a far better optimum (χ² 10.3 →
-/// 4.8 on a realistic pipe in the second round).
+/// next to a new best are others: from the piece a first round moved the best to, the soil
+/// moved between two measured phase speeds can reach a far better optimum (evidence:
+/// docs/search.md, "The grazing probe").
 pub const GRAZING_ROUNDS: usize = 3;
 /// See [`GRAZING_ROUNDS`].
 pub const GRAZING_ROUND_GAIN: f64 = 0.01;
@@ -581,9 +565,8 @@ pub const GRAZING_ROUND_GAIN: f64 = 0.01;
 /// Levenberg–Marquardt iterations of the polish of each optimum of the search.
 pub const POLISH_ITERATIONS: usize = 30;
 /// Further iterations for the best optimum when its polish was still descending after
-/// [`POLISH_ITERATIONS`]. In a flat valley LM creeps: on the bench's cast-iron case the data fix
-/// c_P and nearly only ξ·c_S, and 30 iterations stop 0.03–0.13 in χ² above the valley's bottom
-/// on 85 of 100 seeds (at ξ = 1; `examples/budget_scan 170 2 100`), 100 more reach it on all.
+/// [`POLISH_ITERATIONS`]: in a flat valley, where the data fix c_P and nearly only ξ·c_S, LM
+/// creeps (evidence: docs/search.md, "The continued polish").
 pub const POLISH_MORE_ITERATIONS: usize = 100;
 
 /// The paper's answer is the best member of the final population (P59): no polish. The
@@ -700,10 +683,7 @@ fn run(
         // reference path has no root at: the caller searches again on the safe path
         // (continuation ramp wherever the soil moves the root far from in vacuo), whose answer
         // stands on the reference path's misfit. Otherwise a worse basin could stand in for a
-        // better one the fast path saw wrongly: on an HDPE pipe of the stress network
-        // (tests/stress.rs) the reference path finds no root at the two DE optima of the fast
-        // search (χ² 33.7 there), and a probe's optimum (χ² 1532) would be the
-        // answer; the safe path's is χ² 33.7.
+        // better one the fast path saw wrongly (evidence: docs/search.md, "The safe path").
         Some(c) if (c.agree && !unconfirmed) || problem.path != SolvePath::Fast => {
             let provenance = Provenance {
                 winner: Some(found_by[c.i]),
@@ -854,10 +834,8 @@ enum Depth {
 
 /// Relative tolerance (LM's `ftol` and `xtol`) of the polish of a candidate of the search,
 /// where only the ranking of the optima matters; the best is then polished to the bottom
-/// (`Depth::Answer`). A candidate's polish spent its last iterations gaining less than this.
-/// On a plastic-heavy realistic network it cut the evaluations a fit from 1,723 (every polish
-/// to LM's own tolerances) to 1,615 and left the same segments above the exhaustive search's
-/// χ², while 1e-6 (1,585) added misses of 0.10–0.16.
+/// (`Depth::Answer`). A candidate's polish spent its last iterations gaining less than this
+/// (evidence: docs/search.md, "The continued polish").
 pub const CANDIDATE_POLISH_RTOL: f64 = 1e-7;
 
 /// Levenberg–Marquardt polish of a candidate optimum of the search inside the bounds.

@@ -36,9 +36,10 @@ pub(super) struct Pieces<'p, 'a> {
 /// search's), and the probes often start them from the same point again: a later round of the
 /// grazing probe, or its scan again near grazing, from a best that did not move starts its own
 /// polishes and walks where the round before did. Answered from here, each fit's result is
-/// the same to the bit, with fewer evaluations; the saving is largest near grazing, where a
-/// walk's evaluation costs 10–25 times one of the DE runs' (the root's continuation halves its
-/// steps, see `physics::solver::NEWTON_MAX_ITER`).
+/// the same to the bit, with fewer evaluations; the saving is largest near grazing (P44),
+/// where the root's continuation halves its steps (see `physics::solver::NEWTON_MAX_ITER`) and
+/// an evaluation costs many times one of the DE runs' (evidence: docs/search.md, "The probes'
+/// memory of their fits (Trodden)").
 struct Trodden<T> {
     seen: RefCell<Vec<(Vec<u64>, Bounds, T)>>,
 }
@@ -174,9 +175,8 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// The grazing probe: whether a deeper basin lies across a grazing cliff from the best
 /// optimum. Where the soil's c_P lies among the measured phase speeds (plastic pipes in stiff
 /// soil) the pieces (see [`Pieces`]) are narrow, in c_P and in ξ (which moves the phase
-/// speeds), and the DE runs settle in one of them: a search can end at χ² 9.50 with c_P = 507
-/// m/s, just below a measured phase speed of 507.3 m/s, while the piece above reaches 9.10; or
-/// at 5.58 with ξ = 0.81, while the same soil at ξ = 1 has 4.00.
+/// speeds), and the DE runs settle in one of them while the piece across a cliff, or the same
+/// soil at another ξ, lies deeper (evidence: docs/search.md, "The grazing probe").
 ///
 /// Candidates: the best optimum's soil with c_P at the middle of each gap between the sorted
 /// measured phase speeds and just outside their range ([`GRAZING_PROBE_MARGIN`]), c_S kept, at
@@ -187,18 +187,16 @@ impl<'p, 'a> Pieces<'p, 'a> {
 /// each pattern is a start, and the [`GRAZING_PROBE_POLISHES`] best starts are polished, and
 /// walked from by the downhill simplex ([`walk`]; the walk's optimum
 /// polished in turn). A polish from inside a narrow piece often leaves it downhill, into the
-/// basin it came from, where the simplex stays in the piece and follows its edges: a PVC pipe
-/// ended at χ² 4.11 (c_P 349 m/s), and the walk from the soil at c_P 527 m/s and ξ = 1 reaches
-/// the exhaustive search's 3.24 (c_P 529 m/s),
-/// while the polish from there returns to 4.11. (A polish held within its start's piece did
-/// no better: a piece is not always connected, and its walls stop the polish short.)
+/// basin it came from, where the simplex stays in the piece and follows its edges. (Holding a
+/// polish within its start's piece does not mend this: a piece is not always connected, and
+/// its walls stop the polish short.)
 ///
 /// Also the best candidate (by the same rule) at the middle in ln c_P of each outer piece, c_S
 /// kept: below the measured phase speeds down to c_P = √2 c_S (ν_m = 0), and above them up to
 /// c_S/r(ν_max). Where the data fix c_S and leave c_P nearly free, a piece's basin can lie far
 /// from its edge, and the polish from just outside the measured speeds stops at the cliff. As
-/// a start of its own it does not displace the gaps' (in their place it cost an
-/// HDPE pipe near grazing 0.9 in χ²); it is polished and walked from in the same way.
+/// a start of its own it does not displace the gaps'; it is polished and walked from in the
+/// same way (evidence: docs/search.md, "The grazing probe").
 ///
 /// With `scan`, also the best of the gap scan's starts ([`gap_scan`]), polished and walked
 /// from in the same way (the search scans in the probe's first round).
@@ -357,13 +355,11 @@ fn gap_scan_targets(v: &[f64], outside: &[f64], highest: f64) -> Vec<f64> {
 /// c_P = c_i·(1 + [`GAP_SCAN_ABOVE_GRAZING`]) for each frequency i, c_i = ω_i/Re k_i its
 /// model phase speed (P2), where that frequency's compressional wave has just stopped radiating
 /// (q_P turns evanescent as c_P passes c_i, the grazing cliff of P44). Moving c_P moves c_i
-/// too, so the target is
-/// found from the best's c_i and then once more from c_i at the moved soil (c_S and the rest
-/// of the best kept): one evaluation a frequency. On an MDPE pipe whose best lies at c_P 366.4
-/// m/s, the fourth frequency's c_4 = 445.52 m/s; at c_P 445.97 m/s c_4 is 446.48, and at the
-/// updated target, 446.93 m/s, χ² is 11.25 with the best's c_S and ξ, against the best's 14.38
-/// (the exhaustive search's 10.38 lies at c_P 449.09 m/s, 0.3 % above its own c_4 of 447.78).
-/// Soils outside the search box give no target.
+/// too, and a target from the best's c_i alone can fall below the moved c_i, on the side where
+/// the frequency still radiates; so the target is found from the best's c_i and then once more
+/// from c_i at the moved soil (c_S and the rest of the best kept): one evaluation a frequency.
+/// Soils outside the search box give no target (evidence: docs/search.md, "The gap scan's
+/// targets (GAP_SCAN_OFFSET, GAP_SCAN_BELOW_GRAZING, GAP_SCAN_ABOVE_GRAZING)").
 fn above_grazing_targets(
     pieces: &Pieces<'_, '_>,
     best: &Optimum,
@@ -441,16 +437,13 @@ impl LeastSquares for HeldCp<'_, '_, '_> {
 /// [`GAP_SCAN_ITERATIONS`] iterations, loose tolerances) and c_S kept within ν_m's range at
 /// that c_P. For a plastic pipe the data fix c_S to a few per cent and ξ with it, and the
 /// valley moves from piece to piece, so the best's own c_S and ξ, moved to another piece, can
-/// lie far up its walls: an MDPE pipe ended at χ² 15.80 with c_P = 3,676 m/s, c_S 164 m/s and
-/// ξ 0.65; at c_P 492 m/s (between the measured phase speeds 490 and 494) its c_S and ξ give
-/// about 30, while the valley there (c_S 161 m/s, ξ 0.86) has 14.69, the exhaustive search's
-/// piece (14.68).
+/// lie far up its walls.
 ///
 /// Each target starts from the previous one's answer or from the best's own c_S and ξ,
-/// whichever fits better there (one evaluation each). Always from the previous answer, a scan
-/// that crossed a piece fitting badly carried its c_S and ξ on and could end 1.2 above the
-/// exhaustive χ²; from the best's own after each piece that fits badly, the fits took about 140
-/// evaluations more (8 %).
+/// whichever fits better there (one evaluation each): the previous answer follows the valley
+/// from piece to piece, and the best's own restarts the scan after a piece that fits badly,
+/// whose c_S and ξ would otherwise be carried on (evidence: docs/search.md, "The gap scan
+/// (gap_scan)").
 fn gap_scan(pieces: &Pieces<'_, '_>, targets: &[f64], best: &Optimum) -> Vec<Vec<f64>> {
     let problem = pieces.problem;
     let (_, c_s) = pieces.speeds(&best.x);
@@ -543,48 +536,42 @@ fn walk(problem: &Problem<'_>, bounds: &Bounds, x: &[f64]) -> Option<Optimum> {
     Some(Optimum { x: r.x, cost: r.f })
 }
 
-/// A walk's initial simplex: steps of this fraction of each parameter's range. Along two
-/// cliff edges of realistic pipes (χ² 8.74 and 6.60 where a polish stopped), steps of 1e-4,
-/// 1e-3, 1e-2 and 0.1 reach χ² 8.58, 8.46, 8.38 and 8.42 on the first; on the second steps of
-/// 3e-2 stall at the start and the others reach 5.92.
+/// A walk's initial simplex: steps of this fraction of each parameter's range, for a simplex
+/// that follows a grazing cliff's edge (P44) where a polish stopped (evidence: docs/search.md,
+/// "The walk (WALK_STEP, WALK_EVALUATIONS, WALK_STALL)").
 pub const WALK_STEP: f64 = 1e-2;
 /// A walk's budget of evaluations.
 pub const WALK_EVALUATIONS: usize = 400;
 /// A walk stops when χ² fell by less than `.1` over the last `.0` evaluations: most walks
-/// start where a valley ends, and gain nothing; stopping after 40 evaluations without gain left
-/// the first edge of [`WALK_STEP`]'s description at 8.70.
+/// start where a valley ends, and gain nothing, while one along a cliff's edge gains slowly and
+/// needs the longer window (evidence: docs/search.md, "The walk (WALK_STEP, WALK_EVALUATIONS,
+/// WALK_STALL)").
 pub const WALK_STALL: (usize, f64) = (80, 1e-4);
 
 /// The grazing probe's c_P just outside the range of the measured phase speeds, relative.
 pub const GRAZING_PROBE_MARGIN: f64 = 0.02;
 /// The gap scan's targets of c_P: each measured phase speed times 1 ∓ this (and the
 /// grazing probe's two c_P outside their range). A narrow piece often lies right next to a
-/// measured phase speed, where one frequency's wave is just grazing, not midway between two:
-/// against exhaustive searches of plastic-heavy networks, with the midpoints of the gaps as
-/// targets 8 segments stayed more than 0.1 above the global optimum, with offsets of 0.2 % 6,
-/// 0.3 % 5, 0.4 % 4. A gap narrower than twice this has no such target inside it, so its
-/// middle is a target too: the phase speeds of a metal pipe often lie within 1 % of each
-/// other, and a cast-iron pipe ended at χ² 5.59 while the gap from 1,335.4 to 1,338.1 m/s holds
-/// the exhaustive search's 5.16. Every gap's middle as a target would cost about 70
-/// evaluations a fit, against 30 for the narrow gaps', and changed no fit's χ².
+/// measured phase speed, where one frequency's wave is just grazing (P44), not midway between
+/// two. A gap narrower than twice this has no such target inside it, so its middle is a target
+/// too: the phase speeds of a metal pipe often lie within 1 % of each other. The middles of
+/// wider gaps are not targets (evidence: docs/search.md, "The gap scan's targets
+/// (GAP_SCAN_OFFSET, GAP_SCAN_BELOW_GRAZING, GAP_SCAN_ABOVE_GRAZING)").
 pub const GAP_SCAN_OFFSET: f64 = 0.004;
 /// The gap scan's target just below the best optimum's highest model phase speed, relative.
-/// As c_P falls from above every phase speed, that frequency is the first
-/// to radiate compressional waves, and just past its grazing point the misfit can dip in a
-/// piece too narrow for the targets next to the measured phase speeds, which the model's may
-/// miss by a per cent: a cast-iron pipe ended at χ² 1.37 with c_P 1,359 m/s, its highest model
-/// phase speed 1,337.75 m/s, while the exhaustive search's 0.57 lies at c_P 1,336.12 m/s.
-/// Targets below every model phase speed cost 66 evaluations a fit against this one's 15 and
-/// mended nothing more.
+/// As c_P falls from above every phase speed, that frequency is the first to radiate
+/// compressional waves, and just past its grazing point (P44) the misfit can dip in a piece
+/// too narrow for the targets next to the measured phase speeds, which the model's may miss by
+/// a per cent. The grazing points below it are not targets (evidence: docs/search.md, "The gap
+/// scan's targets (GAP_SCAN_OFFSET, GAP_SCAN_BELOW_GRAZING, GAP_SCAN_ABOVE_GRAZING)").
 pub const GAP_SCAN_BELOW_GRAZING: f64 = 1e-3;
 /// The gap scan's targets just above each of the best's model phase speeds, relative
 /// (`above_grazing_targets`); a target within [`GAP_SCAN_OFFSET`] of one of the
 /// other targets is dropped. Just past a grazing point (P44) on the side where the frequency's
 /// compressional wave no longer radiates, the misfit can dip in a piece 0.2 % wide, which
 /// neither the targets next to the measured phase speeds nor the one below the highest model
-/// phase speed reach (a PVC pipe: χ² 18.49 against 16.92 at c_P 507.77 m/s, 0.35 % above its
-/// model phase speed 506.01 m/s). These targets cost 28 evaluations a fit (39 on plastic-heavy
-/// networks); kept within 0.1 % of the others, 50 (67); all kept, 70 (86).
+/// phase speed reach (evidence: docs/search.md, "The gap scan's targets (GAP_SCAN_OFFSET,
+/// GAP_SCAN_BELOW_GRAZING, GAP_SCAN_ABOVE_GRAZING)").
 pub const GAP_SCAN_ABOVE_GRAZING: f64 = 1e-3;
 /// The gap scan's starts polished and walked from, best first, besides the grazing probe's
 /// own [`GRAZING_PROBE_POLISHES`].
@@ -602,32 +589,29 @@ pub const GRAZING_PROBE_CONTACTS: [f64; 11] =
 /// Starts of the grazing probe polished and walked from, best first.
 pub const GRAZING_PROBE_POLISHES: usize = 2;
 /// The grazing probe polishes only starts whose misfit is at most this multiple of the
-/// best's. Measured with the probe polishing without this limit on realistic networks: of
-/// 2,719 polishes, 14 improved on the best by more than 0.01 in χ², all from starts at most
-/// 1.43 times the best's misfit; the limit skips about 9 in 10.
+/// best's: a start further up the landscape seldom leads below the best, and the limit skips
+/// most polishes (evidence: docs/search.md, "The grazing probe's gate (GRAZING_PROBE_GATE)").
 pub const GRAZING_PROBE_GATE: f64 = 2.0;
 
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
 pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
 /// Further moves of c_P, tried after [`OFF_CLIFF_STEPS`] where the reference path has roots at
-/// the optimum but not the search path's. A PVC pipe's search ended at χ² 14.84 with c_P =
-/// 491.7 m/s, where the reference path takes another root at the highest frequency (phase
-/// speed 483.5 against the search path's 488.1 m/s) and rates it 20.85; the paths disagree up
-/// to c_P × (1 − 1e-3) and agree at × (1 − 3e-3), at 14.88 (the exhaustive search's 14.85).
-/// Where the reference path has no root at the optimum, the fast path's ranking is not trusted
-/// and the fit searches again on the safe path (see `fit::run`) unless a move of
-/// [`OFF_CLIFF_STEPS`] is confirmed: a longer move there would stand in for that search, and
-/// end further from the global optimum.
+/// the optimum but not the search path's: near a grazing cliff (P44) the reference path can
+/// take another root at a frequency over a wider band of c_P than those moves cross. Where the
+/// reference path has no root at the optimum, the fast path's ranking is not trusted and the
+/// fit searches again on the safe path (see `fit::run`) unless a move of [`OFF_CLIFF_STEPS`] is
+/// confirmed: a longer move there would stand in for that search, and end further from the
+/// global optimum (evidence: docs/search.md, "Stepping off a cliff (OFF_CLIFF_STEPS,
+/// FURTHER_OFF_CLIFF_STEPS)").
 pub const FURTHER_OFF_CLIFF_STEPS: [f64; 2] = [3e-3, 1e-2];
 
 /// Points just off a grazing cliff next to `x`, to be tried in turn. Where χ² falls towards a
 /// cliff (see [`Pieces`]) the search's optimum sits on its edge, and there the search path and
 /// the reference path can take roots on either side of it. Just off the edge, on the side the
-/// search path rates lower, they agree: an optimum at c_P = 563.45 m/s had χ² 12.19 on the
-/// search path and 13.11 on the reference path; at c_P × (1 − 1e-4) both give 12.19. For each
-/// step of [`OFF_CLIFF_STEPS`],
-/// and of [`FURTHER_OFF_CLIFF_STEPS`] when `rooted` (the reference path has roots at `x`), the
-/// side the search path rates lower.
+/// search path rates lower, they agree (evidence: docs/search.md, "Stepping off a cliff
+/// (OFF_CLIFF_STEPS, FURTHER_OFF_CLIFF_STEPS)"). For each step of [`OFF_CLIFF_STEPS`], and of
+/// [`FURTHER_OFF_CLIFF_STEPS`] when `rooted` (the reference path has roots at `x`), the side
+/// the search path rates lower.
 pub(super) fn off_cliff(pieces: &Pieces<'_, '_>, x: &[f64], rooted: bool) -> Vec<Vec<f64>> {
     let (c_p, c_s) = pieces.speeds(x);
     let further: &[f64] = if rooted {

@@ -134,8 +134,8 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 /// * from its soil at the same c_P moved to r = r_min (ν_m → ½, the incompressible face: the
 ///   fluid-like end of a valley of constant c_P, c_S → 0), and, when it lies on that face, to
 ///   r = r_max (ν_m = 0: the valley's other end; the data of a metal pipe fix c_P and barely
-///   c_S, so χ² changes little along the valley, and a polish from one end does not cross it:
-///   a ductile-iron pipe ended at χ² 13.43 at ν_m 0.499, the other end has 13.21);
+///   c_S, so χ² changes little along the valley, and a polish from one end does not cross it;
+///   evidence: docs/search.md, "The faces in speed coordinates");
 /// * when it lies on a face of ξ, from its soil at the opposite face (ξ enters the soil's
 ///   stiffness as a weight, §4.10, so a misfit falling towards one face can have a deeper
 ///   basin at the other);
