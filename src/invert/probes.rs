@@ -591,7 +591,7 @@ pub const GRAZING_PROBE_POLISHES: usize = 2;
 /// The grazing probe polishes only starts whose misfit is at most this multiple of the
 /// best's: a start further up the landscape seldom leads below the best, and the limit skips
 /// most polishes (evidence: docs/search.md, "The grazing probe's gate (GRAZING_PROBE_GATE)").
-pub const GRAZING_PROBE_GATE: f64 = 2.0;
+pub const GRAZING_PROBE_GATE: f64 = 4.0;
 
 /// Relative moves of c_P (c_S and ξ kept) that take an optimum off a grazing cliff.
 pub const OFF_CLIFF_STEPS: [f64; 2] = [1e-4, 1e-3];
