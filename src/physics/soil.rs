@@ -56,8 +56,8 @@ pub fn dln_cs_dnu(nu: f64) -> f64 {
     -0.5 / (1.0 + nu)
 }
 
-/// Poisson's ratio ν_m of a soil with c_S/c_P = r, the inverse of [`shear_to_compressional`]:
-/// (1 − 2r²)/(2(1 − r²)); `None` outside 0 < r ≤ 1/√2 (ν_m ≥ 0, ν_m < ½).
+/// Poisson's ratio ν_m of a soil with c_S/c_P = r, the inverse of [`shear_to_compressional`]
+/// (P63–P64): (1 − 2r²)/(2(1 − r²)); `None` outside 0 < r ≤ 1/√2 (ν_m ≥ 0, ν_m < ½).
 pub fn poisson_of_ratio(r: f64) -> Option<f64> {
     let r2 = r * r;
     (r > 0.0 && r2 <= 0.5 + 1e-15).then(|| ((1.0 - 2.0 * r2) / (2.0 * (1.0 - r2))).max(0.0))
@@ -71,7 +71,8 @@ pub fn speeds_of(e: f64, nu: f64, rho: f64) -> (f64, f64) {
 }
 
 /// (E_m in Pa, ν_m) of the soil with ln c_P = `ln_cp` and c_S/c_P = `r`, density `rho`: the
-/// inverse of [`speeds_of`]. `None` where r gives no Poisson's ratio in [0, ½).
+/// inverse of [`speeds_of`] (P63–P64), ν_m from r and E_m from M = ρ_m c_P² at that ν_m. `None`
+/// where r gives no Poisson's ratio in [0, ½).
 pub fn soil_of(ln_cp: f64, r: f64, rho: f64) -> Option<(f64, f64)> {
     let nu = poisson_of_ratio(r)?;
     let m = rho * (2.0 * ln_cp).exp();
