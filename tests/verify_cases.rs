@@ -353,3 +353,26 @@ fn finds_a_soft_basin_along_the_face_nu_zero() {
         "the search ended at 3.22 past grazing",
     );
 }
+
+/// Two segments, each ended by fit algorithm 25 in another piece than the best known one,
+/// which the grazing probe's candidates reach only from a start more than twice the best misfit
+/// (the gate was 2; it is 4 since algorithm 26): a cast-iron pipe at χ² 12.33 against the
+/// yardstick's 11.16, and an MDPE pipe of a plastic-heavy network at 11.26, where the yardstick
+/// (a grid in the speed coordinates) does no better and the search with the gate of 4 reaches
+/// 6.64.
+#[test]
+fn crosses_a_cliff_from_a_candidate_well_above_the_best() {
+    verify_below(
+        990031,
+        "WM10104",
+        11.3,
+        "the search ended at 12.33 with the gate of 2",
+    );
+    verify_below_of(
+        991034,
+        MaterialMix::PlasticHeavy,
+        "WM10411",
+        7.0,
+        "the search ended at 11.26 with the gate of 2",
+    );
+}
