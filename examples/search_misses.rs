@@ -11,7 +11,9 @@
 //! do not depend on JOBS. With ROWS=1, every segment's χ² and evaluations are printed too.
 //! With YARDSTICK=0 the yardstick is not run (about 1 s a segment): with ROWS=1, a fast paired
 //! comparison of two builds, segment by segment; only the segments whose χ² rose need the
-//! yardstick (ONLY=ID) to tell a new miss.
+//! yardstick (ONLY=ID) to tell a new miss. RESTARTS=N and EVALUATIONS=N set the fit's DE runs
+//! and their budget per parameter (`FitSettings`; the yardstick keeps the defaults), to
+//! measure what a larger global stage buys.
 
 use std::time::Instant;
 
@@ -61,6 +63,20 @@ fn main() {
     let exhaustive = arg(6) == "exhaustive";
     let with_yardstick = std::env::var("YARDSTICK").map_or(true, |v| v != "0");
     let settings = FitSettings::default();
+    let budget = |name: &str, default: usize| -> usize {
+        match std::env::var(name) {
+            Ok(v) => v.parse().unwrap_or_else(|e| {
+                eprintln!("{name}={v}: {e}");
+                std::process::exit(2);
+            }),
+            Err(_) => default,
+        }
+    };
+    let fit_settings = FitSettings {
+        restarts: budget("RESTARTS", settings.restarts),
+        evaluations_per_dimension: budget("EVALUATIONS", settings.evaluations_per_dimension),
+        ..settings.clone()
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.max(1))
         .build()
@@ -77,7 +93,7 @@ fn main() {
             net.par_iter()
                 .map(|seg| {
                     let t = thread_cpu_ms();
-                    let fit = fit_segment(&seg.data, &settings, seg.seed);
+                    let fit = fit_segment(&seg.data, &fit_settings, seg.seed);
                     let ms = thread_cpu_ms() - t;
                     let yard = with_yardstick.then(|| yardstick(&seg.data, &settings));
                     let yard = yard.as_ref().and_then(|y| y.as_ref().ok());

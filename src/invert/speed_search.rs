@@ -124,6 +124,13 @@ pub const FACE_FAR_PAST_GRAZING: f64 = 2.0;
 pub const FACE_BELOW_SPAN: f64 = 8.0;
 /// Local minima of that line polished at most.
 pub const FACE_BELOW_STARTS: usize = 2;
+/// Step in ln c_P of the line at constant c_S from the face's minima at the weakest contact
+/// (5 % in c_P).
+pub const FACE_SHEAR_LINE_STEP: f64 = 0.05;
+/// That line's best point is polished only when its misfit is at most this multiple of the
+/// best optimum's (the grazing probe's gate, `probes::GRAZING_PROBE_GATE`, for the same
+/// reason: a start well above the best seldom polishes below it).
+pub const FACE_SHEAR_LINE_GATE: f64 = 4.0;
 /// The best of the stiffest end is polished only when its misfit is at most this multiple of
 /// the best optimum's.
 pub const FACE_STIFF_GATE: f64 = 2.0;
@@ -148,7 +155,16 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 ///   below grazing (c_P from v̄/[`FACE_BELOW_SPAN`] to v̄, where every soil wave radiates),
 ///   each point the best over the same values of ξ. Towards ξ = 0 the shear coupling fades
 ///   and the misfit depends on c_P nearly alone; its basins along c_P lie far from the best
-///   optimum's c_P, where no other start reaches them.
+///   optimum's c_P, where no other start reaches them;
+/// * at the weakest contact (ξ at its lower bound), from the best point of a line at constant
+///   c_S that starts at each of the best [`FACE_BELOW_STARTS`] local minima of that ξ's own line
+///   along the face r = r_max and rises in c_P (r falling) every [`FACE_SHEAR_LINE_STEP`] up
+///   to v̄, where that point is below its start (gated by [`FACE_SHEAR_LINE_GATE`]). Where the
+///   data fix c_S (plastic pipes, P47) and the contact is weak, the valley runs along constant
+///   c_S, below the measured phase speeds and narrow in ξ, and the face r = r_max meets it only
+///   at its soft end, far up its walls (evidence: docs/search.md, "The faces in speed
+///   coordinates"). The line starts from ξ's own minima, not the best over ξ: at another ξ the
+///   valley lies at another c_S.
 pub(super) fn faces(
     problem: &Problem<'_>,
     bounds: &Bounds,
@@ -207,22 +223,33 @@ pub(super) fn faces(
         / n;
     // The best soil with ln c_P = l and c_S/c_P = r over the values of ξ tried (the first of
     // equals), with its misfit; `None` where none has a finite one.
-    let best_over_xi = |l: f64, r: f64| -> Option<(f64, Vec<f64>)> {
-        let mut at: Option<(f64, Vec<f64>)> = None;
-        for &xi in &xis {
-            let mut y = y_best.clone();
-            (y[je], y[jn]) = (l, r);
-            if let (Some(j), Some(xi)) = (jx, xi) {
-                y[j] = xi;
-            }
-            let Some(x) = speeds.x(&y) else { continue };
-            let f = problem.value(&x);
-            if f.is_finite() && at.as_ref().is_none_or(|(g, _)| f < *g) {
-                at = Some((f, x));
-            }
-        }
-        at
+    // The soil with ln c_P = l and c_S/c_P = r at each value of ξ tried, with its misfit
+    // (`None` where it has none).
+    let over_xi = |l: f64, r: f64| -> Vec<Option<(f64, Vec<f64>)>> {
+        xis.iter()
+            .map(|&xi| {
+                let mut y = y_best.clone();
+                (y[je], y[jn]) = (l, r);
+                if let (Some(j), Some(xi)) = (jx, xi) {
+                    y[j] = xi;
+                }
+                let x = speeds.x(&y)?;
+                let f = problem.value(&x);
+                f.is_finite().then_some((f, x))
+            })
+            .collect()
     };
+    // The best of those (the first of equals).
+    let lowest = |at: &[Option<(f64, Vec<f64>)>]| -> Option<(f64, Vec<f64>)> {
+        at.iter()
+            .flatten()
+            .fold(None::<&(f64, Vec<f64>)>, |b, p| match b {
+                Some(q) if q.0 <= p.0 => Some(q),
+                _ => Some(p),
+            })
+            .cloned()
+    };
+    let best_over_xi = |l: f64, r: f64| lowest(&over_xi(l, r));
     if let (true, Some((_, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_min)) {
         // The best point of each class: [up to FACE_FAR_PAST_GRAZING v̄, beyond, stiffest].
         let mut best_of: [Option<(f64, Vec<f64>)>; 3] = [None, None, None];
@@ -255,27 +282,65 @@ pub(super) fn faces(
     if let (true, Some((bottom, top))) = (v > 0.0, speeds.region.ln_cp_range_at(r_max)) {
         // The line along the face r = r_max below grazing, every FACE_LN_CP_STEP from just
         // below v̄ down to v̄/FACE_BELOW_SPAN; its local minima, best first.
-        let mut line: Vec<Option<(f64, Vec<f64>)>> = Vec::new();
+        let (mut ls, mut grid) = (Vec::new(), Vec::new());
         let mut l = (v.ln() - 0.5 * FACE_LN_CP_STEP).min(top);
         while l >= (v / FACE_BELOW_SPAN).ln().max(bottom) {
-            line.push(best_over_xi(l, r_max));
+            grid.push(over_xi(l, r_max));
+            ls.push(l);
             l -= FACE_LN_CP_STEP;
         }
+        let line: Vec<_> = grid.iter().map(|at| lowest(at)).collect();
+        let minima_of = |f: &dyn Fn(usize) -> f64| {
+            let mut minima: Vec<usize> = (0..ls.len())
+                .filter(|&i| f(i).is_finite() && f(i) <= f(i + 1) && (i == 0 || f(i) <= f(i - 1)))
+                .collect();
+            minima.sort_by(|&a, &b| f(a).total_cmp(&f(b)));
+            minima.truncate(FACE_BELOW_STARTS);
+            minima
+        };
         let f = |i: usize| {
             line.get(i)
                 .and_then(Option::as_ref)
                 .map_or(f64::INFINITY, |p| p.0)
         };
-        let mut minima: Vec<usize> = (0..line.len())
-            .filter(|&i| f(i).is_finite() && f(i) <= f(i + 1) && (i == 0 || f(i) <= f(i - 1)))
-            .collect();
-        minima.sort_by(|&a, &b| f(a).total_cmp(&f(b)));
         starts.extend(
-            minima
+            minima_of(&f)
                 .into_iter()
-                .take(FACE_BELOW_STARTS)
                 .filter_map(|i| line[i].as_ref().map(|(_, x)| x.clone())),
         );
+        // At the weakest contact (ξ at its lower bound), from the local minima of that ξ's own
+        // line, the line of their c_S up to just below v̄ (r falls as c_P rises); its lowest
+        // point where it is below its start and within FACE_SHEAR_LINE_GATE of the best.
+        let weak = jx.and_then(|j| {
+            xis.iter()
+                .position(|xi| xi.unwrap_or(best.x[j]) == bounds.lower()[j])
+                .map(|k| (k, bounds.lower()[j], j))
+        });
+        if let Some((k, xi, j)) = weak {
+            let fk = |i: usize| {
+                grid.get(i)
+                    .and_then(|at| at[k].as_ref())
+                    .map_or(f64::INFINITY, |p| p.0)
+            };
+            for i in minima_of(&fk) {
+                let ln_cs = ls[i] + r_max.ln();
+                let mut best_on: Option<(f64, Vec<f64>)> = None;
+                let mut l = ls[i] + FACE_SHEAR_LINE_STEP;
+                while l < v.ln() && (ln_cs - l).exp() >= r_min {
+                    let mut y = y_best.clone();
+                    (y[je], y[jn], y[j]) = (l, (ln_cs - l).exp(), xi);
+                    if let Some(x) = speeds.x(&y) {
+                        let g = problem.value(&x);
+                        if g.is_finite() && best_on.as_ref().is_none_or(|(h, _)| g < *h) {
+                            best_on = Some((g, x));
+                        }
+                    }
+                    l += FACE_SHEAR_LINE_STEP;
+                }
+                let worth = |g: f64| g < fk(i) && g <= FACE_SHEAR_LINE_GATE * best.cost;
+                starts.extend(best_on.filter(|(g, _)| worth(*g)).map(|(_, x)| x));
+            }
+        }
     }
     starts
         .iter()
