@@ -221,32 +221,24 @@ pub(super) fn faces(
         .map(|m| m.phase_speed())
         .sum::<f64>()
         / n;
-    // The best soil with ln c_P = l and c_S/c_P = r over the values of ξ tried (the first of
-    // equals), with its misfit; `None` where none has a finite one.
-    // The soil with ln c_P = l and c_S/c_P = r at each value of ξ tried, with its misfit
-    // (`None` where it has none).
-    let over_xi = |l: f64, r: f64| -> Vec<Option<(f64, Vec<f64>)>> {
-        xis.iter()
-            .map(|&xi| {
-                let mut y = y_best.clone();
-                (y[je], y[jn]) = (l, r);
-                if let (Some(j), Some(xi)) = (jx, xi) {
-                    y[j] = xi;
-                }
-                let x = speeds.x(&y)?;
-                let f = problem.value(&x);
-                f.is_finite().then_some((f, x))
-            })
-            .collect()
+    // The soil with ln c_P = l, c_S/c_P = r and ξ (the best's where `None`), with its misfit;
+    // `None` where it has none.
+    let at = |l: f64, r: f64, xi: Option<f64>| -> Option<(f64, Vec<f64>)> {
+        let mut y = y_best.clone();
+        (y[je], y[jn]) = (l, r);
+        if let (Some(j), Some(xi)) = (jx, xi) {
+            y[j] = xi;
+        }
+        let x = speeds.x(&y)?;
+        let f = problem.value(&x);
+        f.is_finite().then_some((f, x))
     };
-    // The best of those (the first of equals).
-    let lowest = |at: &[Option<(f64, Vec<f64>)>]| -> Option<(f64, Vec<f64>)> {
-        at.iter()
+    let over_xi = |l: f64, r: f64| -> Vec<_> { xis.iter().map(|&xi| at(l, r, xi)).collect() };
+    // The lowest of some soils (the first of equals).
+    let lowest = |p: &[Option<(f64, Vec<f64>)>]| {
+        p.iter()
             .flatten()
-            .fold(None::<&(f64, Vec<f64>)>, |b, p| match b {
-                Some(q) if q.0 <= p.0 => Some(q),
-                _ => Some(p),
-            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
             .cloned()
     };
     let best_over_xi = |l: f64, r: f64| lowest(&over_xi(l, r));
@@ -314,31 +306,22 @@ pub(super) fn faces(
         let weak = jx.and_then(|j| {
             xis.iter()
                 .position(|xi| xi.unwrap_or(best.x[j]) == bounds.lower()[j])
-                .map(|k| (k, bounds.lower()[j], j))
         });
-        if let Some((k, xi, j)) = weak {
+        if let Some(k) = weak {
             let fk = |i: usize| {
                 grid.get(i)
-                    .and_then(|at| at[k].as_ref())
+                    .and_then(|p| p[k].as_ref())
                     .map_or(f64::INFINITY, |p| p.0)
             };
             for i in minima_of(&fk) {
                 let ln_cs = ls[i] + r_max.ln();
-                let mut best_on: Option<(f64, Vec<f64>)> = None;
-                let mut l = ls[i] + FACE_SHEAR_LINE_STEP;
+                let (mut on, mut l) = (Vec::new(), ls[i] + FACE_SHEAR_LINE_STEP);
                 while l < v.ln() && (ln_cs - l).exp() >= r_min {
-                    let mut y = y_best.clone();
-                    (y[je], y[jn], y[j]) = (l, (ln_cs - l).exp(), xi);
-                    if let Some(x) = speeds.x(&y) {
-                        let g = problem.value(&x);
-                        if g.is_finite() && best_on.as_ref().is_none_or(|(h, _)| g < *h) {
-                            best_on = Some((g, x));
-                        }
-                    }
+                    on.push(at(l, (ln_cs - l).exp(), xis[k]));
                     l += FACE_SHEAR_LINE_STEP;
                 }
                 let worth = |g: f64| g < fk(i) && g <= FACE_SHEAR_LINE_GATE * best.cost;
-                starts.extend(best_on.filter(|(g, _)| worth(*g)).map(|(_, x)| x));
+                starts.extend(lowest(&on).filter(|(g, _)| worth(*g)).map(|(_, x)| x));
             }
         }
     }
