@@ -379,11 +379,11 @@ fn crosses_a_cliff_from_a_candidate_well_above_the_best() {
 
 /// Two MDPE segments whose global optimum lies below the measured phase speeds at a weak
 /// contact (ξ ≈ 0.005): at ξ = 0 their misfit valley runs along constant c_S (the data of a
-/// plastic pipe fix c_S, P47), here c_S ≈ 265 and 242 m/s at r = c_S/c_P ≈ 0.55, and it is
-/// narrow in ξ. The face r = r_max meets the valley only at its soft end, where the misfit is
-/// 20 times the optimum's, and the DE runs settle at another c_S. The faces' line at constant
-/// c_S from each local minimum of the face's line, per value of ξ, finds it. Without that line
-/// the fits ended at 73.36 (the yardstick 4.17) and 48.44 (4.03), both searched twice.
+/// plastic pipe fix c_S, P47), here c_S ≈ 265 and 242 m/s at r = c_S/c_P ≈ 0.53–0.55, and it
+/// is narrow in ξ. The face r = r_max meets the valley only at its soft end, where the misfit
+/// is about 20 times the optimum's, and the DE runs settle at another c_S. The faces' line at
+/// constant c_S from the local minima of the face's line at the weakest contact finds it.
+/// Without that line the fits ended at 73.36 (the yardstick 4.17) and 48.44 (4.03).
 #[test]
 fn follows_a_valley_of_constant_shear_speed_at_a_weak_contact() {
     verify_below(

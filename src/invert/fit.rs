@@ -910,17 +910,17 @@ mod tests {
     use super::*;
 
     /// A fit flagged `high_misfit` searches once more only up to
-    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A PVC pipe of a bench network: from some seeds
-    /// the search ends in a basin near χ² 60 (χ²/dof 8.5), the second search at 6.3; the
-    /// test takes the first such seed. With its attenuations written in dB/m (8.7 × too large, a defect
-    /// of the sample network) χ²/dof is far above the limit, and the fit is the first search's,
-    /// evaluation for evaluation.
+    /// [`HIGH_MISFIT_RETRY_MAX_CHI2_PER_DOF`]. A segment of a bench network: from a few seeds
+    /// (1 of the first 200) the search ends in a basin at χ² 65.1 (χ²/dof 5.9), the second
+    /// search at 11.6; the test takes the first such seed. With its attenuations written in dB/m
+    /// (8.7 × too large, a defect of the sample network) χ²/dof is far above the limit, and the
+    /// fit is the first search's, evaluation for evaluation.
     #[test]
     fn a_high_misfit_is_searched_again_only_below_the_chi2_per_dof_limit() {
         use crate::synth::bench::{bench_network, MaterialMix};
-        let seg = bench_network(200, 849214, MaterialMix::Default)
+        let seg = bench_network(200, 998006, MaterialMix::Default)
             .into_iter()
-            .find(|s| s.id == "WM10098")
+            .find(|s| s.id == "WM10035")
             .expect("the segment");
         let settings = FitSettings::default();
         let seed = (0..400)
@@ -933,7 +933,7 @@ mod tests {
         let (first, answer) = first_and_answer(&seg.data);
         assert!(first.has_flag(FlagCode::HighMisfit), "{}", first.misfit);
         assert!(first.misfit > 50.0, "{}", first.misfit);
-        assert!(answer.misfit < 6.5, "{}", answer.misfit);
+        assert!(answer.misfit < 12.0, "{}", answer.misfit);
         assert!(answer.evaluations > first.evaluations);
 
         let mut defective = seg.data.clone();

@@ -153,9 +153,9 @@ pub const FACE_STIFF_GATE: f64 = 2.0;
 ///   narrow in r (c_P² ∝ 1/(1 − 2ν_m)) and in c_P, and a population seldom lands in them;
 /// * from the best [`FACE_BELOW_STARTS`] local minima of a line along the face r = r_max
 ///   below grazing (c_P from v̄/[`FACE_BELOW_SPAN`] to v̄, where every soil wave radiates),
-///   each point the best over the same values of ξ. Towards ξ = 0 the shear coupling fades
-///   and the misfit depends on c_P nearly alone; its basins along c_P lie far from the best
-///   optimum's c_P, where no other start reaches them;
+///   each point the best over the same values of ξ. Towards ξ = 0 the shear coupling fades,
+///   and where the data fix c_P (metal pipes) the misfit depends on c_P nearly alone; its
+///   basins along c_P lie far from the best optimum's c_P, where no other start reaches them;
 /// * at the weakest contact (ξ at its lower bound), from the best point of a line at constant
 ///   c_S that starts at each of the best [`FACE_BELOW_STARTS`] local minima of that ξ's own line
 ///   along the face r = r_max and rises in c_P (r falling) every [`FACE_SHEAR_LINE_STEP`] up
