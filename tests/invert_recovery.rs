@@ -189,14 +189,16 @@ fn an_extended_fit_never_ends_worse_than_its_base() {
     eprintln!("largest extended minus base chi2: {worst:.3e}");
 }
 
-/// The guarantee does not rest on the search: with a budget far too small to find the optimum
-/// (one restart of 100 evaluations), a plain fit of the extended model ends above the base fit
-/// on some segments, and the nested fit on none.
+/// The guarantee does not rest on the search: with a DE budget far too small to find the
+/// optimum (one restart of 100 evaluations), a plain fit of the extended model ends above the
+/// base fit on some segments, and the nested fit on none. The faces and probes find most optima
+/// without the DE: since fit algorithm 27 the plain fit ends above the base on 1 of these 120
+/// segments (on none of the first 40), so a search that never falls short fails this test.
 #[test]
 fn the_nested_start_carries_the_guarantee_when_the_search_falls_short() {
     use pipewave::physics::effects::Effect;
     let net = generate(&SynthOptions {
-        segments: 40,
+        segments: 120,
         seed: 35,
         defect_fraction: 0.0,
         ..SynthOptions::default()
