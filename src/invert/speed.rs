@@ -62,8 +62,14 @@ impl SpeedBox {
 
     /// Whether the soil (ln c_P, r) lies in the box of (E_m, ν_m).
     pub fn contains(&self, ln_cp: f64, r: f64) -> bool {
+        self.range_holding(ln_cp, r).is_some()
+    }
+
+    /// [`Self::ln_cp_range_at`] `r` when it holds `ln_cp` (to 1e-12), else `None`: the test of
+    /// [`Self::contains`] and the range it found, for a caller that needs both.
+    pub fn range_holding(&self, ln_cp: f64, r: f64) -> Option<(f64, f64)> {
         self.ln_cp_range_at(r)
-            .is_some_and(|(lo, hi)| ln_cp >= lo - 1e-12 && ln_cp <= hi + 1e-12)
+            .filter(|&(lo, hi)| ln_cp >= lo - 1e-12 && ln_cp <= hi + 1e-12)
     }
 }
 
@@ -105,6 +111,10 @@ mod tests {
                 let (l, r) = speeds_of(e, nu, rho);
                 assert!(b.contains(l, r));
                 assert!(!b.contains(l + if e == E_BOUNDS.0 { -1e-6 } else { 1e-6 }, r));
+                // The range it holds the soil in is the range at its r, one end at the soil.
+                let (lo, hi) = b.range_holding(l, r).expect("inside");
+                assert_eq!(Some((lo, hi)), b.ln_cp_range_at(r));
+                assert!((if e == E_BOUNDS.0 { lo } else { hi } - l).abs() < 1e-12);
             }
         }
         // A soft soil at ν_m = 0 (large r) exists only down to E_min; at ν_m = 0.499 the same c_P

@@ -68,7 +68,17 @@ impl<'q, 'a> InSpeeds<'q, 'a> {
     /// The search coordinates of the point `y` of the speed coordinates, its ln c_P moved into
     /// the image of the search box at its r; `None` where r gives no soil.
     pub(super) fn x(&self, y: &[f64]) -> Option<Vec<f64>> {
-        let (lo, hi) = self.region.ln_cp_range_at(y[self.jn])?;
+        self.x_within(y, self.region.ln_cp_range_at(y[self.jn])?)
+    }
+
+    /// [`Self::x`] of a point of the image only, `None` outside it: the DE's evaluation, which
+    /// finds ln c_P's range at r once for both the test and the map.
+    fn x_of_image(&self, y: &[f64]) -> Option<Vec<f64>> {
+        self.x_within(y, self.region.range_holding(y[self.je], y[self.jn])?)
+    }
+
+    /// [`Self::x`] with ln c_P's range at r, (`lo`, `hi`), given.
+    fn x_within(&self, y: &[f64], (lo, hi): (f64, f64)) -> Option<Vec<f64>> {
         let (e, nu) = soil_of(y[self.je].clamp(lo, hi), y[self.jn], self.region.rho)?;
         let mut x = y.to_vec();
         x[self.je] = self.problem.specs[self.je].coordinate(e);
@@ -93,16 +103,11 @@ impl Objective for InSpeeds<'_, '_> {
         self.problem.specs.len()
     }
     fn value(&self, y: &[f64]) -> f64 {
-        if !self.region.contains(y[self.je], y[self.jn]) {
-            return f64::INFINITY;
-        }
-        self.x(y).map_or(f64::INFINITY, |x| self.problem.value(&x))
+        self.x_of_image(y)
+            .map_or(f64::INFINITY, |x| self.problem.value(&x))
     }
     fn search_value(&self, y: &[f64]) -> f64 {
-        if !self.region.contains(y[self.je], y[self.jn]) {
-            return f64::INFINITY;
-        }
-        self.x(y)
+        self.x_of_image(y)
             .map_or(f64::INFINITY, |x| self.problem.search_value(&x))
     }
 }
@@ -128,8 +133,10 @@ pub const FACE_BELOW_STARTS: usize = 2;
 /// (5 % in c_P).
 pub const FACE_SHEAR_LINE_STEP: f64 = 0.05;
 /// That line's best point is polished only when its misfit is at most this multiple of the
-/// best optimum's (the grazing probe's gate, `probes::GRAZING_PROBE_GATE`, for the same
-/// reason: a start well above the best seldom polishes below it).
+/// best optimum's: a start well above the best seldom polishes below it. The value is the
+/// grazing probe's (`probes::GRAZING_PROBE_GATE`), not tuned for this line; without the gate
+/// the line costs about 2.5 % more evaluations a fit and mended no more (evidence:
+/// docs/search.md, "The faces in speed coordinates").
 pub const FACE_SHEAR_LINE_GATE: f64 = 4.0;
 /// The best of the stiffest end is polished only when its misfit is at most this multiple of
 /// the best optimum's.
