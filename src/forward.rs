@@ -208,7 +208,7 @@ pub fn run(input: &Path, output: &Path) -> Result<ForwardReport, ForwardError> {
         };
         wtr.write_record(&row).map_err(write_err)?;
     }
-    wtr.flush().map_err(|e| write_err(e.into()))?;
+    spreadsheet::finish(wtr).map_err(write_err)?;
     Ok(report)
 }
 

@@ -10,6 +10,7 @@ pub mod forward;
 pub mod invert;
 pub mod locate;
 pub mod optimize;
+pub mod outfile;
 pub mod physics;
 pub mod recordings;
 pub mod report;

@@ -83,6 +83,20 @@ fn not_nan(v: f64) -> Option<f64> {
     (!v.is_nan()).then_some(v)
 }
 
+/// The campaigns of the measurements a fit is made from, latest first, comma-separated: the
+/// segment's current state is its latest campaign ([`crate::db::load_segment`]).
+fn campaigns_of(rec: &SegmentRecord) -> String {
+    let mut names: Vec<&str> = Vec::new();
+    for m in &rec.measurements {
+        if let Some(c) = m.campaign.as_deref() {
+            if !names.contains(&c) {
+                names.push(c);
+            }
+        }
+    }
+    names.join(",")
+}
+
 /// A failed fit whose inputs could not be built.
 pub fn failed_row(rec: &SegmentRecord, run_id: i64, settings: &FitSettings, msg: String) -> FitRow {
     let mut f = FitRow::new(
@@ -95,6 +109,7 @@ pub fn failed_row(rec: &SegmentRecord, run_id: i64, settings: &FitSettings, msg:
     f.method = settings.method.as_str().to_string();
     f.effects = effects_text(&settings.effects);
     f.n_measurements = i64::try_from(rec.measurements.len()).ok();
+    f.campaigns = campaigns_of(rec);
     f.evaluations = Some(0);
     f.algorithm_version = Some(FIT_ALGORITHM_VERSION);
     f.message = Some(msg);
@@ -113,6 +128,7 @@ pub fn fit_row(rec: &SegmentRecord, run_id: i64, r: &FitResult) -> FitRow {
     );
     f.method = r.method.as_str().to_string();
     f.effects = effects_text(&r.effects);
+    f.campaigns = campaigns_of(rec);
     let value = |p: Param| r.get(p).map(|e| e.value).and_then(not_nan);
     let std = |p: Param| r.get(p).and_then(|e| e.std).and_then(not_nan);
     let lo = |p: Param| r.get(p).map(|e| e.interval.lo).and_then(not_nan);

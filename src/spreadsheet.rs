@@ -15,8 +15,8 @@
 //!
 //! The neutralisation is visible to programs that read the file: an id `+1` reads back as `'+1`.
 
+use crate::outfile::{Contents, OutFile};
 use std::borrow::Cow;
-use std::fs::File;
 use std::io;
 use std::path::Path;
 
@@ -93,9 +93,21 @@ pub fn writer<W: io::Write>(w: W) -> csv::Writer<W> {
         .from_writer(w)
 }
 
-/// [`writer`] to a new file at `path` (replaced if it exists).
-pub fn writer_from_path(path: &Path) -> Result<csv::Writer<File>, csv::Error> {
-    Ok(writer(File::create(path)?))
+/// [`writer`] to the output `path`, through the output guard ([`crate::outfile`]): the file is
+/// checked now and replaced only by [`finish`]; a writer dropped before that leaves it as it
+/// was.
+pub fn writer_from_path(path: &Path) -> Result<csv::Writer<OutFile>, csv::Error> {
+    let file = OutFile::create(path, Contents::Plain).map_err(io::Error::other)?;
+    Ok(writer(file))
+}
+
+/// Flush a writer of [`writer_from_path`] and move its file over the output.
+pub fn finish(w: csv::Writer<OutFile>) -> Result<(), csv::Error> {
+    let file = w
+        .into_inner()
+        .map_err(|e| io::Error::other(e.to_string()))?;
+    file.commit().map_err(io::Error::other)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -13,6 +13,7 @@ use pipewave::db::wkt::LineString;
 use pipewave::db::{self, curves_for, latest_fits, Database, FitRow, ImportOptions, ImportSource};
 use pipewave::export::numbers::columns;
 use pipewave::export::{self, ExportError, ExportFormat, Precision, PROPERTIES};
+use pipewave::outfile::OutputError;
 use rusqlite::types::Value as Sql;
 use rusqlite::Connection;
 use tempfile::TempDir;
@@ -865,7 +866,7 @@ fn export_never_overwrites_a_pipewave_database() {
     for f in [ExportFormat::Gpkg, ExportFormat::GeoJson, ExportFormat::Csv] {
         let e = export::write(&database, f, &db_path).unwrap_err();
         assert!(
-            matches!(e, ExportError::WouldOverwriteDatabase { .. }),
+            matches!(e, ExportError::Output(OutputError::TheDatabase { .. })),
             "{e}"
         );
         assert!(e.to_string().contains("pipewave.sqlite"), "{e}");
@@ -878,7 +879,10 @@ fn export_never_overwrites_a_pipewave_database() {
     assert_eq!(expected(&database).len(), 8);
     // A directory is refused with a suggestion; an existing GeoPackage is replaced.
     let e = export::write(&database, ExportFormat::Gpkg, dir.path()).unwrap_err();
-    assert!(matches!(e, ExportError::OutIsDirectory { .. }), "{e}");
+    assert!(
+        matches!(e, ExportError::Output(OutputError::Directory { .. })),
+        "{e}"
+    );
     let out = dir.path().join("x.gpkg");
     export::write(&database, ExportFormat::Gpkg, &out).unwrap();
     export::write(&database, ExportFormat::Gpkg, &out).unwrap();

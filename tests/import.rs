@@ -596,7 +596,8 @@ fn reimporting_identical_files_changes_nothing() {
     assert_eq!(
         text(&out.stdout).trim(),
         "imported: segments 0 new, 0 updated, 4 unchanged; measurements 0 written for 0 segments; \
-         fit inputs changed for 0 segments"
+         fit inputs changed for 0 segments; campaign spring-2024: 0 rows added, 0 updated, 5 kept; \
+         campaign unnamed: 0 rows added, 0 updated, 3 kept"
     );
     // Same values, same import times, same hashes, and the measurement rows not rewritten.
     assert_eq!(s.snapshot(), before);
@@ -624,8 +625,10 @@ fn changing_one_measurement_changes_only_that_segments_hash() {
     let out = s.import(None, Some(&mp), &[]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert!(
-        text(&out.stdout)
-            .contains("measurements 3 written for 1 segment; fit inputs changed for 1 segment"),
+        text(&out.stdout).contains(
+            "measurements 1 written for 1 segment; fit inputs changed for 1 segment; \
+                       campaign spring-2024: 0 rows added, 1 updated, 4 kept"
+        ),
         "{}",
         text(&out.stdout)
     );
@@ -1006,8 +1009,9 @@ fn a_bad_risk_weight_is_named_by_file_line_and_column() {
     assert_eq!(got[0].soil_class_override.as_deref(), Some("sand"));
 }
 
-/// Both columns are stored; a later file without them keeps them, a blank cell clears them, and
-/// neither changes the segment's inputs hash (they never cause a refit).
+/// Both columns are stored; a later file without them keeps them, a blank cell clears them.
+/// Like every stored column they are inputs of staleness (src/db/staleness.rs): setting them
+/// changes the segment's inputs hash, and a file without them leaves it as it was.
 #[test]
 fn risk_weight_and_class_override_are_stored_kept_and_cleared() {
     let s = Scratch::new();
@@ -1028,7 +1032,8 @@ fn risk_weight_and_class_override_are_stored_kept_and_cleared() {
     let got = stored(&s.db);
     assert_eq!(got[0].risk_weight, Some(0.0));
     assert_eq!(got[0].soil_class_override.as_deref(), Some("clay"));
-    assert_eq!(s.hashes()["N-1"], hash);
+    assert_ne!(s.hashes()["N-1"], hash);
+    let hash = s.hashes()["N-1"].clone();
     // A file without the columns says nothing about them.
     let p = s.write(
         "plain2.csv",
@@ -1039,6 +1044,7 @@ fn risk_weight_and_class_override_are_stored_kept_and_cleared() {
     let got = stored(&s.db);
     assert_eq!(got[0].risk_weight, Some(0.0));
     assert_eq!(got[0].soil_class_override.as_deref(), Some("clay"));
+    assert_eq!(s.hashes()["N-1"], hash);
     // Blank cells clear them.
     let p = s.write(
         "blank.csv",

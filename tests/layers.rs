@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 /// The library's top-level modules by layer, lowest first. Modules of one layer do not use each
 /// other. Layer 0 is usable from every layer.
 const LAYERS: &[&[&str]] = &[
-    &["units", "seed", "stats", "types", "spreadsheet"],
+    &["units", "seed", "stats", "types", "spreadsheet", "outfile"],
     &["special"],
     &["physics", "optimize"],
     &["invert", "db"],

@@ -115,6 +115,7 @@ fn read_rows(path: &Path) -> Vec<Row> {
             "k_re_std",
             "attenuation_std",
             "campaign",
+            "note",
         ]
     );
     r.records()
@@ -128,7 +129,7 @@ fn read_rows(path: &Path) -> Vec<Row> {
                 a: p(3),
                 ks: p(4),
                 as_: p(5),
-                notes: x[6].to_string(),
+                notes: x[7].to_string(),
             }
         })
         .collect()

@@ -176,6 +176,9 @@ pub trait RunObserver {
     fn waiting_for_lock(&mut self, _pid: i64, _started_at: &str) {}
     /// We took over the lock of a run that no longer exists.
     fn took_over_stale_lock(&mut self, _pid: i64, _started_at: &str) {}
+    /// Segments whose stored inputs changed since their hash was stored, by another tool than
+    /// pipewave's import (their fits are stale), by id; told before the selection.
+    fn inputs_edited(&mut self, _segment_ids: &[String]) {}
     /// The run is recorded and the workers start.
     fn started(&mut self, _plan: &RunPlan) {}
     /// One segment's fit was committed.
@@ -449,6 +452,12 @@ fn locked_run(
     started: Instant,
 ) -> Result<CalibrateSummary, BatchError> {
     let jobs = summary.jobs;
+    // Staleness from the stored rows themselves: an edit made with any tool since the last
+    // import or run makes exactly the edited segments stale.
+    let sweep = db::refresh_all_inputs_hashes(conn)?;
+    if !sweep.changed.is_empty() {
+        observer.inputs_edited(&sweep.changed);
+    }
     let selection = Selection::new(conn, opts, &mut summary)?;
     // Count first, a page at a time, for the run's row and the progress bar; the fits then read
     // the inventory again, page by page, as the workers need it.

@@ -21,6 +21,11 @@ pub struct AuditArgs {
 
 /// Write the report.
 pub fn run(args: &AuditArgs) -> anyhow::Result<Outcome> {
+    super::guard_outputs(
+        Some(&args.db),
+        &[],
+        &[(&args.out, pipewave::outfile::Contents::Plain)],
+    )?;
     let database = super::open_reader(&args.db)?;
     let summary = report::audit::write(&database, &args.out)?;
     print_summary("the audit report", &args.out, &summary);

@@ -52,11 +52,47 @@ pub struct BenchArgs {
     /// the worst case and the share of fits each search stage won.
     #[arg(long, value_name = "N")]
     verify: Option<usize>,
+    /// Time the staleness sweep of calibrate (every segment's inputs hash recomputed from its
+    /// stored rows) on a temporary database of N segments with 5 measurements each: the first
+    /// sweep hashes every segment, the second finds nothing changed, as a nightly calibrate
+    /// with nothing to do.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+    staleness: Option<u32>,
     /// Database of --recovery (default: DIR/pipewave.sqlite).
     #[arg(long, value_name = "PATH", requires = "recovery")]
     db: Option<PathBuf>,
     #[command(flatten)]
     run: RunArgs,
+}
+
+/// `--staleness N`: time the two sweeps on a temporary database.
+fn staleness(n: usize) -> anyhow::Result<()> {
+    const PER_SEGMENT: usize = 5;
+    let dir = std::env::temp_dir().join(format!("pipewave-bench-staleness-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let result = (|| -> anyhow::Result<()> {
+        let mut db = pipewave::db::Database::open(dir.join("bench.sqlite"))?;
+        pipewave::db::staleness::fill_for_bench(db.conn_mut(), n, PER_SEGMENT)?;
+        for what in [
+            "first sweep (hashes every segment)",
+            "second sweep (nothing changed)",
+        ] {
+            let t = std::time::Instant::now();
+            let s = pipewave::db::refresh_all_inputs_hashes(db.conn_mut())?;
+            let secs = t.elapsed().as_secs_f64();
+            println!(
+                "staleness: {} segments, {} measurements: {what}: {:.3} s ({:.2} µs a segment), {} stored",
+                s.segments,
+                s.measurements,
+                secs,
+                1e6 * secs / s.segments.max(1) as f64,
+                s.first_hashed + s.changed.len()
+            );
+        }
+        Ok(())
+    })();
+    let _ = std::fs::remove_dir_all(&dir);
+    result
 }
 
 /// Print one calibrate throughput measurement of `n` segments.
@@ -113,6 +149,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
         ..CalibrateOptions::default()
     };
     let mut outcome = Outcome::Done;
+    if let Some(n) = args.staleness {
+        staleness(n as usize)?;
+    }
     if let Some(n) = args.calibrate {
         let n = n as usize;
         // Without --jobs, the run on every core is bracketed by two on a single core, and the

@@ -224,6 +224,37 @@ impl RunObserver for CliObserver {
         );
     }
 
+    fn inputs_edited(&mut self, segment_ids: &[String]) {
+        const SHOWN: usize = 5;
+        let shown: Vec<String> = segment_ids
+            .iter()
+            .take(SHOWN)
+            .map(|s| pipewave::units::escape_controls(s).into_owned())
+            .collect();
+        eprintln!(
+            "note: {} segment{} changed in the database since {} last imported or \
+             calibrated (edited with another tool): {}{}; {} refitted",
+            segment_ids.len(),
+            if segment_ids.len() == 1 { "" } else { "s" },
+            if segment_ids.len() == 1 {
+                "it was"
+            } else {
+                "they were"
+            },
+            shown.join(", "),
+            if segment_ids.len() > SHOWN {
+                ", ..."
+            } else {
+                ""
+            },
+            if segment_ids.len() == 1 {
+                "it is"
+            } else {
+                "they are"
+            },
+        );
+    }
+
     fn started(&mut self, plan: &RunPlan) {
         if plan.to_fit == 0 {
             return;

@@ -76,6 +76,15 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<Outcome> {
             Ok((id.to_string(), mix))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let reports: Vec<std::path::PathBuf> = ["diagnosis.csv", "groups.csv", "diagnosis.html"]
+        .iter()
+        .map(|n| args.out.join(n))
+        .collect();
+    let outputs: Vec<(&std::path::Path, pipewave::outfile::Contents)> = reports
+        .iter()
+        .map(|p| (p.as_path(), pipewave::outfile::Contents::Plain))
+        .collect();
+    super::guard_outputs(Some(&args.db), &[], &outputs)?;
     let mut database = super::open_database(&args.db)?;
     let opts = DiagnoseOptions {
         segments: (!args.segments.is_empty()).then(|| args.segments.clone()),

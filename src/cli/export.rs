@@ -72,8 +72,13 @@ pub fn report(what: &str, out: &std::path::Path, s: &ExportSummary) {
 
 /// Run the export.
 pub fn run(args: &ExportArgs) -> anyhow::Result<Outcome> {
-    let database = super::open_reader(&args.db)?;
     let format = ExportFormat::from(args.format);
+    let contents = match format {
+        ExportFormat::Gpkg => pipewave::outfile::Contents::GeoPackage,
+        ExportFormat::GeoJson | ExportFormat::Csv => pipewave::outfile::Contents::Plain,
+    };
+    super::guard_outputs(Some(&args.db), &[], &[(&args.out, contents)])?;
+    let database = super::open_reader(&args.db)?;
     let precision = match args.precision {
         PrecisionArg::People => Precision::People,
         PrecisionArg::Full => Precision::Full,

@@ -47,6 +47,11 @@ pub struct FitArgs {
 
 /// Import into a scratch database, calibrate, write the CSV, remove the scratch files.
 pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
+    super::guard_outputs(
+        None,
+        &[&args.segments, &args.measurements],
+        &[(&args.out, pipewave::outfile::Contents::Plain)],
+    )?;
     let opts = CalibrateOptions {
         jobs: args.run.jobs.map(|j| j as usize),
         seed: args.run.seed,

@@ -12,14 +12,20 @@ pub struct ForwardArgs {
     /// Cases to evaluate (columns of docs/interface.md, "forward input").
     #[arg(long, value_name = "FILE")]
     input: PathBuf,
-    /// Where to write the results (one row per input row).
-    #[arg(long, value_name = "FILE")]
+    /// Where to write the results (one row per input row); `--out` is the same option, named as
+    /// in every other command.
+    #[arg(long, value_name = "FILE", visible_alias = "out")]
     output: PathBuf,
 }
 
 /// Evaluate the cases. Malformed rows are listed on stderr (file:line:col) and get the status
 /// `invalid_input`; a root that was not found gets its reason. Exit 1 if any row failed.
 pub fn run(args: &ForwardArgs) -> anyhow::Result<Outcome> {
+    super::guard_outputs(
+        None,
+        &[&args.input],
+        &[(&args.output, pipewave::outfile::Contents::Plain)],
+    )?;
     let report = pipewave::forward::run(&args.input, &args.output)?;
     for m in &report.messages {
         eprintln!("{m}");

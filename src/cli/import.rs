@@ -40,7 +40,7 @@ segments.csv: one row per pipe segment
   soil_class_override   optional  text: the soil class the field must use for the segment
   geometry_wkt, srid    optional  LINESTRING (x y, x y, ...) in EPSG:srid (for the maps)
 
-measurements.csv: one row per segment and frequency (field wavenumbers)
+measurements.csv: one row per segment, campaign and frequency (field wavenumbers)
   segment_id            required  must be in the inventory (this file's segments or earlier)
   frequency_hz          one of    frequency, Hz, > 0
   omega_rad_s             these   angular frequency, rad/s, > 0 (not both)
@@ -51,7 +51,11 @@ measurements.csv: one row per segment and frequency (field wavenumbers)
   k_re_std, attenuation_std
                         optional  one standard deviation of each, same units (without them
                                   the fit assumes the noise and chi2/dof is not defined)
-  measured_on, campaign optional  ISO date, text
+  measured_on, campaign optional  ISO date, text (blank campaign: `unnamed`); a campaign
+                                  imported again updates its rows, a new one is added beside
+                                  the earlier ones (--replace-campaign NAME deletes the rows
+                                  of NAME that the file does not hold)
+  note                  optional  text (the wavenumber estimate's band notes)
 
 Example segments.csv:
   segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3,geometry_wkt,srid
@@ -96,6 +100,16 @@ pub struct ImportArgs {
     /// Import the valid rows and report the invalid ones, instead of importing nothing.
     #[arg(long)]
     skip_invalid: bool,
+    /// Make the measurements file the whole of campaign NAME: its stored rows that the file
+    /// does not hold are deleted (repeatable). Without it nothing stored is ever deleted: a
+    /// re-imported campaign updates its rows and keeps the others, and a new campaign adds rows
+    /// beside the earlier ones.
+    #[arg(
+        long = "replace-campaign",
+        value_name = "NAME",
+        requires = "measurements"
+    )]
+    replace_campaign: Vec<String>,
     /// EPSG code of the coordinates when the file does not name its CRS: a GeoJSON without
     /// `crs` (otherwise WGS 84), CSV geometry without a srid column.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(i64).range(1..))]
@@ -104,6 +118,11 @@ pub struct ImportArgs {
 
 /// Read the files, import, print each bad row on stderr and a summary on stdout.
 pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
+    let inputs: Vec<&std::path::Path> = [args.segments.as_deref(), args.measurements.as_deref()]
+        .into_iter()
+        .flatten()
+        .collect();
+    super::guard_database(&args.db, &inputs)?;
     // Read the inputs before touching the database, so a mistyped path creates no file.
     let segments = args
         .segments
@@ -126,6 +145,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<Outcome> {
             layer: args.layer.clone(),
             map: args.map.clone(),
             srid: args.srid,
+            replace_campaigns: args.replace_campaign.clone(),
         },
     )
     .with_context(|| {
@@ -203,8 +223,28 @@ fn plural(n: usize) -> &'static str {
     }
 }
 
-/// The one-line summary of an import.
+/// The one-line summary of an import, ending with what it did to each campaign the
+/// measurements file held.
 pub(super) fn summary(r: &ImportReport) -> String {
+    let mut out = headline(r);
+    for (name, c) in &r.campaigns {
+        out.push_str(&format!(
+            "; campaign {}: {} rows added, {} updated, {} kept{}",
+            escape_controls(name),
+            c.added,
+            c.updated,
+            c.kept,
+            if c.removed > 0 {
+                format!(", {} removed (--replace-campaign)", c.removed)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    out
+}
+
+fn headline(r: &ImportReport) -> String {
     format!(
         "imported: segments {} new, {} updated, {} unchanged; measurements {} written for {} \
          segment{}; fit inputs changed for {} segment{}",

@@ -19,6 +19,8 @@ use pipewave::locate::{
     DelayInput, Job, LocateOptions, Located, Locator, DEFAULT_BAND_HZ, DEFAULT_SPAN_STD_FRACTION,
 };
 
+use pipewave::outfile::Contents;
+
 use super::{open_database, Outcome};
 
 /// Arguments of `locate`.
@@ -173,6 +175,12 @@ fn detail(l: &Located) -> String {
 
 /// Locate the correlations and write the answers.
 pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
+    let mut outputs: Vec<(&std::path::Path, Contents)> = Vec::new();
+    outputs.extend(args.out.as_deref().map(|p| (p, Contents::Plain)));
+    outputs.extend(args.geojson.as_deref().map(|p| (p, Contents::Plain)));
+    outputs.extend(args.gpkg.as_deref().map(|p| (p, Contents::GeoPackage)));
+    let inputs: Vec<&std::path::Path> = args.jobs.as_deref().into_iter().collect();
+    super::guard_outputs(Some(&args.db), &inputs, &outputs)?;
     let weighting: Weighting = args.weighting.parse().map_err(anyhow::Error::msg)?;
     let given_weighting: Weighting = args.given_weighting.parse().map_err(anyhow::Error::msg)?;
     for (v, name) in [
@@ -244,6 +252,19 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
             })]
         }
     };
+    // The recordings the jobs name are inputs too: no output may replace one.
+    let recordings: Vec<&std::path::Path> = jobs
+        .iter()
+        .filter_map(|j| match j {
+            Ok(Job {
+                delay: DelayInput::Recordings(r),
+                ..
+            }) => Some([r.file1.as_path(), r.file2.as_path()]),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    super::guard_outputs(None, &recordings, &outputs)?;
     let db = open_database(&args.db)?;
     let options = LocateOptions {
         band_hz: band,

@@ -21,6 +21,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use pipewave::db::{Database, DbError};
+use pipewave::outfile::{self, Contents};
 
 use clap::{Parser, Subcommand};
 
@@ -112,6 +113,47 @@ pub fn run(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Plan(args) => plan::run(&args),
         Command::Locate(args) => locate::run(&args),
     }
+}
+
+/// The output guard of every command that writes a file ([`pipewave::outfile`]), called before
+/// the command does any work: register its database and input files as protected, then refuse
+/// any output that is a directory, the database, another database, an input or a read-only
+/// file. The writes themselves go through the same guard.
+pub(crate) fn guard_outputs(
+    database: Option<&Path>,
+    inputs: &[&Path],
+    outputs: &[(&Path, Contents)],
+) -> anyhow::Result<()> {
+    if let Some(db) = database {
+        outfile::protect_database(db);
+    }
+    for input in inputs {
+        outfile::protect_input(input);
+    }
+    for (out, contents) in outputs {
+        let suggested = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "output".into());
+        outfile::check(out, *contents, &suggested)?;
+    }
+    Ok(())
+}
+
+/// Refuse a database path that is one of the command's input files (`import --db segments.csv
+/// --segments segments.csv` would turn the survey into a database).
+pub(crate) fn guard_database(database: &Path, inputs: &[&Path]) -> anyhow::Result<()> {
+    for input in inputs {
+        if outfile::same_file(database, input) {
+            anyhow::bail!(
+                "refusing to use {} as the database: it is this command's input {}; give \
+                 another --db path",
+                database.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Open an existing pipewave database for a command that reads or fits one (every command but

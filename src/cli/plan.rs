@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 use pipewave::field::plan;
+use pipewave::outfile::Contents;
+use pipewave::spreadsheet::{self, spreadsheet_safe};
 
 use super::open_database as open_existing;
 use super::Outcome;
@@ -28,11 +30,13 @@ pub struct PlanArgs {
 
 /// Choose, store and write the plan.
 pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
+    super::guard_outputs(Some(&args.db), &[], &[(&args.out, Contents::Plain)])?;
     let mut database = open_existing(&args.db)?;
     let jobs = args.jobs.unwrap_or_else(pipewave::batch::default_jobs);
     let picks = plan::plan(database.conn_mut(), args.count as usize, jobs)
         .with_context(|| format!("plan of {} failed", args.db.display()))?;
-    let mut w = csv::Writer::from_path(&args.out)
+    // Through the output guard, and spreadsheet-safe like every CSV pipewave writes.
+    let mut w = spreadsheet::writer_from_path(&args.out)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     w.write_record([
         "segment_id",
@@ -43,7 +47,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
     ])?;
     for p in &picks {
         w.write_record([
-            p.segment_id.clone(),
+            spreadsheet_safe(&p.segment_id).into_owned(),
             p.rank.to_string(),
             format!("{:.6e}", p.expected_gain),
             p.leak_band_speed_std_m_per_s
@@ -51,8 +55,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
             format!("{:.2}", p.weight),
         ])?;
     }
-    w.flush()
-        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    spreadsheet::finish(w).with_context(|| format!("cannot write {}", args.out.display()))?;
     let risk_weighted = pipewave::db::field::count_risk_weighted(database.conn())
         .with_context(|| format!("cannot read {}", args.db.display()))?;
     println!("plan: {} segments -> {}", picks.len(), args.out.display());

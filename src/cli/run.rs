@@ -11,6 +11,7 @@ use clap::Args;
 use pipewave::batch::CalibrateOptions;
 use pipewave::db::{self, Database, ImportOptions, ImportSource};
 use pipewave::export::{self, ExportFormat};
+use pipewave::outfile::Contents;
 use pipewave::synth::network::{MEASUREMENTS_CSV, SEGMENTS_CSV};
 
 use super::calibrate::{self, RunArgs};
@@ -76,6 +77,23 @@ pub const DIAGNOSIS_DIR: &str = "diagnosis";
 /// Import, calibrate, then the later steps.
 pub fn run(args: &RunDirArgs) -> anyhow::Result<Outcome> {
     let db_path = args.db.clone().unwrap_or_else(|| args.dir.join(DEFAULT_DB));
+    let out = args.dir.join(OUT_DIR);
+    let (gpkg, csv, report) = (
+        out.join(GPKG_FILE),
+        out.join(CSV_FILE),
+        out.join(REPORT_FILE),
+    );
+    let inputs = [args.dir.join(SEGMENTS_CSV), args.dir.join(MEASUREMENTS_CSV)];
+    super::guard_database(&db_path, &[&inputs[0], &inputs[1]])?;
+    super::guard_outputs(
+        Some(&db_path),
+        &[&inputs[0], &inputs[1]],
+        &[
+            (&gpkg, Contents::GeoPackage),
+            (&csv, Contents::Plain),
+            (&report, Contents::Plain),
+        ],
+    )?;
     let mut database = import_dir(&args.dir, &db_path)?;
     let opts = CalibrateOptions {
         jobs: args.run.jobs.map(|j| j as usize),

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use clap::Args;
+use pipewave::outfile::Contents;
 use pipewave::synth::network::{
     published, NetworkTables, MEASUREMENTS_CSV, SEGMENTS_CSV, TRUTH_CSV,
 };
@@ -123,6 +124,16 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             args.defects
         );
     }
+    let network_files: Vec<PathBuf> = [SEGMENTS_CSV, MEASUREMENTS_CSV, TRUTH_CSV]
+        .iter()
+        .map(|n| args.out.join(n))
+        .collect();
+    let mut outputs: Vec<(&Path, Contents)> = network_files
+        .iter()
+        .map(|p| (p.as_path(), Contents::Plain))
+        .collect();
+    outputs.extend(args.campaign_out.as_deref().map(|p| (p, Contents::Plain)));
+    super::guard_outputs(None, &[], &outputs)?;
     if !args.force && !args.recordings_only {
         for name in [SEGMENTS_CSV, MEASUREMENTS_CSV, TRUTH_CSV] {
             let p = args.out.join(name);
@@ -267,8 +278,12 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
     tables.write_dir(&args.out)?;
     if let Some(path) = &args.campaign_out {
         let campaign = NetworkTables::campaign(&synthetic, LATER_CAMPAIGN);
-        std::fs::write(path, campaign.measurements_csv())
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        pipewave::outfile::write_bytes(
+            path,
+            Contents::Plain,
+            campaign.measurements_csv().as_bytes(),
+        )
+        .with_context(|| format!("cannot write {}", path.display()))?;
     }
     if !args.no_real_cases {
         write_real_copies(&args.out.join(REAL_DIR))?;
@@ -336,7 +351,8 @@ fn write_real_copies(dir: &Path) -> anyhow::Result<()> {
         ("README.md", published::README_MD),
     ] {
         let p = dir.join(name);
-        std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+        pipewave::outfile::write_bytes(&p, Contents::Plain, body.as_bytes())
+            .with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
 }

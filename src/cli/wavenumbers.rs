@@ -3,9 +3,8 @@
 //! hydrant-test recordings (model §10).
 //!
 //! Writes the `measurements.csv` columns of docs/interface.md for the bands that carry
-//! information, ready for `import` (which accepts no other columns). A band's notes
-//! (`reflection_suspected`, ...) are put in its `campaign` text in brackets, e.g.
-//! `layout (reflection_suspected)`.
+//! information, ready for `import`. A band's notes (`reflection_suspected`, ...) go in its
+//! `note` column, so every band of one survey is in one campaign.
 //! A segment whose recordings cannot be used is reported (file, line, what) and left out; the
 //! others are written, and the exit code is 1.
 
@@ -52,6 +51,11 @@ pub struct WavenumbersArgs {
 
 /// Analyse every segment of the layout and write the measurements.
 pub fn run(args: &WavenumbersArgs) -> anyhow::Result<Outcome> {
+    super::guard_outputs(
+        None,
+        &[&args.layout],
+        &[(&args.out, pipewave::outfile::Contents::Plain)],
+    )?;
     let opts = EstimateOptions::new(args.band_hz, args.min_coherence, args.fmin, args.fmax)
         .map_err(anyhow::Error::msg)?;
     let layout = match read_layout(&args.layout) {
@@ -63,6 +67,17 @@ pub fn run(args: &WavenumbersArgs) -> anyhow::Result<Outcome> {
             bail!("{}", errors[errors.len() - 1]);
         }
     };
+    // The recordings the layout names are inputs too: no output may replace one.
+    for seg in &layout.segments {
+        for s in &seg.sensors {
+            pipewave::outfile::protect_input(&s.path);
+        }
+    }
+    pipewave::outfile::check(
+        &args.out,
+        pipewave::outfile::Contents::Plain,
+        "measurements.csv",
+    )?;
     let campaign = args.campaign.clone().unwrap_or_else(|| {
         args.layout
             .file_stem()

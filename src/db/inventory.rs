@@ -5,7 +5,6 @@ use std::collections::BTreeSet;
 
 use rusqlite::{params, Connection, OptionalExtension, Row};
 
-use super::hash::Canonical;
 use super::DbError;
 use crate::physics::inputs::{SOIL_DENSITY_RANGE, WATER_BULK_MODULUS, WATER_DENSITY};
 use crate::physics::{Fluid, InputError, Material, MaterialProps, Pipe};
@@ -59,7 +58,7 @@ pub struct SegmentRecord {
     pub geometry_wkt: Option<String>,
     /// EPSG code of the geometry.
     pub srid: Option<i64>,
-    /// Hash of everything a fit depends on ([`SegmentRecord::compute_inputs_hash`]), as stored.
+    /// Hash of everything a fit depends on ([`super::staleness`]), as stored.
     pub inputs_hash: String,
     /// When the row was last inserted or changed by an import (UTC, ISO 8601).
     pub imported_at: String,
@@ -84,9 +83,16 @@ pub struct MeasurementRecord {
     pub attenuation_std: Option<f64>,
     /// Date of measurement, `YYYY-MM-DD`.
     pub measured_on: Option<String>,
-    /// Campaign name.
+    /// Campaign name ([`UNNAMED_CAMPAIGN`] when the file gave none; `None` only in records
+    /// not yet stored).
     pub campaign: Option<String>,
+    /// What the wavenumber estimate says of the band (`reflection_suspected`, ...), if anything.
+    pub note: Option<String>,
 }
+
+/// The campaign of measurements given without one: re-importing such a file updates its rows
+/// and adds nothing.
+pub const UNNAMED_CAMPAIGN: &str = "unnamed";
 
 impl SegmentRecord {
     /// A segment of the given pipe and soil density with the material's typical properties,
@@ -165,44 +171,6 @@ impl SegmentRecord {
         SOIL_DENSITY_RANGE.check(self.soil_density_kg_m3)
     }
 
-    /// The canonical text of everything a fit of this segment depends on: the id, the pipe,
-    /// fluid and soil columns, and each measurement's ω, Re k, attenuation and standard
-    /// deviations in order of ω. Informational columns (length, soil type, install year,
-    /// geometry, dates, campaign) are left out, so correcting them does not trigger a refit.
-    pub fn canonical_inputs(&self) -> String {
-        let mut c = Canonical::new("pipewave-inputs-v1");
-        c.text("segment_id", Some(&self.segment_id))
-            .text("material", Some(self.material.code()))
-            .num("outer_diameter_mm", Some(self.outer_diameter_mm))
-            .num("wall_thickness_mm", Some(self.wall_thickness_mm))
-            .num("soil_density_kg_m3", Some(self.soil_density_kg_m3))
-            .num("pipe_youngs_modulus_pa", self.pipe_youngs_modulus_pa)
-            .num("pipe_poisson", self.pipe_poisson)
-            .num("pipe_density_kg_m3", self.pipe_density_kg_m3)
-            .num("pipe_loss_factor", self.pipe_loss_factor)
-            .num("fluid_density_kg_m3", self.fluid_density_kg_m3)
-            .num("fluid_bulk_modulus_pa", self.fluid_bulk_modulus_pa)
-            .int(
-                "measurements",
-                Some(i64::try_from(self.measurements.len()).unwrap_or(i64::MAX)),
-            );
-        let mut ms: Vec<&MeasurementRecord> = self.measurements.iter().collect();
-        ms.sort_by(|a, b| a.omega_rad_s.total_cmp(&b.omega_rad_s));
-        for m in ms {
-            c.num("omega_rad_s", Some(m.omega_rad_s))
-                .num("k_re_rad_per_m", Some(m.k_re_rad_per_m))
-                .num("attenuation_np_per_m", Some(m.attenuation_np_per_m))
-                .num("k_re_std", m.k_re_std)
-                .num("attenuation_std", m.attenuation_std);
-        }
-        c.as_str().to_string()
-    }
-
-    /// FNV-1a 64 of [`SegmentRecord::canonical_inputs`], 16 hex digits.
-    pub fn compute_inputs_hash(&self) -> String {
-        super::hash::fnv1a64_hex(&self.canonical_inputs())
-    }
-
     /// True when the inventory columns (everything but measurements, hash and import time)
     /// equal those of `other`.
     pub(crate) fn same_inventory(&self, other: &SegmentRecord) -> bool {
@@ -236,7 +204,9 @@ pub(crate) const SEGMENT_COLUMNS: &str =
     soil_class_override";
 
 pub(crate) const MEASUREMENT_COLUMNS: &str = "omega_rad_s, frequency_hz, k_re_rad_per_m, \
-    attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign";
+    attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign, note";
+/// How many columns [`MEASUREMENT_COLUMNS`] names.
+pub(crate) const MEASUREMENT_WIDTH: usize = 9;
 
 /// A segment row without its measurements; the material is parsed afterwards.
 pub(crate) fn segment_from_row(r: &Row<'_>) -> rusqlite::Result<(SegmentRecord, String)> {
@@ -281,6 +251,7 @@ pub(crate) fn measurement_from_row(r: &Row<'_>) -> rusqlite::Result<MeasurementR
         attenuation_std: r.get(5)?,
         measured_on: r.get(6)?,
         campaign: r.get(7)?,
+        note: r.get(8)?,
     })
 }
 
@@ -298,16 +269,92 @@ pub(crate) fn finish_segment(
     Ok(seg)
 }
 
-/// The measurements of one segment, sorted by ω.
+/// The measurements of one segment's current state, sorted by ω: those of its latest
+/// campaign ([`campaigns_of`]). A fit uses these; the earlier campaigns stay stored.
 pub fn load_measurements(
     conn: &Connection,
     segment_id: &str,
 ) -> Result<Vec<MeasurementRecord>, DbError> {
+    let Some(latest) = campaigns_of(conn, segment_id)?.pop() else {
+        return Ok(Vec::new());
+    };
+    load_campaign(conn, segment_id, &latest.name)
+}
+
+/// The measurements of one segment in one campaign, sorted by ω.
+pub fn load_campaign(
+    conn: &Connection,
+    segment_id: &str,
+    campaign: &str,
+) -> Result<Vec<MeasurementRecord>, DbError> {
     let mut stmt = conn.prepare_cached(&format!(
-        "SELECT {MEASUREMENT_COLUMNS} FROM measurements WHERE segment_id = ?1 ORDER BY omega_rad_s"
+        "SELECT {MEASUREMENT_COLUMNS} FROM measurements WHERE segment_id = ?1 AND campaign = ?2 \
+         ORDER BY omega_rad_s"
     ))?;
-    let rows = stmt.query_map([segment_id], measurement_from_row)?;
+    let rows = stmt.query_map(params![segment_id, campaign], measurement_from_row)?;
     Ok(rows.collect::<Result<_, _>>()?)
+}
+
+/// Every stored measurement of one segment, of every campaign, by campaign (in
+/// [`campaigns_of`]'s order) and ω.
+pub fn load_all_measurements(
+    conn: &Connection,
+    segment_id: &str,
+) -> Result<Vec<MeasurementRecord>, DbError> {
+    let mut out = Vec::new();
+    for c in campaigns_of(conn, segment_id)? {
+        out.extend(load_campaign(conn, segment_id, &c.name)?);
+    }
+    Ok(out)
+}
+
+/// One campaign of one segment, as [`campaigns_of`] orders them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CampaignOfSegment {
+    /// The campaign's name.
+    pub name: String,
+    /// Its newest `measured_on` on this segment, if any row has one.
+    pub newest_measured_on: Option<String>,
+    /// Its rows on this segment.
+    pub rows: usize,
+    /// Its smallest row id on this segment: rows keep their id when a campaign is imported
+    /// again, so this is the order in which the segment's campaigns were first imported.
+    pub first_row_id: i64,
+}
+
+/// The campaigns a segment was measured in, oldest first, so the last is its latest. When every
+/// one of them has a date the order is that of their newest `measured_on` (then of import);
+/// otherwise it is the order in which they were first imported. A segment whose rows are dated
+/// in one campaign and not in another is therefore ordered by import, which never reorders a
+/// history as dates are filled in one campaign at a time.
+pub fn campaigns_of(
+    conn: &Connection,
+    segment_id: &str,
+) -> Result<Vec<CampaignOfSegment>, DbError> {
+    let mut stmt = conn.prepare_cached(
+        "SELECT campaign, MAX(measured_on), COUNT(*), MIN(id) FROM measurements \
+         WHERE segment_id = ?1 GROUP BY campaign",
+    )?;
+    let mut out: Vec<CampaignOfSegment> = stmt
+        .query_map([segment_id], |r| {
+            Ok(CampaignOfSegment {
+                name: r.get(0)?,
+                newest_measured_on: r.get(1)?,
+                rows: usize::try_from(r.get::<_, i64>(2)?).unwrap_or(usize::MAX),
+                first_row_id: r.get(3)?,
+            })
+        })?
+        .collect::<Result<_, _>>()?;
+    if out.iter().all(|c| c.newest_measured_on.is_some()) {
+        out.sort_by(|a, b| {
+            a.newest_measured_on
+                .cmp(&b.newest_measured_on)
+                .then(a.first_row_id.cmp(&b.first_row_id))
+        });
+    } else {
+        out.sort_by_key(|c| c.first_row_id);
+    }
+    Ok(out)
 }
 
 /// One segment with its measurements, or `None` if it is not in the inventory.
@@ -452,48 +499,110 @@ pub(crate) fn update_segment(conn: &Connection, s: &SegmentRecord) -> Result<(),
     Ok(())
 }
 
-/// Replace the measurement set of a segment.
-pub(crate) fn replace_measurements(
-    conn: &Connection,
-    segment_id: &str,
-    ms: &[MeasurementRecord],
-) -> Result<(), DbError> {
-    conn.prepare_cached("DELETE FROM measurements WHERE segment_id = ?1")?
-        .execute([segment_id])?;
-    let mut ins = conn.prepare_cached(
-        "INSERT INTO measurements (segment_id, omega_rad_s, frequency_hz, k_re_rad_per_m, \
-         attenuation_np_per_m, k_re_std, attenuation_std, measured_on, campaign) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
-    )?;
-    for m in ms {
-        ins.execute(params![
-            segment_id,
-            m.omega_rad_s,
-            m.frequency_hz,
-            m.k_re_rad_per_m,
-            m.attenuation_np_per_m,
-            m.k_re_std,
-            m.attenuation_std,
-            m.measured_on,
-            m.campaign,
-        ])?;
-    }
-    Ok(())
+/// What storing one segment's rows of one campaign did ([`store_campaign`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct CampaignWrite {
+    /// Rows at a frequency the campaign did not have for the segment.
+    pub added: usize,
+    /// Rows at a frequency it had, with other values.
+    pub updated: usize,
+    /// Rows it had that are unchanged, or not in the file and kept.
+    pub kept: usize,
+    /// Rows it had that are not in the file and were removed (`replace`).
+    pub removed: usize,
 }
 
-/// Recompute and store a segment's `inputs_hash` from what is in the database now. Returns true
-/// when the stored hash changed.
-pub(crate) fn refresh_inputs_hash(conn: &Connection, segment_id: &str) -> Result<bool, DbError> {
-    let Some(seg) = load_segment(conn, segment_id)? else {
-        return Ok(false);
+/// Store one segment's rows of one campaign: a row at a frequency (within `same_frequency`) the
+/// campaign already has for the segment updates that row in place, keeping its id; another row
+/// is added. The campaign's stored rows missing from `ms` are kept, or removed with `replace`.
+/// Other campaigns are never touched.
+pub(crate) fn store_campaign(
+    conn: &Connection,
+    segment_id: &str,
+    campaign: &str,
+    ms: &[MeasurementRecord],
+    replace: bool,
+    same_frequency: impl Fn(f64, f64) -> bool,
+) -> Result<CampaignWrite, DbError> {
+    let stored: Vec<(i64, MeasurementRecord)> = {
+        let mut stmt = conn.prepare_cached(&format!(
+            "SELECT {MEASUREMENT_COLUMNS}, id FROM measurements WHERE segment_id = ?1 \
+             AND campaign = ?2 ORDER BY omega_rad_s"
+        ))?;
+        let rows = stmt.query_map(params![segment_id, campaign], |r| {
+            Ok((r.get(MEASUREMENT_WIDTH)?, measurement_from_row(r)?))
+        })?;
+        rows.collect::<Result<_, _>>()?
     };
-    let hash = seg.compute_inputs_hash();
-    if hash == seg.inputs_hash {
-        return Ok(false);
+    let mut w = CampaignWrite::default();
+    let mut matched = vec![false; stored.len()];
+    for m in ms {
+        let at = stored
+            .iter()
+            .position(|(_, s)| same_frequency(s.omega_rad_s, m.omega_rad_s));
+        match at {
+            Some(i) => {
+                matched[i] = true;
+                let (id, old) = &stored[i];
+                let mut new = m.clone();
+                new.campaign = Some(campaign.to_string());
+                if *old == new {
+                    w.kept += 1;
+                    continue;
+                }
+                conn.prepare_cached(
+                    "UPDATE measurements SET omega_rad_s = ?2, frequency_hz = ?3, \
+                     k_re_rad_per_m = ?4, attenuation_np_per_m = ?5, k_re_std = ?6, \
+                     attenuation_std = ?7, measured_on = ?8, note = ?9 WHERE id = ?1",
+                )?
+                .execute(params![
+                    id,
+                    m.omega_rad_s,
+                    m.frequency_hz,
+                    m.k_re_rad_per_m,
+                    m.attenuation_np_per_m,
+                    m.k_re_std,
+                    m.attenuation_std,
+                    m.measured_on,
+                    m.note,
+                ])?;
+                w.updated += 1;
+            }
+            None => {
+                conn.prepare_cached(
+                    "INSERT INTO measurements (segment_id, campaign, omega_rad_s, frequency_hz, \
+                     k_re_rad_per_m, attenuation_np_per_m, k_re_std, attenuation_std, \
+                     measured_on, note) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
+                )?
+                .execute(params![
+                    segment_id,
+                    campaign,
+                    m.omega_rad_s,
+                    m.frequency_hz,
+                    m.k_re_rad_per_m,
+                    m.attenuation_np_per_m,
+                    m.k_re_std,
+                    m.attenuation_std,
+                    m.measured_on,
+                    m.note,
+                ])?;
+                w.added += 1;
+            }
+        }
     }
-    conn.prepare_cached("UPDATE segments SET inputs_hash = ?2 WHERE segment_id = ?1")?
-        .execute(params![segment_id, hash])?;
-    Ok(true)
+    for ((id, _), hit) in stored.iter().zip(&matched) {
+        if *hit {
+            continue;
+        }
+        if replace {
+            conn.prepare_cached("DELETE FROM measurements WHERE id = ?1")?
+                .execute([id])?;
+            w.removed += 1;
+        } else {
+            w.kept += 1;
+        }
+    }
+    Ok(w)
 }
 
 #[cfg(test)]
@@ -515,6 +624,7 @@ mod tests {
                 attenuation_std: None,
                 measured_on: Some("2024-05-01".into()),
                 campaign: None,
+                note: None,
             }],
             ..SegmentRecord::new("P-1", Material::DuctileIron, 170.0, 6.0, 1900.0)
         }
@@ -539,50 +649,5 @@ mod tests {
         assert_eq!(s.soil_density().unwrap(), 1900.0);
         o.soil_density_kg_m3 = 900.0;
         assert!(o.soil_density().is_err());
-    }
-
-    #[test]
-    fn inputs_hash_ignores_informational_columns_but_not_inputs() {
-        let s = sample();
-        let h = s.compute_inputs_hash();
-        assert_eq!(h.len(), 16);
-        let mut info = s.clone();
-        info.length_m = Some(99.0);
-        info.soil_type = None;
-        info.measurements[0].campaign = Some("spring".into());
-        assert_eq!(info.compute_inputs_hash(), h);
-        let mut k = s.clone();
-        k.measurements[0].k_re_rad_per_m = 0.5000000001;
-        assert_ne!(k.compute_inputs_hash(), h);
-        let mut std = s.clone();
-        std.measurements[0].attenuation_std = Some(0.001);
-        assert_ne!(std.compute_inputs_hash(), h);
-        let mut wall = s;
-        wall.wall_thickness_mm = 6.5;
-        assert_ne!(wall.compute_inputs_hash(), h);
-    }
-
-    /// The stored hashes must not change between program versions, or every segment would be
-    /// refitted after an upgrade. Value computed once from the canonical text (and checked
-    /// independently with a 5-line Python FNV-1a); change it only with a new version tag.
-    #[test]
-    fn inputs_hash_is_pinned() {
-        let s = sample();
-        assert!(s
-            .canonical_inputs()
-            .contains("\nomega_rad_s=f:6.283185307179587e2\nk_re_rad_per_m=f:5e-1\n"));
-        assert_eq!(s.compute_inputs_hash(), "0287f9d1471f32b9");
-    }
-
-    #[test]
-    fn inputs_hash_does_not_depend_on_measurement_order() {
-        let mut s = sample();
-        let mut m2 = s.measurements[0].clone();
-        m2.omega_rad_s *= 2.0;
-        m2.frequency_hz *= 2.0;
-        s.measurements.push(m2);
-        let h = s.compute_inputs_hash();
-        s.measurements.reverse();
-        assert_eq!(s.compute_inputs_hash(), h);
     }
 }

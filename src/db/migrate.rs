@@ -87,6 +87,16 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0013_prediction_field_run.sql",
         sql: include_str!("../../migrations/0013_prediction_field_run.sql"),
     },
+    Migration {
+        version: 14,
+        name: "0014_inputs_hash_v2.sql",
+        sql: include_str!("../../migrations/0014_inputs_hash_v2.sql"),
+    },
+    Migration {
+        version: 15,
+        name: "0015_measurement_campaigns.sql",
+        sql: include_str!("../../migrations/0015_measurement_campaigns.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

@@ -22,6 +22,7 @@ pub mod migrate;
 pub mod pages;
 pub mod results;
 pub mod speeds;
+pub mod staleness;
 pub mod wkt;
 pub mod zones;
 
@@ -34,8 +35,8 @@ pub use effects::{
     effects_of, fit_states, mark_forced_refits, segment_effects, set_segment_effects, FitState,
 };
 pub use import::{
-    import, known_columns, ColumnRef, ImportOptions, ImportReport, ImportSource, RowError,
-    SourceKind,
+    import, known_columns, CampaignCounts, ColumnRef, ImportOptions, ImportReport, ImportSource,
+    RowError, SourceKind,
 };
 pub use inventory::{
     load_segment, load_segments, load_zoned_segments, MeasurementRecord, SegmentRecord,
@@ -45,6 +46,9 @@ pub use results::{
     curves_for, finish_run, fit_states_page, fit_with_settings, insert_fit_with_curves,
     latest_fits, load_run, segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun,
     RunCounts, RunRow, RunStatus,
+};
+pub use staleness::{
+    refresh_all_inputs_hashes, refresh_inputs_hash, stored_inputs_hash, InputsSweep,
 };
 
 /// How long a statement waits for another connection's write lock before giving up. A calibrate
@@ -266,6 +270,8 @@ impl Database {
 
     fn open_with(path: &Path, create: bool) -> Result<Database, DbError> {
         use rusqlite::OpenFlags;
+        // No file this process writes may replace the database it uses.
+        crate::outfile::protect_database(path);
         let path = path.to_path_buf();
         if path.is_dir() {
             return Err(DbError::IsDirectory { path });
@@ -346,6 +352,7 @@ impl Database {
     /// Errors: [`DbError::NeedsUpgrade`] for an older schema (upgrading writes).
     pub fn open_immutable(path: impl AsRef<Path>) -> Result<Database, DbError> {
         let path = path.as_ref().to_path_buf();
+        crate::outfile::protect_database(&path);
         let flags = rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY
             | rusqlite::OpenFlags::SQLITE_OPEN_URI
             | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;

@@ -183,6 +183,9 @@ pub struct FitRow {
     /// `model`, or `model+discrepancy` where the misfit is significant and the curve and the
     /// leak-band speed are corrected by a fitted discrepancy (model §7.13).
     pub curve_source: String,
+    /// The measurement campaigns the fit was made from, comma-separated, the latest first
+    /// (empty: a fit made before campaigns were kept).
+    pub campaigns: String,
     /// How far the leak band reaches beyond the measured frequencies, octaves.
     pub leak_band_extrapolation_octaves: Option<f64>,
     /// Objective value at the optimum.
@@ -272,6 +275,7 @@ impl FitRow {
             soil_information_ps: None,
             soil_information_ss: None,
             curve_source: "model".into(),
+            campaigns: String::new(),
             leak_band_extrapolation_octaves: None,
             misfit: None,
             chi2_per_dof: None,
@@ -555,6 +559,7 @@ fn fit_values(f: &FitRow) -> Vec<(&'static str, rusqlite::types::Value)> {
         ("soil_information_ps", real(f.soil_information_ps)),
         ("soil_information_ss", real(f.soil_information_ss)),
         ("curve_source", text(&f.curve_source)),
+        ("campaigns", text(&f.campaigns)),
         (
             "leak_band_extrapolation_octaves",
             real(f.leak_band_extrapolation_octaves),
@@ -626,6 +631,7 @@ fn fit_from_row(r: &Row<'_>) -> Result<FitRow, DbError> {
     f.soil_information_ps = r.get("soil_information_ps")?;
     f.soil_information_ss = r.get("soil_information_ss")?;
     f.curve_source = r.get("curve_source")?;
+    f.campaigns = r.get("campaigns")?;
     f.leak_band_extrapolation_octaves = r.get("leak_band_extrapolation_octaves")?;
     f.misfit = r.get("misfit")?;
     f.chi2_per_dof = r.get("chi2_per_dof")?;

@@ -292,8 +292,7 @@ pub fn write_groups_csv(
             g.twins.as_ref().map(twin_text).unwrap_or_default(),
         ])?;
     }
-    w.flush()?;
-    Ok(())
+    spreadsheet::finish(w)
 }
 
 /// The `twin_comparison` column: the two detected twins' group-level evidence at one common
@@ -409,8 +408,7 @@ pub fn write_csv(
             },
         ])?;
     }
-    w.flush()?;
-    Ok(())
+    spreadsheet::finish(w)
 }
 
 fn num(v: f64) -> String {
@@ -801,7 +799,8 @@ pub fn write_html(
         h.push_str("</table></div>");
     }
     h.push_str("</body></html>\n");
-    std::fs::write(path, h)
+    crate::outfile::write_bytes(path, crate::outfile::Contents::Plain, h.as_bytes())
+        .map_err(std::io::Error::other)
 }
 
 #[cfg(test)]

@@ -149,12 +149,7 @@ pub fn convert_measurements(
             params![k, segment_id],
         )?,
     };
-    if let Some(seg) = crate::db::load_segment(&tx, segment_id)? {
-        tx.execute(
-            "UPDATE segments SET inputs_hash = ?2 WHERE segment_id = ?1",
-            params![segment_id, seg.compute_inputs_hash()],
-        )?;
-    }
+    crate::db::refresh_inputs_hash(&tx, segment_id)?;
     tx.commit()?;
     Ok(n)
 }

@@ -21,9 +21,10 @@ use rusqlite::{params, params_from_iter, Connection};
 use super::record::{Records, Value};
 use super::style;
 use super::zones::ZonePoints;
-use super::{finish_temp, temp_path, ExportError, Tally};
+use super::{ExportError, Tally};
 use crate::db::crs::{self, ToCommonCrs};
 use crate::db::wkt::LineString;
+use crate::outfile::{Contents, OutFile};
 
 /// The feature table.
 pub const TABLE: &str = "pipe_segments";
@@ -360,10 +361,10 @@ fn write_style(tx: &rusqlite::Transaction<'_>, qml: &str) -> rusqlite::Result<()
 /// Write the GeoPackage of the records to `out` (through a temporary file), each row as it
 /// is read.
 pub(crate) fn write(records: &Records<'_>, out: &Path) -> Result<Tally, ExportError> {
-    let tmp = temp_path(out);
-    let _ = std::fs::remove_file(&tmp);
-    let result = write_to(records, &tmp, out);
-    finish_temp(&tmp, out, result)
+    let file = OutFile::for_path(out, Contents::GeoPackage, false)?;
+    let tally = write_to(records, file.temp_path(), out)?;
+    file.commit()?;
+    Ok(tally)
 }
 
 fn write_to(records: &Records<'_>, tmp: &Path, out: &Path) -> Result<Tally, ExportError> {

@@ -34,6 +34,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use crate::db::{Database, DbError};
+use crate::outfile::{Contents, OutFile, OutputError};
 
 pub use numbers::Precision;
 pub use record::{load_records, Records, SegmentExport, PAGE_SIZE, PROPERTIES};
@@ -108,26 +109,10 @@ pub enum ExportError {
         #[source]
         source: DbError,
     },
-    /// The output path is the database being read, or another pipewave database.
-    #[error(
-        "refusing to write {} over {}: it is a pipewave database; give another --out path",
-        format,
-        path.display()
-    )]
-    WouldOverwriteDatabase {
-        /// The output path.
-        path: PathBuf,
-        /// What was being written.
-        format: &'static str,
-    },
-    /// The output path is a directory.
-    #[error("{} is a directory; give the path of the file to write, such as {}", path.display(), path.join(suggested).display())]
-    OutIsDirectory {
-        /// The output path.
-        path: PathBuf,
-        /// A file name to suggest.
-        suggested: &'static str,
-    },
+    /// The output path may not be written (a directory, a database, an input, a read-only
+    /// file).
+    #[error(transparent)]
+    Output(#[from] OutputError),
     /// Creating, writing or renaming the output failed.
     #[error("cannot write {}", path.display())]
     Write {
@@ -212,7 +197,11 @@ fn write_pages(
         ExportFormat::GeoJson => "pipewave.geojson",
         ExportFormat::Csv => "pipewave.csv",
     };
-    check_out_path(db, out_path, format.as_str(), suggested)?;
+    let contents = match format {
+        ExportFormat::Gpkg => Contents::GeoPackage,
+        ExportFormat::GeoJson | ExportFormat::Csv => Contents::Plain,
+    };
+    check_out_path(db, out_path, contents, suggested)?;
     let records = Records::new(db, page_size);
     let _snapshot = records.snapshot()?;
     let tally = match format {
@@ -249,201 +238,34 @@ impl Tally {
     }
 }
 
-/// Refuse an output path that is a directory, the database being read, or any pipewave database.
+/// Refuse an output path that the guard of [`crate::outfile`] refuses: a directory, the database
+/// being read, any other database, an input or a read-only file. `contents` says whether a
+/// GeoPackage is written (which may replace a GeoPackage).
 pub(crate) fn check_out_path(
     db: &Database,
     out: &Path,
-    format: &'static str,
+    contents: Contents,
     suggested: &'static str,
 ) -> Result<(), ExportError> {
-    if out.is_dir() {
-        return Err(ExportError::OutIsDirectory {
-            path: out.to_path_buf(),
-            suggested,
-        });
-    }
-    if !out.exists() {
-        return Ok(());
-    }
-    let same = match (out.canonicalize(), db.path().canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if same || is_pipewave_database(out) {
-        return Err(ExportError::WouldOverwriteDatabase {
-            path: out.to_path_buf(),
-            format,
-        });
-    }
+    crate::outfile::protect_database(db.path());
+    crate::outfile::check(out, contents, suggested)?;
     Ok(())
 }
 
-/// True when the file is a SQLite database with pipewave's `segments` and `fits` tables. Any
-/// failure to tell (not SQLite, unreadable) answers false: such a file is not a pipewave database.
-fn is_pipewave_database(path: &Path) -> bool {
-    // Only a regular file can be a database; opening a FIFO to look would wait for a writer.
-    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
-        return false;
-    }
-    let Ok(mut f) = std::fs::File::open(path) else {
-        return false;
-    };
-    let mut magic = [0u8; 16];
-    if std::io::Read::read_exact(&mut f, &mut magic).is_err() || &magic != b"SQLite format 3\0" {
-        return false;
-    }
-    let flags =
-        rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
-    let Ok(conn) = rusqlite::Connection::open_with_flags(path, flags) else {
-        return false;
-    };
-    conn.query_row(
-        "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name IN ('segments', 'fits')",
-        [],
-        |r| r.get::<_, i64>(0),
-    )
-    .map(|n| n == 2)
-    .unwrap_or(false)
-}
-
-/// Where an output path leads: the file it names after following its symlinks, and whether
-/// that is a stream (a character device such as `/dev/null` or `/dev/stdout`, or a FIFO) to be
-/// written directly rather than replaced.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) enum OutTarget {
-    /// A regular file, or a path that does not exist yet: written through a temporary file
-    /// renamed over it.
-    File(PathBuf),
-    /// A device or FIFO: opened for writing as it is, never replaced.
-    Stream(PathBuf),
-}
-
-/// Follow `out`'s symlinks (also to a target that does not exist yet, which is then created)
-/// and tell a stream from a file. A symlink is never replaced: its target is written.
-pub(crate) fn resolve_out(out: &Path) -> OutTarget {
-    let mut path = out.to_path_buf();
-    // A loop of links ends here and is left to the write to report.
-    for _ in 0..40 {
-        match std::fs::symlink_metadata(&path) {
-            Ok(m) if m.file_type().is_symlink() => match std::fs::read_link(&path) {
-                Ok(t) => {
-                    path = match path.parent() {
-                        Some(dir) if t.is_relative() => dir.join(t),
-                        _ => t,
-                    }
-                }
-                Err(_) => break,
-            },
-            Ok(m) if is_stream(&m.file_type()) => return OutTarget::Stream(path),
-            _ => break,
-        }
-    }
-    OutTarget::File(path)
-}
-
-#[cfg(unix)]
-fn is_stream(t: &std::fs::FileType) -> bool {
-    use std::os::unix::fs::FileTypeExt;
-    t.is_char_device() || t.is_fifo() || t.is_block_device() || t.is_socket()
-}
-
-#[cfg(not(unix))]
-fn is_stream(t: &std::fs::FileType) -> bool {
-    !t.is_file() && !t.is_dir() && !t.is_symlink()
-}
-
-/// A temporary path for the contents of `out`: beside the file it names (same directory, so
-/// the final rename is atomic), or in the system's temporary directory for a stream.
-pub(crate) fn temp_path(out: &Path) -> PathBuf {
-    let (dir, target) = match resolve_out(out) {
-        OutTarget::File(p) => (None, p),
-        OutTarget::Stream(p) => (Some(std::env::temp_dir()), p),
-    };
-    let name = target
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "export".into());
-    let tmp = format!(".{name}.tmp-{}", std::process::id());
-    match dir {
-        Some(d) => d.join(tmp),
-        None => target.with_file_name(tmp),
-    }
-}
-
-/// Move the finished temporary file over the file `out` names, or copy it into the stream `out`
-/// names; on failure remove the temporary file.
-pub(crate) fn commit_temp(tmp: &Path, out: &Path) -> Result<(), ExportError> {
-    let result = match resolve_out(out) {
-        OutTarget::File(target) => std::fs::rename(tmp, target),
-        OutTarget::Stream(target) => std::fs::File::open(tmp)
-            .and_then(|mut from| {
-                let mut to = std::fs::OpenOptions::new().write(true).open(target)?;
-                std::io::copy(&mut from, &mut to)?;
-                std::io::Write::flush(&mut to)
-            })
-            .and_then(|()| std::fs::remove_file(tmp)),
-    };
-    result.map_err(|source| {
-        let _ = std::fs::remove_file(tmp);
-        ExportError::Write {
-            path: out.to_path_buf(),
-            source,
-        }
-    })
-}
-
-/// Finish a write into the temporary file `tmp`: on success move it over `out`, on failure
-/// remove it.
-pub(crate) fn finish_temp<T>(
-    tmp: &Path,
-    out: &Path,
-    result: Result<T, ExportError>,
-) -> Result<T, ExportError> {
-    match result {
-        Ok(t) => {
-            commit_temp(tmp, out)?;
-            Ok(t)
-        }
-        Err(e) => {
-            let _ = std::fs::remove_file(tmp);
-            Err(e)
-        }
-    }
-}
-
-/// Write `out` through a temporary file with `fill`, which writes the contents into a buffered
+/// Write `out` through an [`OutFile`] with `fill`, which writes the contents into a buffered
 /// writer; the file replaces `out` only when `fill` and the final flush succeed.
 pub(crate) fn write_streamed<T>(
     out: &Path,
-    fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> Result<T, ExportError>,
+    fill: impl FnOnce(&mut OutFile) -> Result<T, ExportError>,
 ) -> Result<T, ExportError> {
-    let tmp = temp_path(out);
-    let result = std::fs::File::create(&tmp)
-        .map_err(|source| ExportError::Write {
-            path: out.to_path_buf(),
-            source,
-        })
-        .and_then(|f| {
-            let mut w = std::io::BufWriter::new(f);
-            let t = fill(&mut w)?;
-            std::io::Write::flush(&mut w).map_err(|source| ExportError::Write {
-                path: out.to_path_buf(),
-                source,
-            })?;
-            Ok(t)
-        });
-    finish_temp(&tmp, out, result)
+    let mut file = OutFile::create(out, Contents::Plain)?;
+    let t = fill(&mut file)?;
+    file.commit()?;
+    Ok(t)
 }
 
-/// Write bytes to `out` through a temporary file.
+/// Write bytes to `out` through an [`OutFile`].
 pub(crate) fn write_file_atomically(out: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    let tmp = temp_path(out);
-    std::fs::write(&tmp, bytes).map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        ExportError::Write {
-            path: out.to_path_buf(),
-            source,
-        }
-    })?;
-    commit_temp(&tmp, out)
+    crate::outfile::write_bytes(out, Contents::Plain, bytes)?;
+    Ok(())
 }

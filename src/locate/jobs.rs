@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::outfile::{Contents, OutFile};
 use rusqlite::{params, Connection};
 use serde_json::{json, Value as Json};
 
@@ -348,8 +349,7 @@ pub fn write_csv(path: &Path, answers: &[Answer]) -> Result<(), String> {
             .collect();
         w.write_record(&r).map_err(e)?;
     }
-    w.flush()
-        .map_err(|x| format!("cannot write {}: {x}", path.display()))
+    spreadsheet::finish(w).map_err(e)
 }
 
 fn properties(a: &Answer) -> serde_json::Map<String, Json> {
@@ -420,7 +420,8 @@ pub fn write_geojson(
     }
     let doc = json!({"type": "FeatureCollection", "features": features});
     let text = serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())?;
-    std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    crate::outfile::write_bytes(path, crate::outfile::Contents::Plain, text.as_bytes())
+        .map_err(|e| e.to_string())?;
     Ok(warnings)
 }
 
@@ -453,7 +454,10 @@ pub fn write_gpkg(
 ) -> Result<Vec<String>, String> {
     let e = |x: rusqlite::Error| format!("GeoPackage {}: {x}", path.display());
     let exists = path.exists();
-    let mut conn = Connection::open(path).map_err(e)?;
+    // An existing GeoPackage is copied and extended beside itself, then moved over it: a
+    // failure halfway leaves it as it was.
+    let file = OutFile::for_path(path, Contents::GeoPackage, true).map_err(|x| x.to_string())?;
+    let mut conn = Connection::open(file.temp_path()).map_err(e)?;
     if exists {
         let id: i32 = conn
             .pragma_query_value(None, "application_id", |r| r.get(0))
@@ -582,5 +586,7 @@ pub fn write_gpkg(
     )
     .map_err(e)?;
     tx.commit().map_err(e)?;
+    conn.close().map_err(|(_, x)| e(x))?;
+    file.commit().map_err(|x| x.to_string())?;
     Ok(warnings)
 }

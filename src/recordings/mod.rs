@@ -32,7 +32,7 @@ use crate::units::sig;
 
 /// Columns of the written measurements (docs/interface.md `measurements.csv`; `import` accepts no
 /// other columns).
-pub const MEASUREMENT_COLUMNS: [&str; 7] = [
+pub const MEASUREMENT_COLUMNS: [&str; 8] = [
     "segment_id",
     "frequency_hz",
     "k_re_rad_per_m",
@@ -40,12 +40,13 @@ pub const MEASUREMENT_COLUMNS: [&str; 7] = [
     "k_re_std",
     "attenuation_std",
     "campaign",
+    "note",
 ];
 
 /// The one place the `wavenumbers` output file is written: one row per band. A band's notes
-/// (`reflection_suspected`, ...) go in brackets after `campaign` in the campaign cell, because
-/// docs/interface.md's `measurements.csv` has no notes column. Text cells follow the
-/// spreadsheet-safety rule of every CSV pipewave writes.
+/// (`reflection_suspected`, ...) go in the `note` column, comma-separated, so that every band
+/// of one survey is in the one campaign. Text cells follow the spreadsheet-safety rule of every
+/// CSV pipewave writes.
 pub fn write_measurements(
     path: &Path,
     results: &[SegmentWavenumbers],
@@ -62,17 +63,12 @@ pub fn write_measurements(
                 b.attenuation.to_string(),
                 b.k_re_std.to_string(),
                 b.attenuation_std.to_string(),
-                spreadsheet_safe(&if b.notes.is_empty() {
-                    campaign.to_string()
-                } else {
-                    format!("{campaign} ({})", b.notes.join(", "))
-                })
-                .into_owned(),
+                spreadsheet_safe(campaign).into_owned(),
+                spreadsheet_safe(&b.notes.join(", ")).into_owned(),
             ])?;
         }
     }
-    w.flush()?;
-    Ok(())
+    spreadsheet::finish(w)
 }
 
 /// A problem with the recordings of a field test. Every message names the file (and the layout

@@ -85,7 +85,7 @@ pub fn write_paged(
     out_path: &Path,
     page_size: usize,
 ) -> Result<ExportSummary, ExportError> {
-    check_out_path(db, out_path, "the audit report", "report.html")?;
+    check_out_path(db, out_path, crate::outfile::Contents::Plain, "report.html")?;
     let records = Records::new(db, page_size);
     let _snapshot = records.snapshot()?;
     let mut warnings = Vec::new();

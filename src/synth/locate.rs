@@ -7,6 +7,7 @@
 //! the spectrum), made by one inverse FFT over the whole record (one period of a periodic random
 //! signal, as the hydrant-test recordings are), plus each sensor's own white noise.
 
+use crate::outfile::{Contents, OutFile};
 use std::path::Path;
 
 use num_complex::Complex64;
@@ -277,7 +278,11 @@ pub fn write_leaks(
     let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, LEAK_SEED_STREAM));
     let mut truths: std::collections::HashMap<usize, TruthCurve> = Default::default();
     let csv_err = |e: csv::Error| e.to_string();
-    let mut jobs = csv::Writer::from_path(dir.join(LEAK_JOBS_CSV)).map_err(csv_err)?;
+    let out = |name: &str| -> Result<csv::Writer<OutFile>, String> {
+        let f = OutFile::create(&dir.join(name), Contents::Plain).map_err(|e| e.to_string())?;
+        Ok(csv::Writer::from_writer(f))
+    };
+    let mut jobs = out(LEAK_JOBS_CSV)?;
     jobs.write_record([
         "job_id",
         "sensor1_segment",
@@ -291,7 +296,7 @@ pub fn write_leaks(
         "path",
     ])
     .map_err(csv_err)?;
-    let mut truth = csv::Writer::from_path(dir.join(LEAK_TRUTH_CSV)).map_err(csv_err)?;
+    let mut truth = out(LEAK_TRUTH_CSV)?;
     truth
         .write_record([
             "job_id",
@@ -369,8 +374,10 @@ pub fn write_leaks(
             .map_err(csv_err)?;
         written += 1;
     }
-    jobs.flush().map_err(|e| e.to_string())?;
-    truth.flush().map_err(|e| e.to_string())?;
+    for w in [jobs, truth] {
+        let f = w.into_inner().map_err(|e| e.to_string())?;
+        f.commit().map_err(|e| e.to_string())?;
+    }
     Ok(written)
 }
 

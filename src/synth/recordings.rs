@@ -10,7 +10,10 @@
 
 pub mod recovery;
 
+use std::io;
 use std::path::Path;
+
+use crate::outfile::{Contents, OutFile};
 
 use num_complex::Complex64;
 use rand::{Rng, SeedableRng};
@@ -265,7 +268,8 @@ pub fn write_wav(
         bits_per_sample: bits,
         sample_format,
     };
-    let mut w = hound::WavWriter::create(path, spec)?;
+    let mut file = OutFile::create(path, Contents::Plain).map_err(io::Error::other)?;
+    let mut w = hound::WavWriter::new(&mut file, spec)?;
     let n = channels.iter().map(|c| c.len()).min().unwrap_or(0);
     let full = 2f64.powi(bits as i32 - 1);
     for i in 0..n {
@@ -280,7 +284,9 @@ pub fn write_wav(
             }
         }
     }
-    w.finalize()
+    w.finalize()?;
+    file.commit().map_err(io::Error::other)?;
+    Ok(())
 }
 
 /// The gain that puts the loudest sample of `channels` at [`WAV_PEAK`] of full scale.
@@ -331,9 +337,13 @@ pub const TRUTH_WAVENUMBERS_CSV: &str = "truth_wavenumbers.csv";
 pub fn write_recordings(dir: &Path, segments: &[RecordedSegment]) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let io = |e: &dyn std::fmt::Display| std::io::Error::other(e.to_string());
-    let mut layout = csv::Writer::from_path(dir.join(LAYOUT_CSV))?;
+    let out = |name: &str| -> std::io::Result<csv::Writer<OutFile>> {
+        let f = OutFile::create(&dir.join(name), Contents::Plain).map_err(io::Error::other)?;
+        Ok(csv::Writer::from_writer(f))
+    };
+    let mut layout = out(LAYOUT_CSV)?;
     layout.write_record(crate::recordings::layout::LAYOUT_COLUMNS)?;
-    let mut truth = csv::Writer::from_path(dir.join(TRUTH_WAVENUMBERS_CSV))?;
+    let mut truth = out(TRUTH_WAVENUMBERS_CSV)?;
     truth.write_record([
         "segment_id",
         "frequency_hz",
@@ -363,8 +373,11 @@ pub fn write_recordings(dir: &Path, segments: &[RecordedSegment]) -> std::io::Re
             ])?;
         }
     }
-    layout.flush()?;
-    truth.flush()
+    for w in [layout, truth] {
+        let f = w.into_inner().map_err(|e| io(&e))?;
+        f.commit().map_err(io::Error::other)?;
+    }
+    Ok(())
 }
 
 /// The usual layout of the seed paper's test (its §4): one sensor at the hydrant, one on each

@@ -5,6 +5,5 @@
 #[path = "../common/mod.rs"]
 mod common;
 
-mod cli;
 mod guard;
-mod import;
+mod staleness;

@@ -5,7 +5,7 @@ use std::f64::consts::TAU;
 use super::staging::{StagedMeasurement, Staging};
 use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, Problems, RowError};
-use crate::db::inventory::MeasurementRecord;
+use crate::db::inventory::{MeasurementRecord, UNNAMED_CAMPAIGN};
 use crate::db::DbError;
 use crate::physics::inputs::{ATTENUATION_RANGE, K_RE_RANGE, MEASUREMENT_STD_RANGE, OMEGA_RANGE};
 use crate::units::short;
@@ -47,6 +47,10 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
     },
     ColumnSpec {
         name: "campaign",
+        required: false,
+    },
+    ColumnSpec {
+        name: "note",
         required: false,
     },
 ];
@@ -119,9 +123,10 @@ pub(super) fn parse(
     }
     staging.index_measurements()?;
 
-    // One measurement per segment and frequency: every member of a group of rows at the same
-    // frequency is an error (we cannot tell which one is meant). The rows come by segment and
-    // ω, so a group is a run of neighbours each at the same frequency as the one before.
+    // One measurement per segment, campaign and frequency: every member of a group of rows at
+    // the same frequency is an error (we cannot tell which one is meant). The rows come by
+    // segment, campaign and ω, so a group is a run of neighbours each at the same frequency as
+    // the one before.
     let mut group: Vec<StagedMeasurement> = Vec::new();
     let mut duplicates: Vec<StagedMeasurement> = Vec::new();
     let mut close = |group: &mut Vec<StagedMeasurement>| {
@@ -141,9 +146,10 @@ pub(super) fn parse(
                     m.line,
                     col,
                     format!(
-                        "segment '{}' already has a measurement at this frequency on line {}; give one row per segment and frequency",
+                        "segment '{}' already has a measurement at this frequency on line {} (campaign '{}'); give one row per segment, campaign and frequency (a later survey of the same pipe is another campaign: name it in the campaign column)",
                         m.segment_id,
-                        lines.join(", ")
+                        lines.join(", "),
+                        m.campaign
                     ),
                 ));
             }
@@ -153,7 +159,9 @@ pub(super) fn parse(
     };
     staging.measurements_by_frequency(|m| {
         let joins = group.last().is_some_and(|prev| {
-            prev.segment_id == m.segment_id && same_frequency(prev.omega_rad_s, m.omega_rad_s)
+            prev.segment_id == m.segment_id
+                && prev.campaign == m.campaign
+                && same_frequency(prev.omega_rad_s, m.omega_rad_s)
         });
         if !joins {
             close(&mut group);
@@ -250,7 +258,13 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
     let attenuation_std = c.positive("attenuation_std", v, " Np/m");
     let attenuation_std = c.in_range("attenuation_std", attenuation_std, MEASUREMENT_STD_RANGE);
     let measured_on = c.date("measured_on");
-    let campaign = c.owned_text("campaign");
+    // A blank campaign is the one fixed campaign `unnamed`: the nightly re-import of a file
+    // without the column updates its rows and adds none.
+    let campaign = Some(
+        c.owned_text("campaign")
+            .unwrap_or_else(|| UNNAMED_CAMPAIGN.to_string()),
+    );
+    let note = c.owned_text("note");
     if !c.errors.is_empty() {
         return None;
     }
@@ -263,6 +277,7 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
         attenuation_std,
         measured_on,
         campaign,
+        note,
     })
 }
 

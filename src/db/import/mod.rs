@@ -27,7 +27,7 @@ use std::fmt;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use rusqlite::{Connection, Transaction, TransactionBehavior};
+use rusqlite::{params, Connection, Transaction, TransactionBehavior};
 
 pub use measurements::SAME_FREQUENCY_REL_TOL;
 
@@ -183,6 +183,9 @@ pub struct ImportOptions {
     /// EPSG code of the coordinates of a file that does not name its CRS (`--srid N`): a
     /// GeoJSON without `crs`, CSV geometry without `srid`.
     pub srid: Option<i64>,
+    /// Campaigns whose stored rows that the measurements file does not hold are deleted
+    /// (`--replace-campaign NAME`); by default a re-imported campaign keeps them.
+    pub replace_campaigns: Vec<String>,
 }
 
 /// At most this many problems are listed (the first, in file and line order); the others are
@@ -336,8 +339,10 @@ pub struct ImportReport {
     pub segments_unchanged: usize,
     /// Measurement rows written (for segments whose set changed).
     pub measurements_written: usize,
-    /// Segments whose measurement set was replaced.
+    /// Segments whose stored measurements changed (a row added, updated or removed).
     pub segments_with_changed_measurements: usize,
+    /// What the import did to each campaign it held rows of, by name.
+    pub campaigns: std::collections::BTreeMap<String, CampaignCounts>,
     /// Segments whose `inputs_hash` changed: calibrate will (re)fit them.
     pub segments_with_changed_inputs: usize,
     /// The invalid rows, in file and line order: the first [`MAX_LISTED_PROBLEMS`] of each
@@ -347,6 +352,19 @@ pub struct ImportReport {
     pub problems: usize,
     /// Things to tell the user that reject nothing: the columns ignored, one note per file.
     pub notes: Vec<String>,
+}
+
+/// What one import did to the rows of one campaign.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CampaignCounts {
+    /// Rows at a frequency the campaign did not have for their segment.
+    pub added: usize,
+    /// Rows that replaced a stored row of the campaign at the same frequency.
+    pub updated: usize,
+    /// Stored rows of the campaign left as they were (unchanged, or not in the file).
+    pub kept: usize,
+    /// Stored rows of the campaign not in the file, deleted by `--replace-campaign`.
+    pub removed: usize,
 }
 
 /// Import the given files into the database (see the module docs for the semantics). At least
@@ -455,20 +473,69 @@ pub fn import(
         }
         Ok(())
     })?;
-    staging.measurement_sets(|id, set| {
-        if inventory::load_measurements(&tx, id)? != set {
-            inventory::replace_measurements(&tx, id, &set)?;
-            report.measurements_written += set.len();
+    let mut changed_segment: Option<String> = None;
+    staging.measurement_sets(|id, campaign, set| {
+        let replace = options.replace_campaigns.iter().any(|c| c == campaign);
+        let w = inventory::store_campaign(
+            &tx,
+            id,
+            campaign,
+            &set,
+            replace,
+            measurements::same_frequency,
+        )?;
+        let counts = report.campaigns.entry(campaign.to_string()).or_default();
+        counts.added += w.added;
+        counts.updated += w.updated;
+        counts.kept += w.kept;
+        counts.removed += w.removed;
+        let written = w.added + w.updated + w.removed;
+        report.measurements_written += written;
+        if written > 0 && changed_segment.as_deref() != Some(id) {
             report.segments_with_changed_measurements += 1;
+            changed_segment = Some(id.to_string());
         }
         Ok(())
     })?;
-    staging.touched_segments(|id| {
-        if inventory::refresh_inputs_hash(&tx, id)? {
+    // A replaced campaign keeps only what the file holds: its rows on segments the file does
+    // not name are deleted too.
+    let mut elsewhere: Vec<String> = Vec::new();
+    for campaign in &options.replace_campaigns {
+        let ids: Vec<String> = tx
+            .prepare(
+                "SELECT DISTINCT segment_id FROM main.measurements WHERE campaign = ?1 \
+                 AND segment_id NOT IN (SELECT segment_id FROM temp.import_measurements \
+                 WHERE valid AND campaign = ?1) ORDER BY segment_id",
+            )?
+            .query_map([campaign], |r| r.get(0))?
+            .collect::<Result<_, _>>()?;
+        for id in &ids {
+            let n = tx.execute(
+                "DELETE FROM main.measurements WHERE campaign = ?1 AND segment_id = ?2",
+                params![campaign, id],
+            )?;
+            report
+                .campaigns
+                .entry(campaign.clone())
+                .or_default()
+                .removed += n;
+            report.measurements_written += n;
+            report.segments_with_changed_measurements += 1;
+        }
+        elsewhere.extend(ids);
+    }
+    let mut refresh = |id: &str| -> Result<(), DbError> {
+        if super::staleness::refresh_inputs_hash(&tx, id)? {
             report.segments_with_changed_inputs += 1;
         }
         Ok(())
-    })?;
+    };
+    staging.touched_segments(&mut refresh)?;
+    elsewhere.sort();
+    elsewhere.dedup();
+    for id in &elsewhere {
+        refresh(id)?;
+    }
     tx.commit()?;
     Ok(report)
 }
@@ -520,13 +587,24 @@ mod tests {
         assert_eq!(r.segments_with_changed_inputs, 2);
         let a = inventory::load_segment(&conn, "A").unwrap().unwrap();
         assert_eq!(a.material, crate::physics::Material::DuctileIron);
-        assert_eq!(a.inputs_hash, a.compute_inputs_hash());
+        assert_eq!(
+            Some(a.inputs_hash.clone()),
+            crate::db::stored_inputs_hash(&conn, "A").unwrap()
+        );
         assert!((a.measurements[1].omega_rad_s - 2.0 * std::f64::consts::PI * 200.0).abs() < 1e-12);
         let r2 = run(&mut conn, Some(SEGS), Some(MEAS), false);
         assert_eq!(
             r2,
             ImportReport {
                 segments_unchanged: 2,
+                campaigns: [(
+                    "unnamed".to_string(),
+                    CampaignCounts {
+                        kept: 3,
+                        ..CampaignCounts::default()
+                    }
+                )]
+                .into(),
                 ..ImportReport::default()
             }
         );
@@ -603,8 +681,10 @@ mod tests {
             .all(|e| e.message.contains("at this frequency")));
     }
 
+    /// A re-imported campaign keeps its stored rows that the file does not hold and adds the new
+    /// one; only the segments in the file are touched.
     #[test]
-    fn measurements_replace_the_set_of_segments_in_the_file_only() {
+    fn a_reimported_campaign_adds_and_keeps_for_the_segments_in_the_file_only() {
         let mut conn = db();
         run(&mut conn, Some(SEGS), Some(MEAS), false);
         let hb = inventory::load_segment(&conn, "B")
@@ -626,7 +706,7 @@ mod tests {
             (1, 1)
         );
         let a = inventory::load_segment(&conn, "A").unwrap().unwrap();
-        assert_eq!(a.measurements.len(), 1);
+        assert_eq!(a.measurements.len(), 3, "the two stored rows are kept");
         assert_ne!(a.inputs_hash, ha);
         let b = inventory::load_segment(&conn, "B").unwrap().unwrap();
         assert_eq!((b.measurements.len(), b.inputs_hash), (1, hb));

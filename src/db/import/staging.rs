@@ -9,7 +9,7 @@ use rusqlite::{params, params_from_iter, Connection};
 
 use crate::db::inventory::{
     inventory_values, measurement_from_row, segment_from_row, MeasurementRecord, SegmentRecord,
-    MEASUREMENT_COLUMNS, SEGMENT_COLUMNS,
+    MEASUREMENT_COLUMNS, MEASUREMENT_WIDTH, SEGMENT_COLUMNS, UNNAMED_CAMPAIGN,
 };
 use crate::db::DbError;
 
@@ -51,7 +51,7 @@ impl<'c> Staging<'c> {
                 omega_given INTEGER NOT NULL, omega_rad_s REAL NOT NULL,
                 frequency_hz REAL NOT NULL, k_re_rad_per_m REAL NOT NULL,
                 attenuation_np_per_m REAL NOT NULL, k_re_std REAL, attenuation_std REAL,
-                measured_on TEXT, campaign TEXT);"
+                measured_on TEXT, campaign TEXT NOT NULL, note TEXT);"
         ))?;
         Ok(Staging { conn, cache_size })
     }
@@ -119,8 +119,8 @@ impl<'c> Staging<'c> {
             .prepare_cached(
                 "INSERT INTO temp.import_measurements (line, valid, segment_id, omega_given, \
                  omega_rad_s, frequency_hz, k_re_rad_per_m, attenuation_np_per_m, k_re_std, \
-                 attenuation_std, measured_on, campaign) \
-                 VALUES (?1, 1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)",
+                 attenuation_std, measured_on, campaign, note) \
+                 VALUES (?1, 1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
             )?
             .execute(params![
                 line_sql(line),
@@ -133,7 +133,8 @@ impl<'c> Staging<'c> {
                 m.k_re_std,
                 m.attenuation_std,
                 m.measured_on,
-                m.campaign,
+                m.campaign.as_deref().unwrap_or(UNNAMED_CAMPAIGN),
+                m.note,
             ])?;
         Ok(())
     }
@@ -151,7 +152,7 @@ impl<'c> Staging<'c> {
     pub fn index_measurements(&self) -> Result<(), DbError> {
         self.conn.execute_batch(
             "CREATE INDEX temp.import_measurements_id \
-             ON import_measurements (segment_id, omega_rad_s, line, omega_given);",
+             ON import_measurements (segment_id, campaign, omega_rad_s, line, omega_given);",
         )?;
         Ok(())
     }
@@ -186,9 +187,9 @@ impl<'c> Staging<'c> {
         mut each: impl FnMut(StagedMeasurement) -> Result<(), DbError>,
     ) -> Result<(), DbError> {
         let mut stmt = self.conn.prepare(
-            "SELECT rowid, segment_id, omega_rad_s, line, omega_given \
+            "SELECT rowid, segment_id, omega_rad_s, line, omega_given, campaign \
              FROM temp.import_measurements WHERE valid \
-             ORDER BY segment_id, omega_rad_s, line",
+             ORDER BY segment_id, campaign, omega_rad_s, line",
         )?;
         let mut rows = stmt.query([])?;
         while let Some(r) = rows.next()? {
@@ -198,6 +199,7 @@ impl<'c> Staging<'c> {
                 omega_rad_s: r.get(2)?,
                 line: line_rust(r.get(3)?),
                 omega_given: r.get(4)?,
+                campaign: r.get(5)?,
             })?;
         }
         Ok(())
@@ -262,31 +264,33 @@ impl<'c> Staging<'c> {
         Ok(())
     }
 
-    /// The valid measurements, one segment at a time in id order, each set sorted by ω.
+    /// The valid measurement rows by segment and campaign, each group by ω:
+    /// `each(segment, campaign, rows)`, in segment then campaign order.
     pub fn measurement_sets(
         &self,
-        mut each: impl FnMut(&str, Vec<MeasurementRecord>) -> Result<(), DbError>,
+        mut each: impl FnMut(&str, &str, Vec<MeasurementRecord>) -> Result<(), DbError>,
     ) -> Result<(), DbError> {
         let mut stmt = self.conn.prepare(&format!(
             "SELECT {MEASUREMENT_COLUMNS}, segment_id FROM temp.import_measurements \
-             WHERE valid ORDER BY segment_id, omega_rad_s, line"
+             WHERE valid ORDER BY segment_id, campaign, omega_rad_s, line"
         ))?;
         let mut rows = stmt.query([])?;
-        let mut current: Option<(String, Vec<MeasurementRecord>)> = None;
+        let mut current: Option<(String, String, Vec<MeasurementRecord>)> = None;
         while let Some(r) = rows.next()? {
             let m = measurement_from_row(r)?;
-            let id: String = r.get(8)?;
+            let id: String = r.get(MEASUREMENT_WIDTH)?;
+            let campaign = m.campaign.clone().unwrap_or_default();
             match &mut current {
-                Some((cur, set)) if *cur == id => set.push(m),
+                Some((cur, cc, set)) if *cur == id && *cc == campaign => set.push(m),
                 _ => {
-                    if let Some((cur, set)) = current.replace((id, vec![m])) {
-                        each(&cur, set)?;
+                    if let Some((cur, cc, set)) = current.replace((id, campaign, vec![m])) {
+                        each(&cur, &cc, set)?;
                     }
                 }
             }
         }
-        if let Some((cur, set)) = current {
-            each(&cur, set)?;
+        if let Some((cur, cc, set)) = current {
+            each(&cur, &cc, set)?;
         }
         Ok(())
     }
@@ -327,6 +331,7 @@ pub(super) struct StagedMeasurement {
     pub omega_rad_s: f64,
     pub line: u64,
     pub omega_given: bool,
+    pub campaign: String,
 }
 
 /// Lines are `u64` in Rust and INTEGER in SQLite (no file has 2⁶³ lines).

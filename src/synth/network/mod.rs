@@ -141,7 +141,7 @@ impl NetworkTables {
                     .map(|&(x, y)| (round_to(x, 2), round_to(y, 2)))
                     .collect(),
             });
-            let mut rec = SegmentRecord {
+            let rec = SegmentRecord {
                 length_m: Some(round_to(s.length_m, 2)),
                 soil_type: Some(s.soil_label.to_string()),
                 install_year: Some(i64::from(s.install_year)),
@@ -161,6 +161,7 @@ impl NetworkTables {
                         attenuation_std: Some(m.attenuation_std),
                         measured_on: None,
                         campaign: Some("synthetic".into()),
+                        note: None,
                     })
                     .collect(),
                 ..SegmentRecord::new(
@@ -171,7 +172,6 @@ impl NetworkTables {
                     s.soil_density,
                 )
             };
-            rec.inputs_hash = rec.compute_inputs_hash();
             t.segments.push(rec);
             t.truth.push(TruthRow {
                 segment_id: s.id.clone(),
@@ -409,11 +409,12 @@ impl NetworkTables {
             (TRUTH_CSV, self.truth_csv()),
         ] {
             let path = dir.join(name);
-            std::fs::write(&path, body).map_err(|source| NetworkError::Io {
-                action: "write",
-                path,
-                source,
-            })?;
+            crate::outfile::write_bytes(&path, crate::outfile::Contents::Plain, body.as_bytes())
+                .map_err(|e| NetworkError::Io {
+                    action: "write",
+                    path,
+                    source: std::io::Error::other(e),
+                })?;
         }
         Ok(())
     }
