@@ -321,7 +321,6 @@ impl Tally {
     /// Count one record; `map_warnings` gets its geometry's, when it cannot go on the map.
     fn add(&mut self, r: &SegmentExport, map_warnings: &mut Vec<String>) {
         self.segments += 1;
-        self.with_geometry += usize::from(r.geometry.is_some());
         self.fitted += usize::from(r.fit.is_some());
         *self.status.entry(r.status()).or_default() += 1;
         count_codes(&mut self.flags, r.flags.as_deref());
@@ -332,6 +331,8 @@ impl Tally {
             self.common
                 .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
         {
+            // Counted as drawn: a geometry the map cannot show has its warning instead.
+            self.with_geometry += 1;
             for &(x, y) in &line.points {
                 self.bbox = [
                     self.bbox[0].min(x),
@@ -912,7 +913,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
         let geometry = g
             .geometry_wkt
             .as_deref()
-            .and_then(|w| LineString::parse_wkt(w).ok());
+            .and_then(|w| crs::usable_line(w, g.srid).ok());
         // Its warning, if any, was given by the first pass.
         seen.clear();
         let Some(line) = common.line(&g.segment_id, geometry.as_ref(), g.srid, &mut seen) else {
