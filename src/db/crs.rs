@@ -214,16 +214,41 @@ pub fn is_geographic(srid: i64) -> bool {
     lookup(srid).is_some_and(|d| d.proj4.contains("+proj=longlat"))
 }
 
-/// Largest coordinate magnitude accepted in a projected system, in the system's own units.
+/// Largest coordinate magnitude accepted in a projected system, in metres (a coordinate in
+/// feet or links is converted first, [`metres_per_unit`]).
 ///
 /// A point on Earth is at most half the equator, 20 037 508 m (Web Mercator's x range), from a
 /// projection's natural origin, and the false origins of the EPSG registry add at most
-/// 64 500 000 m (the zone-prefixed eastings of the 3-degree Gauss–Krüger zones, e.g. EPSG:2581);
-/// systems in feet have small false origins. So every projected coordinate of a real pipe is
-/// below 8.5e7 m in magnitude (a unit test checks this against every definition pipewave
-/// knows), and 1e8 leaves room while still refusing a misplaced exponent or a sentinel value
-/// such as 1e308, whose differences would overflow any length.
+/// 64 500 000 m (the zone-prefixed eastings of the 3-degree Gauss–Krüger zones, e.g. EPSG:2581).
+/// So every projected coordinate of a real pipe is below 8.5e7 m in magnitude (a unit test
+/// checks this against every definition pipewave knows), and 1e8 m leaves room while still
+/// refusing a misplaced exponent or a sentinel value such as 1e308, whose differences would
+/// overflow any length.
 pub const MAX_PROJECTED_COORDINATE: f64 = 1e8;
+
+/// Metres per coordinate unit of EPSG:`srid` (proj4's `+to_meter`, else its `+units`; 1 when
+/// it names none), or `None` for a code pipewave does not know. Degrees of a geographic
+/// system are not lengths: this is for projected systems.
+pub fn metres_per_unit(srid: i64) -> Option<f64> {
+    let p = lookup(srid)?.proj4;
+    let value = |key: &str| p.split_whitespace().find_map(|t| t.strip_prefix(key));
+    if let Some(k) = value("+to_meter=").and_then(|k| k.parse().ok()) {
+        return Some(k);
+    }
+    // proj4's unit names (`proj -lu`).
+    Some(match value("+units=") {
+        Some("km") => 1000.0,
+        Some("ft") => 0.3048,
+        Some("us-ft") => 1200.0 / 3937.0,
+        Some("ind-ft") => 0.304_799_51,
+        Some("yd") => 0.9144,
+        Some("ind-yd") => 0.914_398_53,
+        Some("link") => 0.201_168,
+        Some("ch") => 20.1168,
+        Some("us-ch") => 20.116_84,
+        _ => 1.0,
+    })
+}
 
 /// Largest |longitude| of a geographic system, degrees.
 pub const MAX_LONGITUDE: f64 = 180.0;
@@ -242,6 +267,7 @@ pub fn check_line(srid: i64, line: &LineString) -> Result<(), String> {
         ));
     };
     let geographic = def.proj4.contains("+proj=longlat");
+    let metres = metres_per_unit(srid).unwrap_or(1.0);
     for &(x, y) in &line.points {
         if !(x.is_finite() && y.is_finite()) {
             return Err(format!(
@@ -260,10 +286,13 @@ pub fn check_line(srid: i64, line: &LineString) -> Result<(), String> {
                 def.name
             ));
         }
-        if x.abs() > MAX_PROJECTED_COORDINATE || y.abs() > MAX_PROJECTED_COORDINATE {
+        let scale = if geographic { 1.0 } else { metres };
+        if (x * scale).abs() > MAX_PROJECTED_COORDINATE
+            || (y * scale).abs() > MAX_PROJECTED_COORDINATE
+        {
             return Err(format!(
                 "the vertex ({} {}) is farther from the origin of EPSG:{srid} ({}) than any \
-                 point on Earth (|x|, |y| <= {MAX_PROJECTED_COORDINATE:e} in any projected \
+                 point on Earth (|x|, |y| <= {MAX_PROJECTED_COORDINATE:e} m in any projected \
                  system)",
                 short(x),
                 short(y),
@@ -303,8 +332,8 @@ mod tests {
     use super::*;
 
     /// [`MAX_PROJECTED_COORDINATE`] holds for every projected system pipewave knows: its false
-    /// easting and northing plus half the equator (the farthest a point on Earth is from the
-    /// natural origin), in the system's units, stay below it.
+    /// easting and northing (metres in proj4) plus half the equator (the farthest a point on
+    /// Earth is from the natural origin) stay below it.
     #[test]
     fn no_projected_system_has_coordinates_near_the_bound() {
         const HALF_EQUATOR_M: f64 = 20_037_508.34;
@@ -323,22 +352,9 @@ mod tests {
                 continue;
             }
             projected += 1;
-            let metres_per_unit = param(def.proj4, "+to_meter=").unwrap_or(
-                match def
-                    .proj4
-                    .split_whitespace()
-                    .find_map(|t| t.strip_prefix("+units="))
-                {
-                    Some("ft") => 0.3048,
-                    Some("us-ft") => 1200.0 / 3937.0,
-                    Some("km") => 1000.0,
-                    _ => 1.0,
-                },
-            );
-            // proj4's false easting and northing are in metres whatever the units.
+            assert!(metres_per_unit(i64::from(code)).is_some_and(|m| m > 0.0));
             for key in ["+x_0=", "+y_0="] {
-                let reach =
-                    (param(def.proj4, key).unwrap_or(0.0).abs() + HALF_EQUATOR_M) / metres_per_unit;
+                let reach = param(def.proj4, key).unwrap_or(0.0).abs() + HALF_EQUATOR_M;
                 largest = largest.max(reach);
             }
         }
@@ -359,6 +375,9 @@ mod tests {
         let e = check_line(999_999, &bng).unwrap_err();
         assert!(e.contains("EPSG:999999 is not a coordinate system"), "{e}");
         assert!(check_line(4326, &line(&[(-0.1, 51.5), (-0.1, 51.6)])).is_ok());
+        // 3e8 US survey feet is 9.1e7 m: on Earth for the bound; 3.3e8 ft is not.
+        assert!(check_line(2227, &line(&[(3e8, 0.0), (0.0, 0.0)])).is_ok());
+        assert!(check_line(2227, &line(&[(3.3e8, 0.0), (0.0, 0.0)])).is_err());
         let far = line(&[(1e308, 0.0), (0.0, 0.0)]);
         let e = check_line(27700, &far).unwrap_err();
         assert!(e.contains("than any point on Earth"), "{e}");

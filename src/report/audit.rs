@@ -365,7 +365,7 @@ impl Tally {
                 (!crs::is_geographic(srid))
                     .then(|| r.geometry.as_ref().map(line_length))
                     .flatten()
-                    .map(|l| l * metres_per_unit(srid).unwrap_or(1.0))
+                    .map(|l| l * crs::metres_per_unit(srid).unwrap_or(1.0))
             });
             self.actions.push(Action {
                 id: r.id().to_string(),
@@ -543,27 +543,6 @@ pub fn error_comment(v: f64, e: f64) -> &'static str {
     } else {
         ""
     }
-}
-
-/// Metres per unit of a projected system's coordinates, from its PROJ definition (`+units=`
-/// or `+to_meter=`; PROJ's default is the metre). `None` for an unknown system.
-fn metres_per_unit(srid: i64) -> Option<f64> {
-    let def = crs::lookup(srid)?;
-    let p = def.proj4;
-    if let Some(k) = p
-        .split_whitespace()
-        .find_map(|t| t.strip_prefix("+to_meter="))
-    {
-        return k.parse().ok();
-    }
-    Some(
-        match p.split_whitespace().find_map(|t| t.strip_prefix("+units=")) {
-            Some("us-ft") => 1200.0 / 3937.0,
-            Some("ft") => 0.3048,
-            Some("km") => 1000.0,
-            _ => 1.0,
-        },
-    )
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -882,7 +861,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
     let scale_units = if geographic {
         Some(METRES_PER_DEGREE)
     } else {
-        metres_per_unit(srid)
+        crs::metres_per_unit(srid)
     };
     let speed_style = MapStyle {
         unit: "m/s",

@@ -236,24 +236,6 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
             );
             None
         }
-        // h/a with the mean radius a = (D_o − h)/2 (model P6); the upper limit is the
-        // constructor's (below).
-        (Some(h), Some(d)) if h / ((d - h) / 2.0) < MIN_WALL_RATIO => {
-            c.err(
-                "wall_thickness_mm",
-                format!(
-                    "{} mm is too thin a wall for a {} mm pipe: h/a = {} with the mean radius \
-                     a = (D - h)/2 = {} mm, below {MIN_WALL_RATIO} (D/h of about 400), thinner \
-                     than any water pipe is made; the shell model (model.md §3.2) needs a wall \
-                     with 0.005 <= h/a <= 0.25",
-                    short(h),
-                    short(d),
-                    short(h / ((d - h) / 2.0)),
-                    short((d - h) / 2.0)
-                ),
-            );
-            None
-        }
         _ => wall,
     };
     let soil = c.required_number("soil_density_kg_m3");
@@ -420,6 +402,26 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
     // mean-radius range are only known once the pipe is built.
     if let Err(e) = record.pipe() {
         c.err(pipe_error_column(&e), e.to_string());
+        return None;
+    }
+    // The lower limit of h/a, with the mean radius a = (D_o − h)/2 (model P6), once the
+    // diameter and the upper limit are known to be good (a wrong diameter is named as such).
+    let (h, d) = (record.wall_thickness_mm, record.outer_diameter_mm);
+    let ratio = h / ((d - h) / 2.0);
+    if ratio < MIN_WALL_RATIO {
+        c.err(
+            "wall_thickness_mm",
+            format!(
+                "{} mm is too thin a wall for a {} mm pipe: h/a = {} with the mean radius \
+                 a = (D - h)/2 = {} mm, below {MIN_WALL_RATIO} (D/h of about 400), thinner than \
+                 any water pipe is made; the shell model (model.md §3.2) needs a wall with \
+                 0.005 <= h/a <= 0.25",
+                short(h),
+                short(d),
+                short(ratio),
+                short((d - h) / 2.0)
+            ),
+        );
         return None;
     }
     if let Err(e) = record.fluid() {
