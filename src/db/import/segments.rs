@@ -106,9 +106,9 @@ use crate::physics::inputs::{
 /// pipes are those of large welded steel mains, D/h up to about 290 (AWWA M11's handling
 /// limit, h/a ≈ 0.007), and of thin plastic pipe, SDR 41 (h/a ≈ 0.05). Below h/a = 0.005
 /// (D/h ≈ 400) a buried pipe could not keep its shape under its own backfill (ring stiffness
-/// grows as (h/D)³), so such a wall is a unit or typing error (a wall in metres, 1e-300), and
-/// the model's hoop stiffness E_p h/a (P50) would vanish against the fluid's 2B_f/a, leaving
-/// the fit without a pipe.
+/// grows as (h/D)³), so such a wall is a unit or typing error (a wall given in metres,
+/// 1e-300), and the model's hoop stiffness E_p h/a² (P50) would vanish against the fluid's
+/// 2B_f/a, leaving the fit without a pipe.
 pub const MIN_WALL_RATIO: f64 = 0.005;
 
 /// Longest segment accepted, m. A segment is one stretch of uniform pipe between fittings or
