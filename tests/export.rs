@@ -780,9 +780,17 @@ fn geometries_in_other_systems_are_reprojected_into_the_geopackage_system() {
                 &format!("LINESTRING ({lon} {lat}, {} {lat})", lon + 0.001),
                 "4326",
             ),
-            ("D", "LINESTRING (1 2, 3 4)", "999999"),
+            ("D", "LINESTRING (1 2, 3 4)", "27700"),
         ],
     );
+    // An unknown system, which import refuses, edited into the database.
+    database
+        .conn()
+        .execute(
+            "UPDATE segments SET srid = 999999 WHERE segment_id = 'D'",
+            [],
+        )
+        .unwrap();
     let out = dir.path().join("mixed.gpkg");
     let summary = export::write(&database, ExportFormat::Gpkg, &out).unwrap();
     assert_eq!(summary.with_geometry, 3);

@@ -25,32 +25,40 @@ segments.csv: one row per pipe segment
                                   MDPE, HDPE, AC asbestos cement; also understood, any case:
                                   Cast Iron, Grey Iron, Ductile Iron, DICL, Steel, MSCL, uPVC,
                                   PVC-U, PE80 (= MDPE), PE100 (= HDPE), Asbestos Cement, ...
-  outer_diameter_mm     required  outside diameter, mm, > 0
-  wall_thickness_mm     required  wall thickness, mm, > 0 and < outer_diameter_mm / 2
+  outer_diameter_mm     required  outside diameter, mm, > 0; mean radius a = (D - h)/2 within
+                                  5-1500 mm
+  wall_thickness_mm     required  wall thickness h, mm, > 0 and < outer_diameter_mm / 2, with
+                                  0.005 <= h/a <= 0.25 (the thin-shell model's walls)
   soil_density_kg_m3    required  soil bulk density, kg/m3, 1000-2600 (from a soil test; not
                                   fitted; most soils lie between 1600 and 2200)
   pipe_youngs_modulus_pa, pipe_poisson, pipe_density_kg_m3, pipe_loss_factor
-                        optional  override the material's typical values (Pa, -, kg/m3, -)
+                        optional  override the material's typical values: 1e8-3e11 Pa,
+                                  0-0.49, 500-9000 kg/m3, 0-0.3
   fluid_density_kg_m3, fluid_bulk_modulus_pa
-                        optional  default water: 1000 kg/m3, 2.25e9 Pa
+                        optional  default water: 1000 kg/m3, 2.25e9 Pa; 500-1100 kg/m3,
+                                  1e6-2.5e9 Pa
   length_m, soil_type, install_year
-                        optional  informational (m, text, year)
+                        optional  informational: m, > 0 and <= 100000; text; year 1600-2100
   soil_zone             optional  text: the soil unit the segment lies in
-  risk_weight           optional  >= 0: the segment's weight in plan (default: its length, m)
+  risk_weight           optional  0-1e9: the segment's weight in plan (default: its length, m)
   soil_class_override   optional  text: the soil class the field must use for the segment
-  geometry_wkt, srid    optional  LINESTRING (x y, x y, ...) in EPSG:srid (for the maps)
+  geometry_wkt, srid    optional  LINESTRING (x y, x y, ...) in EPSG:srid (for the maps): a
+                                  known EPSG code, two distinct points or more, |lon| <= 180
+                                  and |lat| <= 90 (geographic), |x|, |y| <= 1e8 (projected)
 
 measurements.csv: one row per segment, campaign and frequency (field wavenumbers)
   segment_id            required  must be in the inventory (this file's segments or earlier)
   frequency_hz          one of    frequency, Hz, > 0
-  omega_rad_s             these   angular frequency, rad/s, > 0 (not both)
-  k_re_rad_per_m        required  real part of the measured wavenumber, rad/m, > 0
+  omega_rad_s             these   angular frequency, rad/s, > 0 (not both); 2 pi f within
+                                  1e-6-1e7 rad/s
+  k_re_rad_per_m        required  real part of the measured wavenumber, rad/m, 1e-9-1e4
                                   (phase speed = 2 pi f / k_re)
-  attenuation_np_per_m  required  decay rate, Np/m, >= 0 (positive, as in field reports;
+  attenuation_np_per_m  required  decay rate, Np/m, 0-1e3 (positive, as in field reports;
                                   1 Np/m = 8.686 dB/m)
   k_re_std, attenuation_std
-                        optional  one standard deviation of each, same units (without them
-                                  the fit assumes the noise and chi2/dof is not defined)
+                        optional  one standard deviation of each, same units, <= 1e6 and
+                                  >= 1e-6 k_re (without them the fit assumes the noise and
+                                  chi2/dof is not defined)
   measured_on, campaign optional  ISO date, text (blank campaign: `unnamed`); a campaign
                                   imported again updates its rows, a new one is added beside
                                   the earlier ones (--replace-campaign NAME deletes the rows

@@ -16,6 +16,7 @@ use std::collections::HashMap;
 use proj4rs::proj::Proj;
 
 use crate::db::wkt::LineString;
+use crate::units::short;
 
 /// EPSG code of WGS 84 longitude/latitude, the only CRS of RFC 7946 GeoJSON.
 pub const WGS84: i64 = 4326;
@@ -213,9 +214,181 @@ pub fn is_geographic(srid: i64) -> bool {
     lookup(srid).is_some_and(|d| d.proj4.contains("+proj=longlat"))
 }
 
+/// Largest coordinate magnitude accepted in a projected system, in metres (a coordinate in
+/// feet or links is converted first, [`metres_per_unit`]).
+///
+/// A point on Earth is at most half the equator, 20 037 508 m (Web Mercator's x range), from a
+/// projection's natural origin, and the false origins of the EPSG registry add at most
+/// 64 500 000 m (the zone-prefixed eastings of the 3-degree Gauss–Krüger zones, e.g. EPSG:2581).
+/// So every projected coordinate of a real pipe is below 8.5e7 m in magnitude (a unit test
+/// checks this against every definition pipewave knows), and 1e8 m leaves room while still
+/// refusing a misplaced exponent or a sentinel value such as 1e308, whose differences would
+/// overflow any length.
+pub const MAX_PROJECTED_COORDINATE: f64 = 1e8;
+
+/// Metres per coordinate unit of EPSG:`srid` (proj4's `+to_meter`, else its `+units`; 1 when
+/// it names none), or `None` for a code pipewave does not know. Degrees of a geographic
+/// system are not lengths: this is for projected systems.
+pub fn metres_per_unit(srid: i64) -> Option<f64> {
+    let p = lookup(srid)?.proj4;
+    let value = |key: &str| p.split_whitespace().find_map(|t| t.strip_prefix(key));
+    if let Some(k) = value("+to_meter=").and_then(|k| k.parse().ok()) {
+        return Some(k);
+    }
+    // proj4's unit names (`proj -lu`).
+    Some(match value("+units=") {
+        Some("km") => 1000.0,
+        Some("ft") => 0.3048,
+        Some("us-ft") => 1200.0 / 3937.0,
+        Some("ind-ft") => 0.304_799_51,
+        Some("yd") => 0.9144,
+        Some("ind-yd") => 0.914_398_53,
+        Some("link") => 0.201_168,
+        Some("ch") => 20.1168,
+        Some("us-ch") => 20.116_84,
+        _ => 1.0,
+    })
+}
+
+/// Largest |longitude| of a geographic system, degrees.
+pub const MAX_LONGITUDE: f64 = 180.0;
+/// Largest |latitude| of a geographic system, degrees.
+pub const MAX_LATITUDE: f64 = 90.0;
+
+/// Why a line cannot be a segment's geometry in EPSG:`srid`, or `Ok`: the system must be one
+/// pipewave knows, every vertex within the system's possible coordinates (|lon| ≤ 180°,
+/// |lat| ≤ 90° in a geographic system; |x|, |y| ≤ [`MAX_PROJECTED_COORDINATE`] in a projected
+/// one), and the line must have a length ([`LineString::check_length`]).
+pub fn check_line(srid: i64, line: &LineString) -> Result<(), String> {
+    let Some(def) = lookup(srid) else {
+        return Err(format!(
+            "{}: give an EPSG code of the registry, such as 27700 or 4326",
+            CrsError::Unknown(srid)
+        ));
+    };
+    let geographic = def.proj4.contains("+proj=longlat");
+    let metres = metres_per_unit(srid).unwrap_or(1.0);
+    for &(x, y) in &line.points {
+        if !(x.is_finite() && y.is_finite()) {
+            return Err(format!(
+                "the vertex ({} {}) is not a pair of finite numbers",
+                short(x),
+                short(y)
+            ));
+        }
+        if geographic && (x.abs() > MAX_LONGITUDE || y.abs() > MAX_LATITUDE) {
+            return Err(format!(
+                "the vertex ({} {}) is not a longitude and latitude, although EPSG:{srid} ({}) \
+                 is a longitude/latitude system (|lon| <= 180, |lat| <= 90); if the coordinates \
+                 are in a projected system, give its EPSG code",
+                short(x),
+                short(y),
+                def.name
+            ));
+        }
+        let scale = if geographic { 1.0 } else { metres };
+        if (x * scale).abs() > MAX_PROJECTED_COORDINATE
+            || (y * scale).abs() > MAX_PROJECTED_COORDINATE
+        {
+            return Err(format!(
+                "the vertex ({} {}) is farther from the origin of EPSG:{srid} ({}) than any \
+                 point on Earth (|x|, |y| <= {MAX_PROJECTED_COORDINATE:e} m in any projected \
+                 system)",
+                short(x),
+                short(y),
+                def.name
+            ));
+        }
+    }
+    line.check_length()
+}
+
+/// A stored geometry as the commands use it: `wkt` parsed and, with its system, checked by
+/// [`check_line`]. Without a system only the parse, the finiteness bound of a projected system
+/// and the length are checked. `Err` says why it cannot be used.
+pub fn usable_line(wkt: &str, srid: Option<i64>) -> Result<LineString, String> {
+    let line = LineString::parse_wkt(wkt)?;
+    match srid {
+        Some(s) => check_line(s, &line)?,
+        None => {
+            if let Some((x, y)) = line.points.iter().find(|(x, y)| {
+                x.abs() > MAX_PROJECTED_COORDINATE || y.abs() > MAX_PROJECTED_COORDINATE
+            }) {
+                return Err(format!(
+                    "the vertex ({} {}) is farther from the origin than any point on Earth in \
+                     any projected system",
+                    short(*x),
+                    short(*y)
+                ));
+            }
+            line.check_length()?;
+        }
+    }
+    Ok(line)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`MAX_PROJECTED_COORDINATE`] holds for every projected system pipewave knows: its false
+    /// easting and northing (metres in proj4) plus half the equator (the farthest a point on
+    /// Earth is from the natural origin) stay below it.
+    #[test]
+    fn no_projected_system_has_coordinates_near_the_bound() {
+        const HALF_EQUATOR_M: f64 = 20_037_508.34;
+        let param = |p: &str, key: &str| -> Option<f64> {
+            p.split_whitespace()
+                .find_map(|t| t.strip_prefix(key))
+                .and_then(|v| v.parse().ok())
+        };
+        let mut largest: f64 = 0.0;
+        let mut projected = 0;
+        for code in 1..=u16::MAX {
+            let Some(def) = lookup(i64::from(code)) else {
+                continue;
+            };
+            if def.proj4.contains("+proj=longlat") || def.proj4.contains("+proj=geocent") {
+                continue;
+            }
+            projected += 1;
+            assert!(metres_per_unit(i64::from(code)).is_some_and(|m| m > 0.0));
+            for key in ["+x_0=", "+y_0="] {
+                let reach = param(def.proj4, key).unwrap_or(0.0).abs() + HALF_EQUATOR_M;
+                largest = largest.max(reach);
+            }
+        }
+        assert!(projected > 1000, "{projected} projected systems");
+        assert!(largest < MAX_PROJECTED_COORDINATE, "{largest}");
+        assert!(largest > 0.5 * MAX_PROJECTED_COORDINATE, "{largest}");
+    }
+
+    #[test]
+    fn lines_are_checked_against_their_system() {
+        let line = |pts: &[(f64, f64)]| LineString {
+            points: pts.to_vec(),
+        };
+        let bng = line(&[(530_000.0, 180_000.0), (530_100.0, 180_000.0)]);
+        assert!(check_line(27700, &bng).is_ok());
+        let e = check_line(4326, &bng).unwrap_err();
+        assert!(e.contains("not a longitude and latitude"), "{e}");
+        let e = check_line(999_999, &bng).unwrap_err();
+        assert!(e.contains("EPSG:999999 is not a coordinate system"), "{e}");
+        assert!(check_line(4326, &line(&[(-0.1, 51.5), (-0.1, 51.6)])).is_ok());
+        // 3e8 US survey feet is 9.1e7 m: on Earth for the bound; 3.3e8 ft is not.
+        assert!(check_line(2227, &line(&[(3e8, 0.0), (0.0, 0.0)])).is_ok());
+        assert!(check_line(2227, &line(&[(3.3e8, 0.0), (0.0, 0.0)])).is_err());
+        let far = line(&[(1e308, 0.0), (0.0, 0.0)]);
+        let e = check_line(27700, &far).unwrap_err();
+        assert!(e.contains("than any point on Earth"), "{e}");
+        assert!(usable_line("LINESTRING (1e308 0, 0 0)", None).is_err());
+        let e = check_line(27700, &line(&[(1.0, 2.0), (1.0, 2.0)])).unwrap_err();
+        assert!(e.contains("zero length"), "{e}");
+        assert_eq!(
+            usable_line("LINESTRING (1 2, 3 4)", Some(27700)).unwrap(),
+            line(&[(1.0, 2.0), (3.0, 4.0)])
+        );
+    }
 
     /// The projected systems utilities commonly use: each must have a projected WKT whose authority is its code.
     #[test]

@@ -70,6 +70,21 @@ impl LineString {
         Ok(LineString { points })
     }
 
+    /// `Err` when every vertex is the same point: such a line has no length, so it can neither
+    /// carry a chainage nor join the network at two ends. Any two distinct vertices give it one.
+    pub fn check_length(&self) -> Result<(), String> {
+        match self.points.split_first() {
+            Some((first, rest)) if rest.iter().all(|p| p == first) => Err(format!(
+                "the line has zero length: all its {} vertices are the point ({} {}); a segment \
+                 needs two distinct points",
+                self.points.len(),
+                crate::units::short(first.0),
+                crate::units::short(first.1)
+            )),
+            _ => Ok(()),
+        }
+    }
+
     /// The canonical WKT, `LINESTRING (x y, x y)`, with full-precision numbers.
     pub fn to_wkt(&self) -> String {
         let mut s = String::from("LINESTRING (");
@@ -134,6 +149,15 @@ mod tests {
             let err = LineString::parse_wkt(text).unwrap_err();
             assert!(err.contains(reason), "{text:?}: {err}");
         }
+    }
+
+    #[test]
+    fn a_line_of_one_repeated_point_has_no_length() {
+        let l = LineString::parse_wkt("LINESTRING (5 6, 5 6, 5 6)").unwrap();
+        let e = l.check_length().unwrap_err();
+        assert!(e.contains("zero length") && e.contains("(5 6)"), "{e}");
+        let l = LineString::parse_wkt("LINESTRING (5 6, 5 6, 5 7)").unwrap();
+        assert!(l.check_length().is_ok());
     }
 
     #[test]

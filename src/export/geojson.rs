@@ -87,7 +87,15 @@ fn feature(
                 }
             }
         }
-        _ => Json::Null,
+        (Some(_), None) => {
+            warnings.push(format!(
+                "segment {}: its geometry has no srid, so its coordinate system is unknown; \
+                 exported without geometry",
+                rec.id()
+            ));
+            Json::Null
+        }
+        (None, _) => Json::Null,
     };
     let layout = columns();
     let mut props = Map::with_capacity(layout.properties.len());

@@ -105,8 +105,9 @@ impl CommonGeometry {
     }
 
     /// The line of a segment (`id`, its parsed geometry and its system) in the common system;
-    /// `None` without a geometry, or when it cannot be reprojected (then with a warning in
-    /// `warnings`).
+    /// `None` without a geometry, or when it has no system or cannot be reprojected (then with
+    /// a warning in `warnings`). A segment is "with geometry" in the counts exactly when this
+    /// gives a line.
     pub fn line(
         &mut self,
         id: &str,
@@ -114,7 +115,12 @@ impl CommonGeometry {
         from: Option<i64>,
         warnings: &mut Vec<String>,
     ) -> Option<LineString> {
-        let (Some(to), Some(line), Some(from)) = (self.to.as_mut(), geometry, from) else {
+        let line = geometry?;
+        let (Some(to), Some(from)) = (self.to.as_mut(), from) else {
+            warnings.push(format!(
+                "segment {id}: its geometry has no srid, so its coordinate system is unknown; \
+                 exported without geometry"
+            ));
             return None;
         };
         match to.line(from, line) {

@@ -77,7 +77,7 @@ impl SegmentExport {
         let geometry = segment
             .geometry_wkt
             .as_deref()
-            .and_then(|w| LineString::parse_wkt(w).ok());
+            .and_then(|w| crs::usable_line(w, segment.srid).ok());
         let mut speed_at = [None; 4];
         let mut attenuation_at = [None; 4];
         for (i, &f) in EXPORT_FREQUENCIES_HZ.iter().enumerate() {
@@ -393,7 +393,9 @@ impl<'a> Records<'a> {
         let prediction = db::field::prediction_for(conn, &id).map_err(&err)?;
         let rec = rec.set_field(field, prediction);
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
-            let why = LineString::parse_wkt(w).err().unwrap_or_default();
+            let why = crs::usable_line(w, rec.segment.srid)
+                .err()
+                .unwrap_or_default();
             warnings.push(format!(
                 "segment {}: its stored geometry cannot be read ({why}); exported without geometry",
                 rec.id()
@@ -409,7 +411,7 @@ impl<'a> Records<'a> {
         let mut srids = std::collections::BTreeMap::<i64, usize>::new();
         pages::for_each_geometry(self.db.conn(), |g| {
             if let (Some(w), Some(srid)) = (g.geometry_wkt.as_deref(), g.srid) {
-                if LineString::parse_wkt(w).is_ok() {
+                if crs::usable_line(w, Some(srid)).is_ok() {
                     *srids.entry(srid).or_default() += 1;
                 }
             }

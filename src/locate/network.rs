@@ -32,6 +32,9 @@ pub struct NetSegment {
     pub length_m: Option<f64>,
     /// Cumulative length at each vertex of the line, m.
     cum: Vec<f64>,
+    /// Why its stored geometry cannot be used, when it cannot: the segment then has neither a
+    /// line nor a length, and every job that needs it fails with this reason.
+    pub problem: Option<String>,
 }
 
 impl NetSegment {
@@ -47,6 +50,28 @@ impl NetSegment {
             line,
             length_m,
             cum,
+            problem: None,
+        }
+    }
+
+    /// A segment whose stored geometry cannot be used, for `why`: it is in the network (so a
+    /// job naming it gets this reason) but has no line, no length and no junctions.
+    pub fn unusable(id: String, why: String) -> NetSegment {
+        NetSegment {
+            problem: Some(why),
+            ..NetSegment::new(id, None, None)
+        }
+    }
+
+    /// `Err` naming the segment when its geometry cannot be used.
+    fn usable(&self) -> Result<(), LocateError> {
+        match &self.problem {
+            Some(why) => Err(LocateError::Network(format!(
+                "segment {}: its stored geometry cannot be used ({why}); correct it and \
+                 re-import the segment to locate on it",
+                self.id
+            ))),
+            None => Ok(()),
         }
     }
 
@@ -212,16 +237,28 @@ pub struct Network {
 
 impl Network {
     /// Build from the inventory: lines reprojected into the system most segments use, which must
-    /// be projected (metres); end points within `join_tolerance_m` are one junction.
+    /// be projected (metres); end points within `join_tolerance_m` are one junction. A stored
+    /// geometry that cannot be used (unreadable, in an unknown system, outside its system's
+    /// coordinates, of zero length, or not reprojectable) makes only its segment unusable
+    /// ([`NetSegment::unusable`]): the jobs that need it fail, the others are located.
     pub fn from_records(
         records: &[SegmentRecord],
         join_tolerance_m: f64,
     ) -> Result<Network, LocateError> {
+        let lines: Vec<Option<Result<LineString, String>>> = records
+            .iter()
+            .map(|r| {
+                r.geometry_wkt
+                    .as_deref()
+                    .map(|w| crs::usable_line(w, r.srid))
+            })
+            .collect();
         let srid = crs::dominant_srid(
             records
                 .iter()
-                .filter(|r| r.geometry_wkt.is_some())
-                .filter_map(|r| r.srid),
+                .zip(&lines)
+                .filter(|(_, l)| matches!(l, Some(Ok(_))))
+                .filter_map(|(r, _)| r.srid),
         );
         if let Some(s) = srid.filter(|&s| crs::is_geographic(s)) {
             return Err(LocateError::Network(format!(
@@ -232,24 +269,20 @@ impl Network {
         }
         let mut to = srid.map(ToCommonCrs::new);
         let mut segments = Vec::with_capacity(records.len());
-        for r in records {
-            let line = match (&r.geometry_wkt, r.srid, to.as_mut()) {
-                (Some(wkt), Some(from), Some(to)) => {
-                    let l = LineString::parse_wkt(wkt).map_err(|e| {
-                        LocateError::Network(format!("segment {}: geometry_wkt: {e}", r.segment_id))
-                    })?;
-                    Some(to.line(from, &l).map_err(|e| {
-                        LocateError::Network(format!("segment {}: {e}", r.segment_id))
-                    })?)
+        for (r, line) in records.iter().zip(lines) {
+            let id = r.segment_id.clone();
+            let line = match (line, r.srid, to.as_mut()) {
+                (Some(Err(why)), _, _) => Err(why),
+                (Some(Ok(l)), Some(from), Some(to)) => {
+                    to.line(from, &l).map(Some).map_err(|e| e.to_string())
                 }
-                (Some(wkt), None, _) if srid.is_none() => {
-                    Some(LineString::parse_wkt(wkt).map_err(|e| {
-                        LocateError::Network(format!("segment {}: geometry_wkt: {e}", r.segment_id))
-                    })?)
-                }
-                _ => None,
+                (Some(Ok(l)), None, _) if srid.is_none() => Ok(Some(l)),
+                _ => Ok(None),
             };
-            segments.push(NetSegment::new(r.segment_id.clone(), line, r.length_m));
+            segments.push(match line {
+                Ok(line) => NetSegment::new(id, line, r.length_m),
+                Err(why) => NetSegment::unusable(id, why),
+            });
         }
         Ok(Network::from_segments(segments, srid, join_tolerance_m))
     }
@@ -321,6 +354,7 @@ impl Network {
                 chainage_m,
             } => {
                 let i = self.segment(segment_id)?;
+                self.segments[i].usable()?;
                 let Some(len) = self.segments[i].length_m else {
                     return Err(LocateError::Network(format!(
                         "segment {segment_id} has neither a geometry nor a length_m, so no \
@@ -412,10 +446,32 @@ impl Network {
             }
         }
         let Some((_, i, j, nodes)) = best else {
+            // Segments whose geometry cannot be used are not in the graph: one of them may be
+            // the missing link.
+            let unusable: Vec<&str> = self
+                .segments
+                .iter()
+                .filter(|s| s.problem.is_some())
+                .map(|s| s.id.as_str())
+                .collect();
+            let gap = match unusable.as_slice() {
+                [] => String::new(),
+                few if few.len() <= 5 => format!(
+                    "; segments whose stored geometry cannot be used are left out of the \
+                     network: {}",
+                    few.join(", ")
+                ),
+                many => format!(
+                    "; {} segments whose stored geometry cannot be used are left out of the \
+                     network, among them {}",
+                    many.len(),
+                    many[..5].join(", ")
+                ),
+            };
             return Err(LocateError::Network(format!(
                 "segments {} and {} are not connected through the network (no chain of \
                  segments whose end points meet within the join tolerance); give the path with \
-                 --path",
+                 --path{gap}",
                 self.segments[s1.segment].id, self.segments[s2.segment].id
             )));
         };
@@ -465,6 +521,9 @@ impl Network {
             .iter()
             .map(|id| self.segment(id))
             .collect::<Result<_, _>>()?;
+        for &i in &idx {
+            self.segments[i].usable()?;
+        }
         let err = |m: String| Err(LocateError::Path(m));
         let (Some(&first), Some(&last)) = (idx.first(), idx.last()) else {
             return err("the path is empty".into());
@@ -732,6 +791,51 @@ mod tests {
         assert!((p.span_m() - (80.0 + 30.0 + 30.0)).abs() < 1e-9);
         let e = n.explicit_path(&ids(&["B", "C"]), s1, s2).unwrap_err();
         assert!(e.to_string().contains("sensor 1's segment A"), "{e}");
+    }
+
+    #[test]
+    fn a_stored_geometry_that_cannot_be_used_costs_only_its_segment() {
+        let rec = |id: &str, wkt: &str, srid: i64| SegmentRecord {
+            segment_id: id.into(),
+            geometry_wkt: Some(wkt.into()),
+            srid: Some(srid),
+            ..SegmentRecord::new(
+                id,
+                crate::physics::Material::DuctileIron,
+                170.0,
+                6.0,
+                1900.0,
+            )
+        };
+        let records = vec![
+            rec("A", "LINESTRING (441800 111900, 441920 111900)", 27700),
+            rec("B", "LINESTRING (441920 111900, 442040 111900)", 999_999),
+            rec("C", "LINESTRING (442040 111900, 442040 111900)", 27700),
+            rec("D", "LINESTRING (442040 111900, 442160 111900)", 27700),
+        ];
+        let n = Network::from_records(&records, 1.0).unwrap();
+        assert_eq!(n.srid, Some(27700));
+        let on = |id: &str| SensorSpec::OnSegment {
+            segment_id: id.into(),
+            chainage_m: 10.0,
+        };
+        assert!(n.place(&on("A"), 5.0).is_ok());
+        for (id, why) in [("B", "EPSG:999999"), ("C", "zero length")] {
+            let e = n.place(&on(id), 5.0).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("segment {id}:")) && e.contains(why),
+                "{e}"
+            );
+        }
+        let (a, d) = (
+            n.place(&on("A"), 5.0).unwrap(),
+            n.place(&on("D"), 5.0).unwrap(),
+        );
+        let e = n.route(a, d).unwrap_err().to_string();
+        assert!(e.contains("left out of the network: B, C"), "{e}");
+        let ids: Vec<String> = ["A", "B", "D"].iter().map(|s| s.to_string()).collect();
+        let e = n.explicit_path(&ids, a, d).unwrap_err().to_string();
+        assert!(e.contains("segment B:"), "{e}");
     }
 
     #[test]

@@ -321,7 +321,6 @@ impl Tally {
     /// Count one record; `map_warnings` gets its geometry's, when it cannot go on the map.
     fn add(&mut self, r: &SegmentExport, map_warnings: &mut Vec<String>) {
         self.segments += 1;
-        self.with_geometry += usize::from(r.geometry.is_some());
         self.fitted += usize::from(r.fit.is_some());
         *self.status.entry(r.status()).or_default() += 1;
         count_codes(&mut self.flags, r.flags.as_deref());
@@ -332,6 +331,8 @@ impl Tally {
             self.common
                 .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
         {
+            // Counted as drawn: a geometry the map cannot show has its warning instead.
+            self.with_geometry += 1;
             for &(x, y) in &line.points {
                 self.bbox = [
                     self.bbox[0].min(x),
@@ -364,7 +365,7 @@ impl Tally {
                 (!crs::is_geographic(srid))
                     .then(|| r.geometry.as_ref().map(line_length))
                     .flatten()
-                    .map(|l| l * metres_per_unit(srid).unwrap_or(1.0))
+                    .map(|l| l * crs::metres_per_unit(srid).unwrap_or(1.0))
             });
             self.actions.push(Action {
                 id: r.id().to_string(),
@@ -542,27 +543,6 @@ pub fn error_comment(v: f64, e: f64) -> &'static str {
     } else {
         ""
     }
-}
-
-/// Metres per unit of a projected system's coordinates, from its PROJ definition (`+units=`
-/// or `+to_meter=`; PROJ's default is the metre). `None` for an unknown system.
-fn metres_per_unit(srid: i64) -> Option<f64> {
-    let def = crs::lookup(srid)?;
-    let p = def.proj4;
-    if let Some(k) = p
-        .split_whitespace()
-        .find_map(|t| t.strip_prefix("+to_meter="))
-    {
-        return k.parse().ok();
-    }
-    Some(
-        match p.split_whitespace().find_map(|t| t.strip_prefix("+units=")) {
-            Some("us-ft") => 1200.0 / 3937.0,
-            Some("ft") => 0.3048,
-            Some("km") => 1000.0,
-            _ => 1.0,
-        },
-    )
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -881,7 +861,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
     let scale_units = if geographic {
         Some(METRES_PER_DEGREE)
     } else {
-        metres_per_unit(srid)
+        crs::metres_per_unit(srid)
     };
     let speed_style = MapStyle {
         unit: "m/s",
@@ -912,7 +892,7 @@ fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportErr
         let geometry = g
             .geometry_wkt
             .as_deref()
-            .and_then(|w| LineString::parse_wkt(w).ok());
+            .and_then(|w| crs::usable_line(w, g.srid).ok());
         // Its warning, if any, was given by the first pass.
         seen.clear();
         let Some(line) = common.line(&g.segment_id, geometry.as_ref(), g.srid, &mut seen) else {

@@ -6,4 +6,5 @@
 mod common;
 
 mod guard;
+mod import;
 mod staleness;

@@ -16,6 +16,7 @@ use rusqlite::{Connection, OpenFlags};
 
 use super::table::{RawRow, RawTable, Rows};
 use super::{ColumnRef, ImportSource, RowError, SourceKind};
+use crate::db::crs;
 use crate::db::wkt::LineString;
 use crate::units::short;
 
@@ -128,6 +129,18 @@ pub(super) fn read(
             }),
         ));
     }
+    if let (true, Some(s)) = (has_geometry, layer.srid) {
+        if crs::lookup(s).is_none() {
+            return Err(whole(
+                Some(&layer.name),
+                format!(
+                    "the layer's coordinate system: {}; save the layer in an EPSG system of the \
+                     registry (such as 27700 or 4326)",
+                    crs::CrsError::Unknown(s)
+                ),
+            ));
+        }
+    }
     Ok((to_raw(file, layer), Vec::new()))
 }
 
@@ -159,12 +172,15 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
                 .map(|(cell, _)| cell)
                 .collect();
             let mut errors = Vec::new();
-            let geographic = layer.srid == Some(WGS84);
+            let geographic = layer.srid.is_some_and(crs::is_geographic);
             let wkt = match f
                 .geometry
                 .and_then(line_of)
-                .and_then(|l| check_geographic(l, geographic))
-            {
+                .and_then(|l| check_geographic(l, geographic, layer.srid))
+                .and_then(|l| match (&l, layer.srid) {
+                    (Some(line), Some(s)) => crs::check_line(s, line).map(|()| l),
+                    _ => Ok(l),
+                }) {
                 Ok(Some(line)) => line.to_wkt(),
                 Ok(None) => String::new(),
                 Err(msg) => {
@@ -202,25 +218,29 @@ fn to_raw(file: &str, layer: Layer) -> RawTable {
     }
 }
 
-/// A line in WGS 84 must have longitudes within ±180° and latitudes within ±90°: coordinates
-/// outside are those of a projected system (metres) in a file that does not say so, as a
-/// GeoJSON without `crs` (RFC 7946 makes it WGS 84).
+/// A line in a longitude/latitude system (WGS 84 and the like) must have longitudes within
+/// ±180° and latitudes within ±90°: coordinates outside are those of a projected system
+/// (metres) in a file that does not say so, as a GeoJSON without `crs` (RFC 7946 makes it
+/// WGS 84).
 fn check_geographic(
     line: Option<LineString>,
     geographic: bool,
+    srid: Option<i64>,
 ) -> Result<Option<LineString>, String> {
     if let (true, Some(l)) = (geographic, &line) {
         if let Some((x, y)) = l
             .points
             .iter()
-            .find(|(x, y)| x.abs() > 180.0 || y.abs() > 90.0)
+            .find(|(x, y)| x.abs() > crs::MAX_LONGITUDE || y.abs() > crs::MAX_LATITUDE)
         {
             return Err(format!(
                 "the coordinates ({}, {}) are not longitude and latitude, although the layer is \
-                 in WGS 84 (EPSG:4326; a GeoJSON without crs is); if they are in a projected \
-                 system, name it with --srid N (such as --srid 27700)",
+                 in EPSG:{}, a longitude/latitude system (a GeoJSON without crs is in WGS 84, \
+                 EPSG:4326); if they are in a projected system, name it with --srid N (such as \
+                 --srid 27700)",
                 short(*x),
-                short(*y)
+                short(*y),
+                srid.unwrap_or(WGS84)
             ));
         }
     }

@@ -182,6 +182,38 @@ pub(super) fn same_frequency(w1: f64, w2: f64) -> bool {
     (w1 - w2).abs() <= SAME_FREQUENCY_REL_TOL * w1.abs().max(w2.abs())
 }
 
+/// Smallest standard deviation of either part of a measured wavenumber, as a fraction of its
+/// k_re. Both parts come from one complex wavenumber (P5), so their errors are of one absolute
+/// size; field wavenumbers are good to 0.1–10 % of k_re, and a deviation a million times smaller
+/// than k_re is a unit or typing error. A vanishing one would also weight its residual by
+/// 1/σ² beyond any floating-point number (σ = 1e-300 leaves the fit no finite objective).
+pub const MIN_RELATIVE_STD: f64 = 1e-6;
+
+/// Keep `std` only if it is at least [`MIN_RELATIVE_STD`] of `k_re` (when both are known).
+fn at_least_resolvable(
+    c: &mut RowCheck<'_>,
+    col: &'static str,
+    std: Option<f64>,
+    k_re: Option<f64>,
+) -> Option<f64> {
+    match (std, k_re) {
+        (Some(s), Some(k)) if s < MIN_RELATIVE_STD * k => {
+            c.err(
+                col,
+                format!(
+                    "{} is less than {MIN_RELATIVE_STD:e} of k_re ({} rad/m): no field \
+                     wavenumber is known that well; give one standard deviation in the same \
+                     units as the value",
+                    short(s),
+                    short(k)
+                ),
+            );
+            None
+        }
+        (s, _) => s,
+    }
+}
+
 fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
     c.required_text("segment_id");
     let f = c.number("frequency_hz");
@@ -254,9 +286,11 @@ fn check_row(c: &mut RowCheck<'_>) -> Option<MeasurementRecord> {
     let v = c.number("k_re_std");
     let k_re_std = c.positive("k_re_std", v, " rad/m");
     let k_re_std = c.in_range("k_re_std", k_re_std, MEASUREMENT_STD_RANGE);
+    let k_re_std = at_least_resolvable(c, "k_re_std", k_re_std, k);
     let v = c.number("attenuation_std");
     let attenuation_std = c.positive("attenuation_std", v, " Np/m");
     let attenuation_std = c.in_range("attenuation_std", attenuation_std, MEASUREMENT_STD_RANGE);
+    let attenuation_std = at_least_resolvable(c, "attenuation_std", attenuation_std, k);
     let measured_on = c.date("measured_on");
     // A blank campaign is the one fixed campaign `unnamed`: the nightly re-import of a file
     // without the column updates its rows and adds none.

@@ -4,6 +4,7 @@ use super::aliases;
 use super::staging::Staging;
 use super::table::{ColumnSpec, RowCheck, Table};
 use super::{ImportOptions, ImportSource, Problems};
+use crate::db::crs;
 use crate::db::inventory::SegmentRecord;
 use crate::db::wkt::LineString;
 use crate::db::DbError;
@@ -99,6 +100,31 @@ use crate::physics::inputs::{
     PIPE_POISSON_RANGE as PIPE_POISSON, PIPE_YOUNGS_MODULUS_RANGE as PIPE_YOUNGS_MODULUS,
     SOIL_DENSITY_RANGE as SOIL_DENSITY,
 };
+
+/// Smallest wall thickness to mean radius ratio h/a accepted (the largest is the thin-shell
+/// limit [`crate::physics::inputs::MAX_WALL_RATIO`], 0.25). The thinnest walls of buried water
+/// pipes are those of large welded steel mains, D/h up to about 290 (AWWA M11's handling
+/// limit, h/a ≈ 0.007), and of thin plastic pipe, SDR 41 (h/a ≈ 0.05). Below h/a = 0.005
+/// (D/h ≈ 400) a buried pipe could not keep its shape under its own backfill (ring stiffness
+/// grows as (h/D)³), so such a wall is a unit or typing error (a wall given in metres,
+/// 1e-300), and the model's hoop stiffness E_p h/a² (P50) would vanish against the fluid's
+/// 2B_f/a, leaving the fit without a pipe.
+pub const MIN_WALL_RATIO: f64 = 0.005;
+
+/// Longest segment accepted, m. A segment is one stretch of uniform pipe between fittings or
+/// changes of material; even transmission mains are split at valves every few kilometres, and
+/// leak-noise correlation spans at most about 1 km. 100 km also bounds every sum of lengths
+/// (plan's weights, P83) far from overflow.
+pub const MAX_LENGTH_M: f64 = 1e5;
+
+/// Largest risk_weight: the longest segment ([`MAX_LENGTH_M`]) times a consequence factor of
+/// 10^4, on the scale of metres of pipe the weight is given in (docs/interface.md).
+pub const MAX_RISK_WEIGHT: f64 = 1e9;
+
+/// Years a pipe in service can have been laid: from the oldest cast-iron mains still in use
+/// (Versailles, 1664) to planned works well ahead; a date, a serial number or a two-digit year
+/// falls outside.
+pub const INSTALL_YEARS: std::ops::RangeInclusive<i64> = 1600..=2100;
 
 /// The file, checked; its rows are staged ([`Staging::segment`]).
 #[derive(Debug)]
@@ -230,10 +256,40 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
 
     let v = c.number("length_m");
     let length_m = c.positive("length_m", v, " m");
+    let length_m = match length_m {
+        Some(l) if l > MAX_LENGTH_M => {
+            c.err(
+                "length_m",
+                format!(
+                    "{} m is longer than a segment can be (at most {} m: one pipe between two \
+                     fittings, not a whole main)",
+                    short(l),
+                    short(MAX_LENGTH_M)
+                ),
+            );
+            None
+        }
+        l => l,
+    };
     let soil_type = c.owned_text("soil_type");
-    let install_year = c.integer("install_year");
+    let install_year = match c.integer("install_year") {
+        Some(y) if !INSTALL_YEARS.contains(&y) => {
+            c.err(
+                "install_year",
+                format!(
+                    "{y} is not a year a pipe in service was laid ({} to {}); give the year \
+                     alone, such as 1947",
+                    INSTALL_YEARS.start(),
+                    INSTALL_YEARS.end()
+                ),
+            );
+            None
+        }
+        y => y,
+    };
     let soil_zone = c.owned_text("soil_zone");
-    // A weight of P83's sum: any finite value ≥ 0 (0: the segment's error does not matter).
+    // A weight of P83's sum: any finite value from 0 (the segment's error does not matter) to
+    // MAX_RISK_WEIGHT.
     let risk_weight = match c.number("risk_weight") {
         Some(w) if w < 0.0 => {
             c.err(
@@ -245,13 +301,25 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
             );
             None
         }
+        Some(w) if w > MAX_RISK_WEIGHT => {
+            c.err(
+                "risk_weight",
+                format!(
+                    "{} is more than {} (the longest segment, {} m, times a consequence factor \
+                     of 10^4); give weights on the scale of metres of pipe",
+                    short(w),
+                    short(MAX_RISK_WEIGHT),
+                    short(MAX_LENGTH_M)
+                ),
+            );
+            None
+        }
         w => w,
     };
     let soil_class_override = c.owned_text("soil_class_override");
 
-    let geometry_wkt = c.text("geometry_wkt").and_then(|t| {
+    let line = c.text("geometry_wkt").and_then(|t| {
         LineString::parse_wkt(t)
-            .map(|l| l.to_wkt())
             .map_err(|e| c.err("geometry_wkt", e))
             .ok()
     });
@@ -261,11 +329,32 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
             c.err("srid", format!("must be a positive EPSG code, got {s}"));
             None
         }
+        Some(s) if crs::lookup(s).is_none() => {
+            c.err(
+                "srid",
+                format!(
+                    "{}: give an EPSG code of the registry, such as 27700 or 4326",
+                    crs::CrsError::Unknown(s)
+                ),
+            );
+            None
+        }
         s => s,
     };
     let srid = match (srid, default_srid) {
         (None, Some(d)) if c.text("srid").is_none() && c.text("geometry_wkt").is_some() => Some(d),
         (s, _) => s,
+    };
+    // The line in its system (a --srid is checked here too, on the geometry it applies to).
+    let geometry_wkt = match (line, srid) {
+        (Some(l), Some(s)) => match crs::check_line(s, &l) {
+            Ok(()) => Some(l.to_wkt()),
+            Err(e) => {
+                c.err("geometry_wkt", e);
+                None
+            }
+        },
+        (l, _) => l.map(|l| l.to_wkt()),
     };
     if c.text("geometry_wkt").is_some() && c.text("srid").is_none() && default_srid.is_none() {
         if c.has("srid") {
@@ -313,6 +402,26 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
     // mean-radius range are only known once the pipe is built.
     if let Err(e) = record.pipe() {
         c.err(pipe_error_column(&e), e.to_string());
+        return None;
+    }
+    // The lower limit of h/a, with the mean radius a = (D_o − h)/2 (model P6), once the
+    // diameter and the upper limit are known to be good (a wrong diameter is named as such).
+    let (h, d) = (record.wall_thickness_mm, record.outer_diameter_mm);
+    let ratio = h / ((d - h) / 2.0);
+    if ratio < MIN_WALL_RATIO {
+        c.err(
+            "wall_thickness_mm",
+            format!(
+                "{} mm is too thin a wall for a {} mm pipe: h/a = {} with the mean radius \
+                 a = (D - h)/2 = {} mm, below {MIN_WALL_RATIO} (D/h of about 400), thinner than \
+                 any water pipe is made; the shell model (model.md §3.2) needs a wall with \
+                 0.005 <= h/a <= 0.25",
+                short(h),
+                short(d),
+                short(ratio),
+                short((d - h) / 2.0)
+            ),
+        );
         return None;
     }
     if let Err(e) = record.fluid() {
