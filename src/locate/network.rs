@@ -491,9 +491,17 @@ impl Network {
                 ));
             }
         }
-        for w in idx.windows(2) {
-            if w[0] == w[1] {
-                return err(format!("segment {} is listed twice in a row", name(w[0])));
+        // A leak's path between two sensors runs through each segment once: a path that comes
+        // back to a segment (A, B, A, B) would count its length again, and the span with it.
+        for (k, &i) in idx.iter().enumerate() {
+            if let Some(j) = idx[..k].iter().position(|&e| e == i) {
+                return err(format!(
+                    "segment {} is on the path twice (places {} and {}): a path between two \
+                     sensors goes through each segment once",
+                    name(i),
+                    j + 1,
+                    k + 1
+                ));
             }
         }
         // Contiguity of consecutive segments that both have lines; a segment without a line

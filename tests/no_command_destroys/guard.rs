@@ -4,5 +4,10 @@ use crate::common::cli::pipewave;
 
 #[test]
 fn the_binary_runs() {
-    assert!(pipewave().arg("--version").output().unwrap().status.success());
+    assert!(pipewave()
+        .arg("--version")
+        .output()
+        .unwrap()
+        .status
+        .success());
 }
