@@ -25,10 +25,10 @@ use super::{bounds, Outcome};
 pub struct BenchArgs {
     /// Repeat factor of the forward-model figures: larger values time longer batches. Range
     /// 0 – 1000 (0 counts as 1).
-    #[arg(long, default_value_t = 1, value_parser = bounds::size(0, 1000))]
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = bounds::size(0, 1000))]
     scale: usize,
     /// Seeds per case for the inversion figures (0 skips them). Range 0 – 100000.
-    #[arg(long, default_value_t = 100, value_parser = bounds::size(0, 100_000))]
+    #[arg(long, value_name = "N", default_value_t = 100, value_parser = bounds::size(0, 100_000))]
     fits: usize,
     /// Time a calibrate run of N synthetic segments (in a temporary database); without --jobs,
     /// on every core between two runs on one core, with the speed-up. Range 1 – 1000000.

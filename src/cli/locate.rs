@@ -49,10 +49,11 @@ pub struct LocateArgs {
     #[arg(long, value_name = "FILE")]
     gpkg: Option<PathBuf>,
     /// Sensor 1: SEGMENT:CHAINAGE (metres along its geometry from the first vertex) or X,Y (map
-    /// coordinates in the network's CRS, snapped to the nearest segment).
+    /// coordinates in the network's CRS, snapped to the nearest segment). Range: CHAINAGE 0 –
+    /// the segment's length; X, Y finite, within --snap-tolerance of a segment.
     #[arg(long, value_name = "ID:M | X,Y")]
     sensor1: Option<String>,
-    /// Sensor 2, as sensor 1.
+    /// Sensor 2, as sensor 1. Range as sensor 1's.
     #[arg(long, value_name = "ID:M | X,Y")]
     sensor2: Option<String>,
     /// The correlator's delay t(sensor 2) − t(sensor 1), s. Range −10 – 10 s.
@@ -67,7 +68,8 @@ pub struct LocateArgs {
     /// Its standard error, s. Range 0 – 10 s.
     #[arg(long, value_name = "S", value_parser = bounds::real(0.0, MAX_DELAY_S, "s"))]
     delay_std: Option<f64>,
-    /// Sensor 1's recording: FILE or FILE:CHANNEL (WAV, channel from 0).
+    /// Sensor 1's recording: FILE or FILE:CHANNEL (WAV, channel from 0). Range: CHANNEL 0 – the
+    /// file's channels − 1.
     #[arg(
         long,
         value_name = "FILE[:CH]",
@@ -75,7 +77,7 @@ pub struct LocateArgs {
         conflicts_with = "delay"
     )]
     recording1: Option<String>,
-    /// Sensor 2's recording.
+    /// Sensor 2's recording, as sensor 1's. Range: CHANNEL 0 – the file's channels − 1.
     #[arg(long, value_name = "FILE[:CH]")]
     recording2: Option<String>,
     /// The path, segment ids from sensor 1's to sensor 2's (instead of routing), each segment

@@ -44,8 +44,9 @@ pub struct SynthArgs {
     /// wall_thinning or pipe_loss. Its value is in truth.csv.
     #[arg(long, value_name = "NAME")]
     hidden_effect: Option<String>,
-    /// Value range of the hidden effect, LO,HI with LO < HI inside the range of the effect's
-    /// parameter (default: one whose signature shows at the synthetic noise in some segments).
+    /// Value range of the hidden effect, LO,HI (default: one whose signature shows at the
+    /// synthetic noise in some segments). Range: LO < HI, both inside the range of the effect's
+    /// parameter.
     #[arg(long, value_name = "LO,HI", requires = "hidden_effect")]
     hidden_range: Option<String>,
     /// Fraction of the synthetic segments given the hidden effect (the rest are controls), 0 -
