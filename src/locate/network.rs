@@ -740,6 +740,15 @@ mod tests {
         assert!((p.span_m() - (80.0 + 30.0 + 30.0)).abs() < 1e-9);
         let e = n.explicit_path(&ids(&["B", "C"]), s1, s2).unwrap_err();
         assert!(e.to_string().contains("sensor 1's segment A"), "{e}");
+        // Back and forth would count B's length twice.
+        let e = n
+            .explicit_path(&ids(&["A", "B", "A", "B", "C"]), s1, s2)
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("segment A is on the path twice (places 1 and 3)"),
+            "{e}"
+        );
     }
 
     #[test]
