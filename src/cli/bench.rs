@@ -27,7 +27,7 @@ pub struct BenchArgs {
     /// 0 – 1000 (0 counts as 1).
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = bounds::size(0, 1000))]
     scale: usize,
-    /// Seeds per case for the inversion figures (0 skips them). Range 0 – 100000.
+    /// Seeds per case for the inversion figures (0 skips them). Range 0 – 100,000.
     #[arg(long, value_name = "N", default_value_t = 100, value_parser = bounds::size(0, 100_000))]
     fits: usize,
     /// Time a calibrate run of N synthetic segments (in a temporary database); without --jobs,

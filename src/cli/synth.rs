@@ -95,7 +95,7 @@ pub struct SynthArgs {
           value_parser = bounds::count(0, bounds::MAX_SEGMENTS))]
     units: u32,
     /// Correlation length of the soil field inside the units, m (with --units; default 350).
-    /// Range 1 – 100000 m.
+    /// Range 1 – 100,000 m.
     #[arg(long, value_name = "M",
           value_parser = bounds::real(MIN_CORRELATION_LENGTH_M, MAX_CORRELATION_LENGTH_M, "m"))]
     correlation_length: Option<f64>,
