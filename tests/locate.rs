@@ -430,7 +430,7 @@ fn bad_input_is_reported_never_a_panic() {
             "--delay-std",
             "1e-4",
         ],
-        "expected a finite delay",
+        "for '--delay <S>': NaN is outside -10 – 10 s",
     );
     fails(
         &[
@@ -442,7 +442,7 @@ fn bad_input_is_reported_never_a_panic() {
             "0.01",
             "--delay-std=-1e-4",
         ],
-        "--delay-std -0.0001: expected a non-negative number of seconds",
+        "for '--delay-std <S>': -0.0001 is outside 0 – 10 s",
     );
     // A segment without geometry can be on a path only when the path is given.
     fails(

@@ -18,30 +18,33 @@ use pipewave::synth::network::{read_truth, recovery, TRUTH_CSV};
 
 use super::calibrate::{self, RunArgs};
 use super::run::{import_dir, DEFAULT_DB};
-use super::Outcome;
+use super::{bounds, Outcome};
 
 /// Arguments of `bench`.
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Repeat factor of the forward-model figures: larger values time longer batches.
-    #[arg(long, default_value_t = 1)]
+    /// Repeat factor of the forward-model figures: larger values time longer batches. Range
+    /// 0 – 1000 (0 counts as 1).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = bounds::size(0, 1000))]
     scale: usize,
-    /// Seeds per case for the inversion figures (0 skips them).
-    #[arg(long, default_value_t = 100)]
+    /// Seeds per case for the inversion figures (0 skips them). Range 0 – 100,000.
+    #[arg(long, value_name = "N", default_value_t = 100, value_parser = bounds::size(0, 100_000))]
     fits: usize,
     /// Time a calibrate run of N synthetic segments (in a temporary database); without --jobs,
-    /// on every core between two runs on one core, with the speed-up.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    /// on every core between two runs on one core, with the speed-up. Range 1 – 1000000.
+    #[arg(long, value_name = "N", value_parser = bounds::count(1, bounds::MAX_SEGMENTS))]
     calibrate: Option<u32>,
     /// Compare the fits of a synthetic network directory with its truth.csv.
     #[arg(long, value_name = "DIR")]
     recovery: Option<PathBuf>,
     /// Segments of the realistic synthetic network whose per-fit times are printed, on one
     /// core (0 skips them). To time another version, build it beside this one:
-    /// scripts/compare-builds.sh OLD_REV.
-    #[arg(long, value_name = "N", default_value_t = 200)]
+    /// scripts/compare-builds.sh OLD_REV. Range 0 – 1000000.
+    #[arg(long, value_name = "N", default_value_t = 200,
+          value_parser = bounds::size(0, u64::from(bounds::MAX_SEGMENTS)))]
     network: usize,
-    /// Seed of that network and of --verify's (pass new values for fresh seeds).
+    /// Seed of that network and of --verify's (pass new values for fresh seeds). Range 0 –
+    /// 2^64 − 1.
     #[arg(long, value_name = "S", default_value_t = pipewave::bench::throughput::BENCH_NETWORK_SEED)]
     network_seed: u64,
     /// Material mix of that network: default (the synthetic network's) or plastic-heavy.
@@ -49,8 +52,8 @@ pub struct BenchArgs {
     materials: pipewave::synth::bench::MaterialMix,
     /// Compare the default fit with the independent yardstick (a dense grid in the soil speeds
     /// and the contact, its best minima polished) on N segments of a realistic network; print
-    /// the worst case and the share of fits each search stage won.
-    #[arg(long, value_name = "N")]
+    /// the worst case and the share of fits each search stage won. Range 1 – 1000000.
+    #[arg(long, value_name = "N", value_parser = bounds::size(1, u64::from(bounds::MAX_SEGMENTS)))]
     verify: Option<usize>,
     /// Time the staleness sweep of calibrate (every segment's inputs hash recomputed from its
     /// stored rows) on a temporary database of N segments with 5 measurements each: the first

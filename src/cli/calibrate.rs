@@ -59,10 +59,11 @@ pub struct CalibrateArgs {
 /// The arguments `calibrate` shares with `run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// Worker threads (default: one per core).
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
+    /// Worker threads (default: one per core). Range 1 – 512.
+    #[arg(long, value_name = "N", value_parser = super::bounds::jobs())]
     pub jobs: Option<u32>,
-    /// Run seed: the same inputs and seed give the same fits, whatever --jobs is.
+    /// Run seed: the same inputs and seed give the same fits, whatever --jobs is. Range 0 –
+    /// 18446744073709551615 (2^64 − 1).
     #[arg(long, value_name = "S", default_value_t = batch::DEFAULT_SEED)]
     pub seed: u64,
 }

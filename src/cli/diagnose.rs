@@ -43,8 +43,8 @@ pub struct DiagnoseArgs {
     /// when the diagnosis of ID names that mix-up; the next calibrate refits the segment.
     #[arg(long = "convert-units", value_name = "ID=MIXUP")]
     convert_units: Vec<String>,
-    /// Worker threads (default: one per core).
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
+    /// Worker threads (default: one per core). Range 1 – 512.
+    #[arg(long, value_name = "N", value_parser = super::bounds::jobs())]
     jobs: Option<u32>,
 }
 

@@ -119,8 +119,8 @@ pub struct ImportArgs {
     )]
     replace_campaign: Vec<String>,
     /// EPSG code of the coordinates when the file does not name its CRS: a GeoJSON without
-    /// `crs` (otherwise WGS 84), CSV geometry without a srid column.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(i64).range(1..))]
+    /// `crs` (otherwise WGS 84), CSV geometry without a srid column. Range 1 – 2147483647.
+    #[arg(long, value_name = "N", value_parser = super::bounds::srid())]
     srid: Option<i64>,
 }
 

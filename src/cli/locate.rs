@@ -17,11 +17,18 @@ use pipewave::locate::model::Weighting;
 use pipewave::locate::network::{SensorSpec, DEFAULT_JOIN_TOLERANCE_M, DEFAULT_SNAP_TOLERANCE_M};
 use pipewave::locate::{
     DelayInput, Job, LocateOptions, Located, Locator, DEFAULT_BAND_HZ, DEFAULT_SPAN_STD_FRACTION,
+    MAX_DELAY_S, MAX_SPAN_STD_FRACTION,
 };
+use pipewave::units::escape_controls;
 
 use pipewave::outfile::Contents;
 
-use super::{open_database, Outcome};
+use super::{bounds, open_database, Outcome};
+
+/// Largest `--snap-tolerance`, m: a sensor a kilometre from every pipe is not on the network.
+const MAX_SNAP_TOLERANCE_M: f64 = 1000.0;
+/// Largest `--join-tolerance`, m: end points 100 m apart are not one junction.
+const MAX_JOIN_TOLERANCE_M: f64 = 100.0;
 
 /// Arguments of `locate`.
 #[derive(Debug, Args)]
@@ -44,24 +51,27 @@ pub struct LocateArgs {
     #[arg(long, value_name = "FILE")]
     gpkg: Option<PathBuf>,
     /// Sensor 1: SEGMENT:CHAINAGE (metres along its geometry from the first vertex) or X,Y (map
-    /// coordinates in the network's CRS, snapped to the nearest segment).
+    /// coordinates in the network's CRS, snapped to the nearest segment). Range: CHAINAGE 0 –
+    /// the segment's length; X, Y finite, within --snap-tolerance of a segment.
     #[arg(long, value_name = "ID:M | X,Y")]
     sensor1: Option<String>,
-    /// Sensor 2, as sensor 1.
+    /// Sensor 2, as sensor 1. Range as sensor 1's.
     #[arg(long, value_name = "ID:M | X,Y")]
     sensor2: Option<String>,
-    /// The correlator's delay t(sensor 2) − t(sensor 1), s.
+    /// The correlator's delay t(sensor 2) − t(sensor 1), s. Range −10 – 10 s.
     #[arg(
         long,
         value_name = "S",
         allow_negative_numbers = true,
-        requires = "delay_std"
+        requires = "delay_std",
+        value_parser = bounds::real(-MAX_DELAY_S, MAX_DELAY_S, "s")
     )]
     delay: Option<f64>,
-    /// Its standard error, s.
-    #[arg(long, value_name = "S")]
+    /// Its standard error, s. Range 0 – 10 s.
+    #[arg(long, value_name = "S", value_parser = bounds::real(0.0, MAX_DELAY_S, "s"))]
     delay_std: Option<f64>,
-    /// Sensor 1's recording: FILE or FILE:CHANNEL (WAV, channel from 0).
+    /// Sensor 1's recording: FILE or FILE:CHANNEL (WAV, channel from 0). Range: CHANNEL 0 – the
+    /// file's channels − 1.
     #[arg(
         long,
         value_name = "FILE[:CH]",
@@ -69,15 +79,16 @@ pub struct LocateArgs {
         conflicts_with = "delay"
     )]
     recording1: Option<String>,
-    /// Sensor 2's recording.
+    /// Sensor 2's recording, as sensor 1's. Range: CHANNEL 0 – the file's channels − 1.
     #[arg(long, value_name = "FILE[:CH]")]
     recording2: Option<String>,
-    /// The path, segment ids from sensor 1's to sensor 2's (instead of routing).
+    /// The path, segment ids from sensor 1's to sensor 2's (instead of routing), each segment
+    /// once.
     #[arg(long, value_name = "ID,ID,...")]
     path: Option<String>,
-    /// Correlation band LO,HI in Hz.
-    #[arg(long, value_name = "LO,HI")]
-    band: Option<String>,
+    /// Correlation band LO,HI in Hz: 0 < LO, HI ≤ 20000, at least 5 Hz wide (default 100,800).
+    #[arg(long, value_name = "LO,HI", value_parser = bounds::band)]
+    band: Option<(f64, f64)>,
     /// Weighting of the cross-correlation of recordings: phat, scot or plain.
     #[arg(long, value_name = "NAME", default_value = "scot")]
     weighting: String,
@@ -85,14 +96,19 @@ pub struct LocateArgs {
     /// cross-correlation), phat or scot.
     #[arg(long, value_name = "NAME", default_value = "plain")]
     given_weighting: String,
-    /// Map coordinates farther than this from every segment are off the network, m.
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_SNAP_TOLERANCE_M)]
+    /// Map coordinates farther than this from every segment are off the network, m. Range
+    /// 0 – 1000 m.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_SNAP_TOLERANCE_M,
+          value_parser = bounds::real(0.0, MAX_SNAP_TOLERANCE_M, "m"))]
     snap_tolerance: f64,
-    /// Segment end points closer than this are one junction, m.
-    #[arg(long, value_name = "M", default_value_t = DEFAULT_JOIN_TOLERANCE_M)]
+    /// Segment end points closer than this are one junction, m. Range 0 – 100 m.
+    #[arg(long, value_name = "M", default_value_t = DEFAULT_JOIN_TOLERANCE_M,
+          value_parser = bounds::real(0.0, MAX_JOIN_TOLERANCE_M, "m"))]
     join_tolerance: f64,
     /// Relative error of the span measured along the GIS geometry (0 for a measured span).
-    #[arg(long, value_name = "F", default_value_t = DEFAULT_SPAN_STD_FRACTION)]
+    /// Range 0 – 0.5.
+    #[arg(long, value_name = "F", default_value_t = DEFAULT_SPAN_STD_FRACTION,
+          value_parser = bounds::real(0.0, MAX_SPAN_STD_FRACTION, ""))]
     span_std_fraction: f64,
 }
 
@@ -100,6 +116,9 @@ fn sensor(text: &str, name: &str) -> anyhow::Result<SensorSpec> {
     if let Some((x, y)) = text.split_once(',') {
         let (x, y) = (x.trim().parse::<f64>(), y.trim().parse::<f64>());
         if let (Ok(x), Ok(y)) = (x, y) {
+            if !(x.is_finite() && y.is_finite()) {
+                bail!("--{name} '{text}': map coordinates must be finite numbers");
+            }
             return Ok(SensorSpec::Map { x, y });
         }
     }
@@ -129,18 +148,6 @@ fn recording(text: &str) -> anyhow::Result<(PathBuf, u16)> {
         }
     }
     Ok((PathBuf::from(text), 0))
-}
-
-fn parse_band(text: &str) -> anyhow::Result<(f64, f64)> {
-    let v: Vec<f64> = text
-        .split(',')
-        .map(|x| x.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("--band '{text}': expected LO,HI in Hz"))?;
-    match v[..] {
-        [lo, hi] if lo > 0.0 && hi > lo => Ok((lo, hi)),
-        _ => bail!("--band '{text}': expected LO,HI with 0 < LO < HI"),
-    }
 }
 
 /// The one-line answer.
@@ -183,19 +190,7 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
     super::guard_outputs(Some(&args.db), &inputs, &outputs)?;
     let weighting: Weighting = args.weighting.parse().map_err(anyhow::Error::msg)?;
     let given_weighting: Weighting = args.given_weighting.parse().map_err(anyhow::Error::msg)?;
-    for (v, name) in [
-        (args.snap_tolerance, "--snap-tolerance"),
-        (args.join_tolerance, "--join-tolerance"),
-        (args.span_std_fraction, "--span-std-fraction"),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            bail!("{name} {v}: expected a non-negative number");
-        }
-    }
-    let band = match &args.band {
-        Some(b) => parse_band(b)?,
-        None => DEFAULT_BAND_HZ,
-    };
+    let band = args.band.unwrap_or(DEFAULT_BAND_HZ);
     let single = args.jobs.is_none();
     let jobs: Vec<Result<Job, RowFailure>> = match &args.jobs {
         Some(file) => {
@@ -217,15 +212,10 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
                 &args.recording1,
                 &args.recording2,
             ) {
-                (Some(d), Some(s), None, _) => {
-                    if !(s.is_finite() && s >= 0.0) {
-                        bail!("--delay-std {s}: expected a non-negative number of seconds");
-                    }
-                    DelayInput::Given {
-                        delay_s: d,
-                        std_s: s,
-                    }
-                }
+                (Some(d), Some(s), None, _) => DelayInput::Given {
+                    delay_s: d,
+                    std_s: s,
+                },
                 (None, _, Some(r1), Some(r2)) => {
                     let ((file1, channel1), (file2, channel2)) = (recording(r1)?, recording(r2)?);
                     DelayInput::Recordings(RecordingPair {
@@ -293,10 +283,12 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
     if single {
         match &answers[0] {
             Ok(l) => {
-                println!("{}", summary_line(l));
-                println!("{}", detail(l));
+                // Segment and job ids come from the user's files: their control characters are
+                // escaped, as in every message.
+                println!("{}", escape_controls(&summary_line(l)));
+                println!("{}", escape_controls(&detail(l)));
                 for n in &l.notes {
-                    println!("  note: {n}");
+                    println!("  note: {}", escape_controls(n));
                 }
             }
             Err(f) => bail!("{}", f.message),
@@ -314,14 +306,17 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
         warnings.extend(write_gpkg(p, &answers, srid).map_err(anyhow::Error::msg)?);
     }
     for w in &warnings {
-        eprintln!("warning: {w}");
+        eprintln!("warning: {}", escape_controls(w));
     }
     let failed: Vec<&RowFailure> = answers.iter().filter_map(|a| a.as_ref().err()).collect();
     if !single {
         for f in &failed {
-            eprintln!("job {}: {}", f.job_id, f.message);
+            eprintln!(
+                "{}",
+                escape_controls(&format!("job {}: {}", f.job_id, f.message))
+            );
         }
-        println!(
+        let line = format!(
             "locate: {} of {} jobs located, {} failed{}",
             answers.len() - failed.len(),
             answers.len(),
@@ -331,6 +326,7 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
                 .map(|o| format!("; answers in {}", o.display()))
                 .unwrap_or_default()
         );
+        println!("{}", escape_controls(&line));
     }
     Ok(if failed.is_empty() {
         Outcome::Done

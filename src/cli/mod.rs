@@ -4,6 +4,7 @@
 
 mod audit;
 mod bench;
+mod bounds;
 mod calibrate;
 mod diagnose;
 mod export;

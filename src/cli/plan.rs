@@ -9,7 +9,7 @@ use pipewave::outfile::Contents;
 use pipewave::spreadsheet::{self, spreadsheet_safe};
 
 use super::open_database as open_existing;
-use super::Outcome;
+use super::{bounds, Outcome};
 
 /// Arguments of `plan`.
 #[derive(Debug, Args)]
@@ -17,22 +17,25 @@ pub struct PlanArgs {
     /// The pipewave database (calibrated: the plan reads its soil field).
     #[arg(long, value_name = "DB")]
     db: PathBuf,
-    /// How many segments to choose.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    /// How many segments to choose. Range 1 – 1000000.
+    #[arg(long, value_name = "N", value_parser = bounds::count(1, bounds::MAX_SEGMENTS))]
     count: u32,
     /// The CSV file to write, best first (replaced if it exists).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// Worker threads (default: all cores; the plan does not depend on it).
-    #[arg(long, value_name = "N")]
-    jobs: Option<usize>,
+    /// Worker threads (default: all cores; the plan does not depend on it). Range 1 – 512, as
+    /// calibrate's.
+    #[arg(long, value_name = "N", value_parser = bounds::jobs())]
+    jobs: Option<u32>,
 }
 
 /// Choose, store and write the plan.
 pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
     super::guard_outputs(Some(&args.db), &[], &[(&args.out, Contents::Plain)])?;
     let mut database = open_existing(&args.db)?;
-    let jobs = args.jobs.unwrap_or_else(pipewave::batch::default_jobs);
+    let jobs = args
+        .jobs
+        .map_or_else(pipewave::batch::default_jobs, |j| j as usize);
     let picks = plan::plan(database.conn_mut(), args.count as usize, jobs)
         .with_context(|| format!("plan of {} failed", args.db.display()))?;
     // Through the output guard, and spreadsheet-safe like every CSV pipewave writes.

@@ -12,7 +12,7 @@ use pipewave::synth::network::{
 };
 use pipewave::synth::{generate, SynthOptions, NOISE_ATTENUATION, NOISE_K_RE};
 
-use super::Outcome;
+use super::{bounds, Outcome};
 
 /// Sub-directory of the network that holds copies of the published data files.
 pub const REAL_DIR: &str = "real";
@@ -24,16 +24,16 @@ pub struct SynthArgs {
     /// if missing.
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// Number of synthetic segments.
+    /// Number of synthetic segments. Range 1 – 1000000.
     #[arg(long, value_name = "N", default_value_t = 200,
-          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+          value_parser = bounds::count(1, bounds::MAX_SEGMENTS))]
     segments: u32,
-    /// Seed of the generator (the same seed gives the same files).
+    /// Seed of the generator (the same seed gives the same files). Range 0 – 2^64 − 1.
     #[arg(long, value_name = "S", default_value_t = 1)]
     seed: u64,
     /// Fraction of segments given a deliberate defect (outlier, attenuation in dB/m, wrong
     /// material, a single frequency), 0 - 1.
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.03)]
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.03, value_parser = bounds::fraction())]
     defects: f64,
     /// Leave out the two published field cases (Lu et al. 2022; Muggleton et al. 2004).
     #[arg(long)]
@@ -46,15 +46,18 @@ pub struct SynthArgs {
     #[arg(long, value_name = "NAME")]
     hidden_effect: Option<String>,
     /// Value range of the hidden effect, LO,HI (default: one whose signature shows at the
-    /// synthetic noise in some segments).
+    /// synthetic noise in some segments). Range: LO < HI, both inside the range of the effect's
+    /// parameter.
     #[arg(long, value_name = "LO,HI", requires = "hidden_effect")]
     hidden_range: Option<String>,
-    /// Fraction of the synthetic segments given the hidden effect (the rest are controls).
+    /// Fraction of the synthetic segments given the hidden effect (the rest are controls), 0 -
+    /// 1.
     #[arg(
         long,
         value_name = "FRACTION",
         default_value_t = 1.0,
-        requires = "hidden_effect"
+        requires = "hidden_effect",
+        value_parser = bounds::fraction()
     )]
     hidden_fraction: f64,
     /// Also write hydrant-test recordings of these segments (comma-separated ids) into
@@ -64,7 +67,7 @@ pub struct SynthArgs {
     /// Write only the recordings, not segments.csv, measurements.csv and truth.csv.
     #[arg(long, requires = "recordings")]
     recordings_only: bool,
-    /// Length of each recording, s.
+    /// Length of each recording, s. Range 6 – 600 s.
     #[arg(long, value_name = "S", requires = "recordings",
           default_value_t = pipewave::synth::recordings::DEFAULT_SECONDS,
           value_parser = recording_seconds)]
@@ -72,31 +75,38 @@ pub struct SynthArgs {
     /// Split the synthetic segments into N soil zones (contiguous blocks of streets), each one
     /// soil with a scatter per segment of 0.04 decade in E_m (about 10 %) and 0.01 in ν_m;
     /// the zone is written to segments.csv (`soil_zone`) and its true soil to truth.csv.
-    #[arg(long, value_name = "N", default_value_t = 0)]
+    /// Range 0 – --segments.
+    #[arg(long, value_name = "N", default_value_t = 0,
+          value_parser = bounds::count(0, bounds::MAX_SEGMENTS))]
     zones: u32,
     /// Also write N two-sensor leak recordings on paths of 1-4 segments into DIR/leaks/
     /// (jobs.csv for `locate`, one WAV per job, leaks_truth.csv), made from the true soils.
-    #[arg(long, value_name = "N")]
+    /// Range 1 – 1000.
+    #[arg(long, value_name = "N", value_parser = bounds::count(1, MAX_LEAKS))]
     leaks: Option<u32>,
-    /// Length of each leak recording, s.
+    /// Length of each leak recording, s. Range 1 – 600 s.
     #[arg(long, value_name = "S", requires = "leaks",
-          default_value_t = pipewave::synth::locate::DEFAULT_LEAK_SECONDS)]
+          default_value_t = pipewave::synth::locate::DEFAULT_LEAK_SECONDS,
+          value_parser = bounds::real(MIN_LEAK_SECONDS, MAX_LEAK_SECONDS, "s"))]
     leak_seconds: f64,
     /// Geological units: split the map into N contiguous units (a Voronoi partition), from
     /// soft to stiff ground, each with a soil that varies smoothly inside it (a Gaussian field
-    /// of the soil's wave speeds, model §7.12); the unit is in truth.csv.
-    #[arg(long, value_name = "N", default_value_t = 0)]
+    /// of the soil's wave speeds, model §7.12); the unit is in truth.csv. Range 0 – --segments.
+    #[arg(long, value_name = "N", default_value_t = 0,
+          value_parser = bounds::count(0, bounds::MAX_SEGMENTS))]
     units: u32,
     /// Correlation length of the soil field inside the units, m (with --units; default 350).
-    #[arg(long, value_name = "M")]
+    /// Range 1 – 100,000 m.
+    #[arg(long, value_name = "M",
+          value_parser = bounds::real(MIN_CORRELATION_LENGTH_M, MAX_CORRELATION_LENGTH_M, "m"))]
     correlation_length: Option<f64>,
     /// Keep the measurements of this fraction of the synthetic segments only (0 - 1, exactly
     /// round(F n) segments); truth.csv still describes every segment.
-    #[arg(long, value_name = "F", default_value_t = 1.0)]
+    #[arg(long, value_name = "F", default_value_t = 1.0, value_parser = bounds::fraction())]
     measured_fraction: f64,
     /// Give this fraction of the synthetic segments a wrong soil_type label (0 - 1): another
     /// unit's class, or another class without --units.
-    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    #[arg(long, value_name = "F", default_value_t = 0.0, value_parser = bounds::fraction())]
     wrong_labels: f64,
     /// Also write every synthetic segment's measurements (campaign `later`) to FILE, in the
     /// measurements.csv format: what a later campaign would measure on any segment, for
@@ -104,6 +114,21 @@ pub struct SynthArgs {
     #[arg(long, value_name = "FILE")]
     campaign_out: Option<PathBuf>,
 }
+
+/// Most leak recordings (`--leaks`): each takes about a second to make at the longest length.
+const MAX_LEAKS: u32 = 1000;
+/// Shortest leak recording, s: the delay's error falls as 1/√(T B) (P87), and a second of a
+/// 700-Hz band already gives T B = 700.
+const MIN_LEAK_SECONDS: f64 = 1.0;
+/// Longest leak recording, s: both channels are held in memory while they are made (600 s at
+/// 8 kHz is about 180 MB), as for the hydrant-test recordings.
+const MAX_LEAK_SECONDS: f64 = pipewave::synth::recordings::MAX_RECORDING_S;
+/// Shortest correlation length of the soil field inside a unit, m: below a metre the field
+/// varies within a segment, which the per-segment scatter already stands for.
+const MIN_CORRELATION_LENGTH_M: f64 = 1.0;
+/// Longest correlation length, m: beyond 100 km the field is one soil over any utility's
+/// network.
+const MAX_CORRELATION_LENGTH_M: f64 = 100_000.0;
 
 /// Campaign name of the measurements `--campaign-out` writes.
 pub const LATER_CAMPAIGN: &str = "later";
@@ -118,12 +143,6 @@ fn recording_seconds(s: &str) -> Result<f64, String> {
 
 /// Generate and write the network.
 pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
-    if !(0.0..=1.0).contains(&args.defects) {
-        bail!(
-            "--defects {} is outside 0 - 1 (it is the fraction of segments with a defect)",
-            args.defects
-        );
-    }
     let network_files: Vec<PathBuf> = [SEGMENTS_CSV, MEASUREMENTS_CSV, TRUTH_CSV]
         .iter()
         .map(|n| args.out.join(n))
@@ -179,20 +198,6 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
             Some((e, range.0, range.1))
         }
     };
-    if !(0.0..=1.0).contains(&args.hidden_fraction) {
-        bail!(
-            "--hidden-fraction {} is outside 0 - 1",
-            args.hidden_fraction
-        );
-    }
-    for (name, v) in [
-        ("--measured-fraction", args.measured_fraction),
-        ("--wrong-labels", args.wrong_labels),
-    ] {
-        if !(0.0..=1.0).contains(&v) {
-            bail!("{name} {v} is outside 0 - 1 (it is a fraction of the segments)");
-        }
-    }
     if args.units > 0 && args.zones > 0 {
         bail!("--units and --zones are two ways to give the soil a structure: choose one");
     }
@@ -202,9 +207,6 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
     let correlation_length_m = args
         .correlation_length
         .unwrap_or(pipewave::synth::DEFAULT_CORRELATION_LENGTH_M);
-    if !(correlation_length_m.is_finite() && correlation_length_m > 0.0) {
-        bail!("--correlation-length {correlation_length_m} must be a positive number of metres");
-    }
     let opts = SynthOptions {
         segments: args.segments as usize,
         seed: args.seed,
@@ -222,6 +224,13 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         bail!(
             "--zones {} is more than --segments {} (every zone needs segments)",
             opts.zones,
+            opts.segments
+        );
+    }
+    if opts.units > opts.segments {
+        bail!(
+            "--units {} is more than --segments {} (every unit needs segments)",
+            opts.units,
             opts.segments
         );
     }
@@ -261,13 +270,6 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         if args.recordings_only {
             return Ok(Outcome::Done);
         }
-    }
-    if opts.units > opts.segments {
-        bail!(
-            "--units {} is more than --segments {} (every unit needs segments)",
-            opts.units,
-            opts.segments
-        );
     }
     let mut tables = NetworkTables::from_synth(&synthetic, opts.srid);
     if !args.no_real_cases {

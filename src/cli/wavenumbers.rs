@@ -18,7 +18,11 @@ use pipewave::recordings::{
     self, analyse_segment, read_layout, write_measurements, EstimateOptions,
 };
 
-use super::Outcome;
+use super::{bounds, Outcome};
+
+/// Highest frequency of `--band-hz`, `--fmin` and `--fmax`, Hz: hydrant-test wavenumbers of
+/// buried mains are measured below a few kHz, where the pipe's fluid wave still carries.
+const MAX_FREQUENCY_HZ: f64 = 10_000.0;
 
 /// Recordings longer than this in all (s) get a progress bar on a terminal.
 const PROGRESS_MIN_SECONDS: f64 = 60.0;
@@ -32,17 +36,21 @@ pub struct WavenumbersArgs {
     /// Where to write the measurements (measurements.csv format).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// Band width, Hz: one measurement per band.
-    #[arg(long, value_name = "W", default_value_t = EstimateOptions::default().band_hz)]
+    /// Band width, Hz: one measurement per band. Range 2 – 10000 Hz.
+    #[arg(long, value_name = "W", default_value_t = EstimateOptions::default().band_hz,
+          value_parser = bounds::real(2.0, MAX_FREQUENCY_HZ, "Hz"))]
     band_hz: f64,
-    /// Lowest coherence γ² of a frequency bin to be used.
-    #[arg(long, value_name = "C", default_value_t = EstimateOptions::default().min_coherence)]
+    /// Lowest coherence γ² of a frequency bin to be used. Range 0 < C < 1.
+    #[arg(long, value_name = "C", default_value_t = EstimateOptions::default().min_coherence,
+          value_parser = bounds::real(0.0, 1.0, ""))]
     min_coherence: f64,
-    /// Lower edge of the first band, Hz.
-    #[arg(long, value_name = "HZ", default_value_t = EstimateOptions::default().fmin_hz)]
+    /// Lower edge of the first band, Hz. Range 0 – 10000 Hz.
+    #[arg(long, value_name = "HZ", default_value_t = EstimateOptions::default().fmin_hz,
+          value_parser = bounds::real(0.0, MAX_FREQUENCY_HZ, "Hz"))]
     fmin: f64,
-    /// Upper edge of the bands, Hz (default: 0.45 × the sample rate).
-    #[arg(long, value_name = "HZ")]
+    /// Upper edge of the bands, Hz (default: 0.45 × the sample rate). Range: above --fmin +
+    /// --band-hz, at most 10000 Hz.
+    #[arg(long, value_name = "HZ", value_parser = bounds::real(0.0, MAX_FREQUENCY_HZ, "Hz"))]
     fmax: Option<f64>,
     /// Text for the campaign column (default: the layout file's name without extension).
     #[arg(long, value_name = "TEXT")]

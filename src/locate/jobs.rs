@@ -159,6 +159,7 @@ pub fn read_jobs(path: &Path) -> Result<Vec<Result<Job, RowFailure>>, JobsFileEr
                     if s < 0.0 {
                         return Err(fail("delay_std_s", format!("{s} is negative")));
                     }
+                    super::check_delay(d, s).map_err(|e| fail("delay_s", e.to_string()))?;
                     DelayInput::Given {
                         delay_s: d,
                         std_s: s,
@@ -191,7 +192,10 @@ pub fn read_jobs(path: &Path) -> Result<Vec<Result<Job, RowFailure>>, JobsFileEr
             };
             let band = match (number("band_lo_hz")?, number("band_hi_hz")?) {
                 (None, None) => None,
-                (Some(a), Some(b)) if a > 0.0 && b > a => Some((a, b)),
+                (Some(a), Some(b)) => {
+                    super::check_band((a, b)).map_err(|e| fail("band_lo_hz", e.to_string()))?;
+                    Some((a, b))
+                }
                 (a, b) => {
                     return Err(fail(
                         "band_lo_hz",

@@ -25,6 +25,7 @@ use crate::db::speeds::{speed_curve, CurveSource};
 use crate::db::SegmentRecord;
 use crate::field::joint::{JointField, Target};
 use crate::physics::{ContactMode, Model, Soil, System};
+use crate::units::short;
 use gcc::{gcc_delay, read_pair, RecordingPair};
 use model::{
     band_grid, solve, table_position, DelayModel, ModelPiece, SpeedCurve, TermKind, Weighting,
@@ -40,6 +41,20 @@ pub const DEFAULT_BAND_HZ: (f64, f64) = (100.0, 800.0);
 pub const MIN_COHERENT_WIDTH_HZ: f64 = 50.0;
 /// The lowest frequency the default band is lowered to, Hz (the fits' curves start at 10 Hz).
 pub const LOW_BAND_FLOOR_HZ: f64 = 10.0;
+/// The narrowest correlation band, Hz. A band Δf wide gives a correlation whose envelope is
+/// about 1/Δf wide (P85): 5 Hz gives 0.2 s, as long as the whole travel time across a 100-m span
+/// of plastic main (about 500 m/s), so a narrower band's correlation is a carrier with crests
+/// every 1/f and no peak that resolves a delay. It also bounds the work: the crests searched
+/// grow as the band's centre over its width.
+pub const MIN_BAND_WIDTH_HZ: f64 = 5.0;
+/// The highest edge of a correlation band, Hz: the top of the audio range; buried mains carry
+/// leak noise a few kHz at most, and the fits' curves end far below.
+pub const MAX_BAND_HZ: f64 = 20_000.0;
+/// The largest delay (and delay error) a correlation can have, s: the travel time across 3 km
+/// of plastic main at 300 m/s, farther than leak noise carries between two sensors.
+pub const MAX_DELAY_S: f64 = 10.0;
+/// The largest relative error of a span, a fraction: a GIS length wrong by half is no span.
+pub const MAX_SPAN_STD_FRACTION: f64 = 0.5;
 /// Default relative error of a span measured along GIS geometry (GIS lengths are good to a few
 /// per cent, model §11).
 pub const DEFAULT_SPAN_STD_FRACTION: f64 = 0.01;
@@ -403,11 +418,18 @@ impl<'c> Locator<'c> {
             lo = lo.max(a);
             hi = hi.min(b);
         }
-        if hi <= lo {
+        if hi - lo < MIN_BAND_WIDTH_HZ {
             return Err(LocateError::NoSpeed(format!(
-                "the curves of the path's segments have no frequency in common with the band \
-                 {}–{} Hz",
-                requested.0, requested.1
+                "the curves of the path's segments have {} in common with the band {}–{} Hz \
+                 (a correlation needs at least {} Hz)",
+                if hi <= lo {
+                    "no frequency".to_string()
+                } else {
+                    format!("only {}–{} Hz", short(lo), short(hi))
+                },
+                short(requested.0),
+                short(requested.1),
+                short(MIN_BAND_WIDTH_HZ)
             )));
         }
         let mut band_note = if (lo, hi) == requested {
@@ -423,12 +445,7 @@ impl<'c> Locator<'c> {
         let ones = vec![1.0; grid.len()];
         let (model, tau, tau_std, band_used) = match &job.delay {
             DelayInput::Given { delay_s, std_s } => {
-                if !delay_s.is_finite() || !std_s.is_finite() || *std_s < 0.0 {
-                    return Err(LocateError::Delay(format!(
-                        "delay {delay_s} s ± {std_s} s: expected a finite delay and a \
-                         non-negative error"
-                    )));
-                }
+                check_delay(*delay_s, *std_s)?;
                 let plain = self.options.given_weighting == Weighting::Plain;
                 let m = DelayModel::new(&grid, &ones, plain, &refs, pieces);
                 (m, *delay_s, *std_s, (lo, hi))
@@ -643,14 +660,43 @@ fn path_ids(net: &Network, path: &SensorPath) -> Vec<String> {
         .collect()
 }
 
-/// A band must be positive and increasing.
+/// A correlation band: `0 < low`, `high ≤` [`MAX_BAND_HZ`], and at least [`MIN_BAND_WIDTH_HZ`]
+/// wide. The same check serves `--band` and a jobs file's band columns.
 pub fn check_band(b: (f64, f64)) -> Result<(), LocateError> {
-    if b.0.is_finite() && b.1.is_finite() && b.0 > 0.0 && b.1 > b.0 {
+    let (lo, hi) = b;
+    if lo.is_finite()
+        && hi.is_finite()
+        && lo > 0.0
+        && hi <= MAX_BAND_HZ
+        && hi - lo >= MIN_BAND_WIDTH_HZ
+    {
         Ok(())
     } else {
         Err(LocateError::Delay(format!(
-            "band {}–{} Hz: expected 0 < low < high",
-            b.0, b.1
+            "band {}–{} Hz: expected 0 < low < high ≤ {} Hz, at least {} Hz wide (a narrower \
+             band's correlation has no peak to resolve a delay by)",
+            short(lo),
+            short(hi),
+            short(MAX_BAND_HZ),
+            short(MIN_BAND_WIDTH_HZ)
+        )))
+    }
+}
+
+/// A correlator's delay and its standard error: finite, the error non-negative, both at most
+/// [`MAX_DELAY_S`] in size. The same check serves `--delay`, `--delay-std` and a jobs file's
+/// `delay_s`, `delay_std_s`.
+pub fn check_delay(delay_s: f64, std_s: f64) -> Result<(), LocateError> {
+    let within = |v: f64| v.is_finite() && v.abs() <= MAX_DELAY_S;
+    if within(delay_s) && within(std_s) && std_s >= 0.0 {
+        Ok(())
+    } else {
+        Err(LocateError::Delay(format!(
+            "delay {} s ± {} s: expected a delay of at most ±{} s and an error of 0 – {} s",
+            short(delay_s),
+            short(std_s),
+            short(MAX_DELAY_S),
+            short(MAX_DELAY_S)
         )))
     }
 }

@@ -550,9 +550,17 @@ impl Network {
                 ));
             }
         }
-        for w in idx.windows(2) {
-            if w[0] == w[1] {
-                return err(format!("segment {} is listed twice in a row", name(w[0])));
+        // A leak's path between two sensors runs through each segment once: a path that comes
+        // back to a segment (A, B, A, B) would count its length again, and the span with it.
+        for (k, &i) in idx.iter().enumerate() {
+            if let Some(j) = idx[..k].iter().position(|&e| e == i) {
+                return err(format!(
+                    "segment {} is on the path twice (places {} and {}): a path between two \
+                     sensors goes through each segment once",
+                    name(i),
+                    j + 1,
+                    k + 1
+                ));
             }
         }
         // Contiguity of consecutive segments that both have lines; a segment without a line
@@ -791,6 +799,15 @@ mod tests {
         assert!((p.span_m() - (80.0 + 30.0 + 30.0)).abs() < 1e-9);
         let e = n.explicit_path(&ids(&["B", "C"]), s1, s2).unwrap_err();
         assert!(e.to_string().contains("sensor 1's segment A"), "{e}");
+        // Back and forth would count B's length twice.
+        let e = n
+            .explicit_path(&ids(&["A", "B", "A", "B", "C"]), s1, s2)
+            .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("segment A is on the path twice (places 1 and 3)"),
+            "{e}"
+        );
     }
 
     #[test]
