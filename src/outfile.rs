@@ -133,9 +133,9 @@ pub fn protect_input(path: &Path) {
     protect(path, Role::Input);
 }
 
-/// The SQLite file header (https://www.sqlite.org/fileformat.html §1.3).
+/// The SQLite file header (https://www.sqlite.org/fileformat.html, section 1.3).
 const SQLITE_MAGIC: &[u8; 16] = b"SQLite format 3\0";
-/// The GeoPackage's `application_id`, "GPKG" (OGC 12-128r18 §1.1.1.1.1), at offset 68 of the
+/// The GeoPackage's `application_id`, "GPKG" (OGC 12-128r18, requirement 2), at offset 68 of the
 /// SQLite header, big-endian.
 const GPKG_APPLICATION_ID: u32 = 0x4750_4B47;
 
