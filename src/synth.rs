@@ -44,6 +44,11 @@ const PIPE_SOIL_SEED_STREAM: u64 = 14;
 const MEASURED_SEED_STREAM: u64 = 15;
 /// Stream for the choice of the wrong labels.
 const LABEL_SEED_STREAM: u64 = 16;
+/// Stream for the noise of the second campaign (`synth --campaigns 2`): its own, so the first
+/// campaign's numbers are those of a one-campaign network.
+const SECOND_NOISE_SEED_STREAM: u64 = 17;
+/// Stream for the choice of the pipes that changed between the campaigns, and their changes.
+const CHANGE_SEED_STREAM: u64 = 18;
 
 /// Default correlation length of the soil field inside a geological unit, m (model §7.12: a
 /// few hundred metres).
@@ -294,13 +299,72 @@ pub struct SynthSegment {
     /// the others' measurements are what a later campaign would take.
     pub measured: bool,
     /// True mean phase speed over the leak band of the pipe as it is (its soil, contact and
-    /// any hidden effect), m/s; `None` if the forward model fails in the band.
+    /// any hidden effect), m/s; `None` if the forward model fails in the band. With two
+    /// campaigns, the speed at the first.
     pub leak_band_speed: Option<f64>,
     /// The "table speed": the same for the inventory's pipe in the table soil
     /// ([`TABLE_SOIL_MODULUS`], [`TABLE_SOIL_POISSON`], [`TABLE_CONTACT`], the inventory's
     /// density).
     pub table_leak_band_speed: Option<f64>,
+    /// The second campaign (`synth --campaigns 2`) of a measured segment, with what changed.
+    pub second: Option<SecondCampaign>,
 }
+
+/// What changed in a pipe between the two campaigns of `synth --campaigns 2`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Change {
+    /// Nothing: the second campaign measures the same pipe (fresh noise only).
+    None,
+    /// The soil's Young's modulus E_m moved (drying or freezing stiffen it, wetting softens it).
+    SoilChange,
+    /// Free air entered the water (model §8 E3, Wood's equation P60–P61).
+    AirInWater,
+    /// The load-bearing wall thinned (model §8 E4, eq. P62): iron, steel and AC only.
+    WallThinning,
+    /// The wall loss factor η_p rose (model §8 E2, eq. P9): cracked joints, degraded lining.
+    PipeLoss,
+}
+
+impl Change {
+    /// Name in truth.csv (`change_effect`): `none`, `soil_change`, or the effect's name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Change::None => "none",
+            Change::SoilChange => "soil_change",
+            Change::AirInWater => Effect::AirInWater.name(),
+            Change::WallThinning => Effect::WallThinning.name(),
+            Change::PipeLoss => Effect::PipeLoss.name(),
+        }
+    }
+}
+
+/// The second campaign of a measured segment: the same frequencies as the first, fresh noise,
+/// and the pipe as it is a year later.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SecondCampaign {
+    /// What changed.
+    pub change: Change,
+    /// The changed parameter's new value: E_m in Pa (`soil_change`), the air fraction φ
+    /// (`air_in_water`), the wall ratio h/h₀ (`wall_thinning`), the wall loss factor η_p
+    /// (`pipe_loss`); `None` when nothing changed.
+    pub change_value: Option<f64>,
+    /// The second campaign's measurements (the first campaign's defect repeated, if any: a
+    /// wrong spacing or a spreadsheet's units stay with the utility's records).
+    pub measurements: Vec<SynthMeasurement>,
+    /// True leak-band speed after the change ([`leak_band_speed_of`]), m/s.
+    pub leak_band_speed_after: Option<f64>,
+    /// Detectability of the change at the stated noise: z of [`change_z`].
+    pub change_z: f64,
+}
+
+/// Campaign name of the first campaign of `synth --campaigns 2`.
+pub const FIRST_CAMPAIGN: &str = "FD-2026";
+/// Campaign name of the second campaign, a year later.
+pub const SECOND_CAMPAIGN: &str = "FD-2027";
+/// Default fraction of the re-measured pipes that changed between two campaigns.
+pub const DEFAULT_CHANGED_FRACTION: f64 = 0.3;
+/// Most campaigns `synth --campaigns` writes.
+pub const MAX_CAMPAIGNS: u32 = 2;
 
 /// Options of a synthetic network.
 #[derive(Debug, Clone, PartialEq)]
@@ -338,6 +402,12 @@ pub struct SynthOptions {
     /// Fraction of segments whose `soil_type` label is wrong (exactly `round(F n)`, each given
     /// the class of another unit, or another class without units).
     pub wrong_label_fraction: f64,
+    /// Campaigns of measurements (1 or 2): with 2, every measured segment is measured again a
+    /// year later ([`SecondCampaign`]).
+    pub campaigns: usize,
+    /// Fraction of the measured segments that changed between the campaigns (exactly
+    /// `round(F m)` of the m measured ones); used with two campaigns only.
+    pub changed_fraction: f64,
 }
 
 impl Default for SynthOptions {
@@ -359,6 +429,8 @@ impl Default for SynthOptions {
             correlation_length_m: DEFAULT_CORRELATION_LENGTH_M,
             measured_fraction: 1.0,
             wrong_label_fraction: 0.0,
+            campaigns: 1,
+            changed_fraction: DEFAULT_CHANGED_FRACTION,
         }
     }
 }
@@ -444,29 +516,67 @@ pub fn measure<R: Rng + ?Sized>(
     freqs: &[f64],
     rng: &mut R,
 ) -> Option<Vec<SynthMeasurement>> {
+    Some(with_noise(freqs, &noiseless(sys, freqs)?, rng))
+}
+
+/// The noiseless wavenumbers k1 of `sys` at `freqs` (Hz); `None` if the forward model fails
+/// or the wave grows. The data come from the reference path (29-point ramp, reference
+/// tolerance, Muller), so they do not depend on the inversion's speed settings.
+pub fn noiseless(sys: &System, freqs: &[f64]) -> Option<Vec<Complex64>> {
     let omegas: Vec<f64> = freqs.iter().map(|&f| hz_to_omega(f)).collect();
-    // The data come from the reference path (29-point ramp, reference tolerance, Muller), so
-    // they do not depend on the inversion's speed settings.
-    let k: Vec<Complex64> = solve_curve(sys, &omegas, Continuation::default())
+    solve_curve(sys, &omegas, Continuation::default())
         .into_iter()
         .map(|r| r.ok().filter(|r| !r.flags.growing_wave).map(|r| r.k1))
-        .collect::<Option<_>>()?;
-    Some(
-        freqs
-            .iter()
-            .zip(k)
-            .map(|(&f, k)| {
-                let (s_re, s_att) = (NOISE_K_RE * k.re, NOISE_ATTENUATION * (-k.im));
-                SynthMeasurement {
-                    frequency_hz: f,
-                    k_re: k.re + s_re * normal(rng),
-                    attenuation: (-k.im + s_att * normal(rng)).max(1e-9),
-                    k_re_std: s_re,
-                    attenuation_std: s_att,
-                }
-            })
-            .collect(),
-    )
+        .collect()
+}
+
+/// The stated one-sigma of Re k and of the attenuation of a measurement whose noiseless
+/// wavenumber is `k`: [`NOISE_K_RE`] and [`NOISE_ATTENUATION`] of each.
+fn stated_sigma(k: Complex64) -> (f64, f64) {
+    (NOISE_K_RE * k.re, NOISE_ATTENUATION * (-k.im))
+}
+
+/// Measurements at `freqs` of the noiseless wavenumbers `k`, with Gaussian noise of the
+/// stated sigmas ([`stated_sigma`]).
+fn with_noise<R: Rng + ?Sized>(
+    freqs: &[f64],
+    k: &[Complex64],
+    rng: &mut R,
+) -> Vec<SynthMeasurement> {
+    freqs
+        .iter()
+        .zip(k)
+        .map(|(&f, &k)| {
+            let (s_re, s_att) = stated_sigma(k);
+            SynthMeasurement {
+                frequency_hz: f,
+                k_re: k.re + s_re * normal(rng),
+                attenuation: (-k.im + s_att * normal(rng)).max(1e-9),
+                k_re_std: s_re,
+                attenuation_std: s_att,
+            }
+        })
+        .collect()
+}
+
+/// Detectability of a change between two campaigns at the same frequencies, a difference of
+/// two independent estimates over the root of the sum of their variances as in eq. P82,
+/// summed in quadrature over the frequencies and both parts: with the noiseless wavenumbers `a` before
+/// and `b` after and the stated sigmas of each,
+/// z = sqrt(Σ_f [(Δk_re)²/(σ_re,A² + σ_re,B²) + (Δα)²/(σ_α,A² + σ_α,B²)]), α = −Im k.
+/// It is the length, in standard deviations, of the difference two noisy campaigns show on
+/// average; z ≈ 2–3 is where a test at the 95 % level starts to see it.
+pub fn change_z(a: &[Complex64], b: &[Complex64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(&ka, &kb)| {
+            let ((sa_re, sa_att), (sb_re, sb_att)) = (stated_sigma(ka), stated_sigma(kb));
+            let re = (kb.re - ka.re).powi(2) / (sa_re.powi(2) + sb_re.powi(2));
+            let att = (kb.im - ka.im).powi(2) / (sa_att.powi(2) + sb_att.powi(2));
+            re + if att.is_finite() { att } else { 0.0 }
+        })
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// Largest ν_m a scattered zone soil is given (below the fit's bound 0.499).
@@ -563,6 +673,9 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
     let geology = geology(opts);
     let mut pipe_soil_rng =
         ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, PIPE_SOIL_SEED_STREAM));
+    // The true system of each segment, its true material and its outlier's index, for the
+    // second campaign.
+    let mut states: Vec<TrueState> = Vec::with_capacity(opts.segments);
     let mut i = 0usize;
     let mut attempts = 0usize;
     while out.len() < opts.segments && attempts < opts.segments * 20 {
@@ -646,10 +759,12 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             None => continue, // the forward model fails there (e.g. grazing): draw again
         };
         let mut inv_material = material;
+        let mut outlier = None;
         match defect {
             Defect::Outlier => {
                 let j = rng.gen_range(0..meas.len());
                 meas[j].k_re *= 1.25;
+                outlier = Some(j);
             }
             Defect::UnitMixUp => {
                 for x in &mut meas {
@@ -710,12 +825,181 @@ pub fn generate(opts: &SynthOptions) -> Vec<SynthSegment> {
             measured: true,
             leak_band_speed,
             table_leak_band_speed,
+            second: None,
+        });
+        states.push(TrueState {
+            sys,
+            material,
+            outlier,
         });
         i += 1;
     }
     keep_measured_fraction(opts, &mut out);
     mislabel(opts, geology.as_ref(), &mut out);
+    if opts.campaigns >= 2 {
+        second_campaign(opts, &mut out, &states);
+    }
     out
+}
+
+/// What the second campaign needs of a generated segment that its record does not hold.
+struct TrueState {
+    /// The true system (soil, contact, hidden effect) at the first campaign.
+    sys: System,
+    /// The true material (the inventory's may be wrong).
+    material: Material,
+    /// Index of the first campaign's outlier, if the segment has that defect.
+    outlier: Option<usize>,
+}
+
+/// Attempts at drawing a change the forward model can solve at the segment's frequencies
+/// before the pipe is left unchanged (a softer soil can bring the shear speed close to the
+/// pipe's, where no bound wave exists).
+const CHANGE_ATTEMPTS: usize = 50;
+
+/// Measure every measured segment again a year later, at the same frequencies with fresh noise
+/// (its own stream), after changing exactly `round(F m)` of the m measured pipes, chosen at
+/// random. The first campaign's measurements are untouched.
+fn second_campaign(opts: &SynthOptions, segments: &mut [SynthSegment], states: &[TrueState]) {
+    let mut noise =
+        ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, SECOND_NOISE_SEED_STREAM));
+    let mut change_rng =
+        ChaCha8Rng::seed_from_u64(crate::seed::derive(opts.seed, CHANGE_SEED_STREAM));
+    let measured: Vec<usize> = (0..segments.len())
+        .filter(|&k| segments[k].measured)
+        .collect();
+    let mut changed = vec![false; segments.len()];
+    for c in field::choose(
+        &mut change_rng,
+        measured.len(),
+        field::count_of(opts.changed_fraction, measured.len()),
+    ) {
+        changed[measured[c]] = true;
+    }
+    for &k in &measured {
+        let (seg, st) = (&mut segments[k], &states[k]);
+        let freqs: Vec<f64> = seg.measurements.iter().map(|m| m.frequency_hz).collect();
+        let Some(before) = noiseless(&st.sys, &freqs) else {
+            continue; // cannot happen: the first campaign was measured from it
+        };
+        let mut after = (Change::None, None, st.sys, before.clone());
+        if changed[k] {
+            for _ in 0..CHANGE_ATTEMPTS {
+                let (change, value) = draw_change(&mut change_rng, st);
+                let Some(sys) = apply_change(&st.sys, change, value) else {
+                    continue;
+                };
+                if let Some(kb) = noiseless(&sys, &freqs) {
+                    after = (change, Some(value), sys, kb);
+                    break;
+                }
+            }
+        }
+        let (change, change_value, sys_after, k_after) = after;
+        let mut meas = with_noise(&freqs, &k_after, &mut noise);
+        repeat_defect(seg.defect, st.outlier, &mut meas);
+        seg.second = Some(SecondCampaign {
+            change,
+            change_value,
+            measurements: meas,
+            leak_band_speed_after: if change == Change::None {
+                seg.leak_band_speed
+            } else {
+                leak_band_speed_of(&sys_after)
+            },
+            change_z: change_z(&before, &k_after),
+        });
+    }
+}
+
+/// The first campaign's measurement defect again in the second: the outlier at the same
+/// frequency (a wrong sensor spacing in the records), the attenuation in dB/m (a spreadsheet's
+/// habit). A wrong inventory material stays in the inventory; a single frequency stays single.
+fn repeat_defect(defect: Defect, outlier: Option<usize>, meas: &mut [SynthMeasurement]) {
+    match defect {
+        Defect::Outlier => {
+            if let Some(m) = outlier.and_then(|j| meas.get_mut(j)) {
+                m.k_re *= 1.25;
+            }
+        }
+        Defect::UnitMixUp => {
+            for x in meas {
+                x.attenuation *= crate::units::DB_PER_NP;
+                x.attenuation_std *= crate::units::DB_PER_NP;
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Smallest and largest |log10| step of E_m of a `soil_change`, decades: 0.03–0.3 decade
+/// (7 %–100 %), up or down with equal chance. A season's drying or wetting moves a clay's
+/// stiffness by tens of per cent and freezing by far more; below 0.03 decade the change is
+/// lost in the zone scatter of 0.04 decade (model §7.11).
+pub const SOIL_CHANGE_DECADES: (f64, f64) = (0.03, 0.3);
+/// Range of the free-air fraction φ that entered the water, log-uniform, at the default line
+/// pressure of 4 bar absolute: 1e-5 (air drawn in at a repair; Wood's equation P60–P61 takes
+/// about 5 % off the water's bulk modulus, 1–3 % off the leak-band speed of an iron pipe and
+/// under 1 % off a plastic one, whose speed the wall sets) to 1e-3 (a main left with an air
+/// pocket: half the speed of an iron pipe, 15 % off a plastic one). Log-uniform because air
+/// contents spread over decades; the range reaches below the detectable so that some changes
+/// are small.
+pub const CHANGE_AIR_RANGE: (f64, f64) = (1e-5, 1e-3);
+/// Range of the wall ratio h/h₀ after thinning (eq. P62): 0.9 is a tenth of the wall lost in
+/// a year of aggressive corrosion or graphitisation, 0.6 a pipe near its failure.
+pub const CHANGE_WALL_RATIO: (f64, f64) = (0.6, 0.9);
+/// Range of the rise of the wall loss factor η_p (eq. P9): 0.01 (small, near the typical
+/// iron value, hard to see at 5 % noise on α) to 0.1 (joints and lining degraded).
+pub const CHANGE_PIPE_LOSS_RISE: (f64, f64) = (0.01, 0.1);
+
+/// Draw a change of the pipe `st` and its value, uniformly among the causes its true material
+/// can have (a plastic wall does not thin).
+fn draw_change<R: Rng + ?Sized>(rng: &mut R, st: &TrueState) -> (Change, f64) {
+    let causes: &[Change] = if Effect::WallThinning.applies_to(st.material) {
+        &[
+            Change::SoilChange,
+            Change::AirInWater,
+            Change::WallThinning,
+            Change::PipeLoss,
+        ]
+    } else {
+        &[Change::SoilChange, Change::AirInWater, Change::PipeLoss]
+    };
+    let change = causes[rng.gen_range(0..causes.len())];
+    let value = match change {
+        Change::SoilChange => {
+            let step = rng.gen_range(SOIL_CHANGE_DECADES.0..SOIL_CHANGE_DECADES.1);
+            let sign = if rng.gen::<bool>() { 1.0 } else { -1.0 };
+            let (lo, hi) = crate::invert::problem::E_BOUNDS;
+            (st.sys.soil.youngs_modulus * 10f64.powf(sign * step)).clamp(lo, hi)
+        }
+        Change::AirInWater => log_uniform(rng, CHANGE_AIR_RANGE.0, CHANGE_AIR_RANGE.1),
+        Change::WallThinning => rng.gen_range(CHANGE_WALL_RATIO.0..CHANGE_WALL_RATIO.1),
+        Change::PipeLoss => {
+            let upper = Effect::PipeLoss.parameter().map_or(0.3, |p| p.upper);
+            (st.sys.pipe.loss_factor
+                + rng.gen_range(CHANGE_PIPE_LOSS_RISE.0..CHANGE_PIPE_LOSS_RISE.1))
+            .min(upper)
+        }
+        Change::None => 0.0,
+    };
+    (change, value)
+}
+
+/// `sys` after `change` to `value`, through the effects the hidden effects use (model §8);
+/// `None` if the value is out of the model's range.
+fn apply_change(sys: &System, change: Change, value: f64) -> Option<System> {
+    match change {
+        Change::None => Some(*sys),
+        Change::SoilChange => {
+            let s = &sys.soil;
+            let soil = Soil::new(value, s.poisson, s.density, s.loss_factor).ok()?;
+            Some(System { soil, ..*sys })
+        }
+        Change::AirInWater => Effect::AirInWater.apply(sys, value).ok(),
+        Change::WallThinning => Effect::WallThinning.apply(sys, value).ok(),
+        Change::PipeLoss => Effect::PipeLoss.apply(sys, value).ok(),
+    }
 }
 
 /// Keep the measurements of exactly `round(F n)` segments, chosen at random (F the measured

@@ -1,6 +1,7 @@
 //! `pipewave synth --out DIR [--segments N] [--seed S] [--defects FRACTION] [--no-real-cases]
 //! [--force] [--units N [--correlation-length M]] [--measured-fraction F] [--wrong-labels F]
-//! [--campaign-out FILE]`: write a synthetic network directory.
+//! [--campaign-out FILE] [--campaigns 2 [--changed-fraction F]]`: write a synthetic network
+//! directory.
 
 use std::path::{Path, PathBuf};
 
@@ -113,6 +114,18 @@ pub struct SynthArgs {
     /// `import --measurements` of the segments chosen (e.g. by `plan`).
     #[arg(long, value_name = "FILE")]
     campaign_out: Option<PathBuf>,
+    /// Campaigns of measurements, 1 – 2. With 2, every measured segment is measured again a
+    /// year later at the same frequencies with fresh noise (campaigns FD-2026 and FD-2027,
+    /// dated), some pipes having changed in between (--changed-fraction); truth.csv then
+    /// states each change and its detectability.
+    #[arg(long, value_name = "N", default_value_t = 1,
+          value_parser = bounds::count(1, pipewave::synth::MAX_CAMPAIGNS))]
+    campaigns: u32,
+    /// With --campaigns 2: fraction of the measured segments whose pipe changed between the
+    /// campaigns (exactly round(F m) of the m measured), 0 – 1 (default 0.3). The cause is
+    /// drawn among soil_change, air_in_water, wall_thinning (iron, steel, AC) and pipe_loss.
+    #[arg(long, value_name = "F", value_parser = bounds::fraction())]
+    changed_fraction: Option<f64>,
 }
 
 /// Most leak recordings (`--leaks`): each takes about a second to make at the longest length.
@@ -204,6 +217,9 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
     if args.correlation_length.is_some() && args.units == 0 {
         bail!("--correlation-length needs --units (it is the scale of the soil inside a unit)");
     }
+    if args.changed_fraction.is_some() && args.campaigns < 2 {
+        bail!("--changed-fraction needs --campaigns 2 (it is the share of pipes that changed between them)");
+    }
     let correlation_length_m = args
         .correlation_length
         .unwrap_or(pipewave::synth::DEFAULT_CORRELATION_LENGTH_M);
@@ -218,6 +234,10 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
         correlation_length_m,
         measured_fraction: args.measured_fraction,
         wrong_label_fraction: args.wrong_labels,
+        campaigns: args.campaigns as usize,
+        changed_fraction: args
+            .changed_fraction
+            .unwrap_or(pipewave::synth::DEFAULT_CHANGED_FRACTION),
         ..SynthOptions::default()
     };
     if opts.zones > opts.segments {
@@ -322,6 +342,24 @@ pub fn run(args: &SynthArgs) -> anyhow::Result<Outcome> {
                 .iter()
                 .filter(|s| s.soil_label != s.soil_type)
                 .count()
+        );
+    }
+    if opts.campaigns >= 2 {
+        let second: Vec<&pipewave::synth::SecondCampaign> =
+            synthetic.iter().filter_map(|s| s.second.as_ref()).collect();
+        let changed: Vec<f64> = second
+            .iter()
+            .filter(|c| c.change != pipewave::synth::Change::None)
+            .map(|c| c.change_z)
+            .collect();
+        println!(
+            "synth: two campaigns ({} and {}) of {} segments; {} pipes changed between them, \
+             {} of them detectable (z >= 3)",
+            pipewave::synth::FIRST_CAMPAIGN,
+            pipewave::synth::SECOND_CAMPAIGN,
+            second.len(),
+            changed.len(),
+            changed.iter().filter(|&&z| z >= 3.0).count()
         );
     }
     if let Some(path) = &args.campaign_out {

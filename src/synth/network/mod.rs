@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use crate::db::wkt::LineString;
 use crate::db::{MeasurementRecord, SegmentRecord};
-use crate::synth::SynthSegment;
+use crate::synth::{SynthSegment, FIRST_CAMPAIGN, SECOND_CAMPAIGN};
 
 /// File names inside a network directory.
 pub const SEGMENTS_CSV: &str = "segments.csv";
@@ -65,6 +65,17 @@ pub struct TruthRow {
     pub geological_unit: Option<String>,
     /// Whether the inventory's `soil_type` differs from the true class (`soil_type` here).
     pub label_wrong: Option<bool>,
+    /// What changed between the two campaigns (`none`, `soil_change`, `air_in_water`,
+    /// `wall_thinning`, `pipe_loss`), for a re-measured segment of `synth --campaigns 2`.
+    pub change_effect: Option<String>,
+    /// The changed parameter's new value ([`crate::synth::SecondCampaign::change_value`]).
+    pub change_value: Option<f64>,
+    /// True leak-band speed at the first campaign, m/s (as `leak_band_speed_m_per_s`).
+    pub leak_band_speed_before_m_per_s: Option<f64>,
+    /// True leak-band speed at the second campaign, m/s.
+    pub leak_band_speed_after_m_per_s: Option<f64>,
+    /// Detectability z of the change at the stated noise ([`crate::synth::change_z`]).
+    pub change_z: Option<f64>,
 }
 
 impl TruthRow {
@@ -88,6 +99,11 @@ impl TruthRow {
             measured: None,
             geological_unit: None,
             label_wrong: None,
+            change_effect: None,
+            change_value: None,
+            leak_band_speed_before_m_per_s: None,
+            leak_band_speed_after_m_per_s: None,
+            change_z: None,
         }
     }
 }
@@ -130,10 +146,50 @@ pub enum NetworkError {
 
 impl NetworkTables {
     /// The tables of a synthetic network in EPSG:`srid`. Pipes use the material's typical
-    /// properties (no overrides), as [`crate::synth::generate`] does.
+    /// properties (no overrides), as [`crate::synth::generate`] does. A network with a second
+    /// campaign ([`SynthSegment::second`]) has both, named [`FIRST_CAMPAIGN`] and
+    /// [`SECOND_CAMPAIGN`] and dated ([`campaign_date`]); one without keeps the campaign
+    /// `synthetic`, undated.
     pub fn from_synth(segments: &[SynthSegment], srid: u32) -> NetworkTables {
         let mut t = NetworkTables::default();
+        let two = segments.iter().any(|s| s.second.is_some());
+        let measured = segments.iter().filter(|s| s.measured).count();
+        let mut j = 0usize;
         for s in segments {
+            let record = |m: &crate::synth::SynthMeasurement,
+                          campaign: &str,
+                          measured_on: Option<String>| MeasurementRecord {
+                omega_rad_s: crate::units::hz_to_omega(m.frequency_hz),
+                frequency_hz: m.frequency_hz,
+                k_re_rad_per_m: m.k_re,
+                attenuation_np_per_m: m.attenuation,
+                k_re_std: Some(m.k_re_std),
+                attenuation_std: Some(m.attenuation_std),
+                measured_on,
+                campaign: Some(campaign.into()),
+                note: None,
+            };
+            let mut measurements: Vec<MeasurementRecord> = Vec::new();
+            if s.measured {
+                if two {
+                    let first = campaign_date(2026, j, measured);
+                    let second = campaign_date(2027, j, measured);
+                    measurements.extend(
+                        s.measurements
+                            .iter()
+                            .map(|m| record(m, FIRST_CAMPAIGN, Some(first.clone()))),
+                    );
+                    measurements.extend(s.second.iter().flat_map(|c| {
+                        c.measurements
+                            .iter()
+                            .map(|m| record(m, SECOND_CAMPAIGN, Some(second.clone())))
+                    }));
+                } else {
+                    measurements
+                        .extend(s.measurements.iter().map(|m| record(m, "synthetic", None)));
+                }
+                j += 1;
+            }
             let geometry = (s.geometry.len() >= 2).then(|| LineString {
                 points: s
                     .geometry
@@ -148,22 +204,7 @@ impl NetworkTables {
                 soil_zone: s.soil_zone.clone(),
                 srid: geometry.as_ref().map(|_| i64::from(srid)),
                 geometry_wkt: geometry.map(|g| g.to_wkt()),
-                measurements: s
-                    .measurements
-                    .iter()
-                    .filter(|_| s.measured)
-                    .map(|m| MeasurementRecord {
-                        omega_rad_s: crate::units::hz_to_omega(m.frequency_hz),
-                        frequency_hz: m.frequency_hz,
-                        k_re_rad_per_m: m.k_re,
-                        attenuation_np_per_m: m.attenuation,
-                        k_re_std: Some(m.k_re_std),
-                        attenuation_std: Some(m.attenuation_std),
-                        measured_on: None,
-                        campaign: Some("synthetic".into()),
-                        note: None,
-                    })
-                    .collect(),
+                measurements,
                 ..SegmentRecord::new(
                     &s.id,
                     s.material,
@@ -193,6 +234,14 @@ impl NetworkTables {
                 measured: Some(s.measured),
                 geological_unit: s.unit.map(unit_name),
                 label_wrong: Some(s.soil_label != s.soil_type),
+                change_effect: s.second.as_ref().map(|c| c.change.as_str().to_string()),
+                change_value: s.second.as_ref().and_then(|c| c.change_value),
+                leak_band_speed_before_m_per_s: s.second.as_ref().and(s.leak_band_speed),
+                leak_band_speed_after_m_per_s: s
+                    .second
+                    .as_ref()
+                    .and_then(|c| c.leak_band_speed_after),
+                change_z: s.second.as_ref().map(|c| c.change_z),
             });
         }
         t
@@ -206,6 +255,7 @@ impl NetworkTables {
             .iter()
             .map(|s| SynthSegment {
                 measured: true,
+                second: None,
                 ..s.clone()
             })
             .collect();
@@ -293,8 +343,13 @@ impl NetworkTables {
     /// in: a record holds both f and ω = 2πf, the given one short (`224`, `3121.958`) and the
     /// derived one with 16–17 digits, so the shorter decimal form is written; it reads back to
     /// the same record.
+    /// The `measured_on` column is written only when some measurement has a date.
     pub fn measurements_csv(&self) -> String {
-        let header = vec![
+        let dated = self
+            .segments
+            .iter()
+            .any(|s| s.measurements.iter().any(|m| m.measured_on.is_some()));
+        let mut header = vec![
             "segment_id",
             "frequency_hz",
             "omega_rad_s",
@@ -302,8 +357,11 @@ impl NetworkTables {
             "attenuation_np_per_m",
             "k_re_std",
             "attenuation_std",
-            "campaign",
         ];
+        if dated {
+            header.push("measured_on");
+        }
+        header.push("campaign");
         csv_text(
             header,
             self.segments.iter().flat_map(|s| {
@@ -314,7 +372,7 @@ impl NetworkTables {
                     } else {
                         (f, String::new())
                     };
-                    vec![
+                    let mut row = vec![
                         s.segment_id.clone(),
                         f,
                         w,
@@ -322,8 +380,12 @@ impl NetworkTables {
                         m.attenuation_np_per_m.to_string(),
                         opt(m.k_re_std),
                         opt(m.attenuation_std),
-                        m.campaign.clone().unwrap_or_default(),
-                    ]
+                    ];
+                    if dated {
+                        row.push(m.measured_on.clone().unwrap_or_default());
+                    }
+                    row.push(m.campaign.clone().unwrap_or_default());
+                    row
                 })
             }),
         )
@@ -360,6 +422,16 @@ impl NetworkTables {
                 "zone_soil_poisson",
             ]);
         }
+        let changed = self.truth.iter().any(|t| t.change_effect.is_some());
+        if changed {
+            header.extend([
+                "change_effect",
+                "change_value",
+                "leak_band_speed_before_m_per_s",
+                "leak_band_speed_after_m_per_s",
+                "change_z",
+            ]);
+        }
         csv_text(
             header,
             self.truth.iter().map(|t| {
@@ -390,6 +462,15 @@ impl NetworkTables {
                         opt(t.zone_soil_poisson),
                     ]);
                 }
+                if changed {
+                    row.extend([
+                        t.change_effect.clone().unwrap_or_default(),
+                        opt(t.change_value),
+                        opt(t.leak_band_speed_before_m_per_s),
+                        opt(t.leak_band_speed_after_m_per_s),
+                        opt(t.change_z),
+                    ]);
+                }
                 row
             }),
         )
@@ -418,6 +499,16 @@ impl NetworkTables {
         }
         Ok(())
     }
+}
+
+/// The date segment `j` of the `n` measured ones was measured in the campaign of `year`: the
+/// crew works through the network in order over four weeks of May, from the 4th to the 27th
+/// (24 days whatever the network's size), so both campaigns' dates are the same day a year
+/// apart and the later campaign is each segment's latest (docs/interface.md, "Campaigns keep
+/// their history").
+pub fn campaign_date(year: i32, j: usize, n: usize) -> String {
+    let day = 4 + (j * 24) / n.max(1);
+    format!("{year}-05-{day:02}")
 }
 
 /// `v` rounded to `digits` decimals (coordinates and lengths to the centimetre).
@@ -532,6 +623,11 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, NetworkError> {
             measured: yes_no("measured")?,
             geological_unit: cell("geological_unit"),
             label_wrong: yes_no("label_wrong")?,
+            change_effect: cell("change_effect"),
+            change_value: num("change_value")?,
+            leak_band_speed_before_m_per_s: num("leak_band_speed_before_m_per_s")?,
+            leak_band_speed_after_m_per_s: num("leak_band_speed_after_m_per_s")?,
+            change_z: num("change_z")?,
         });
     }
     Ok(out)
