@@ -58,8 +58,8 @@ pub struct BenchArgs {
     /// Time the staleness sweep of calibrate (every segment's inputs hash recomputed from its
     /// stored rows) on a temporary database of N segments with 5 measurements each: the first
     /// sweep hashes every segment, the second finds nothing changed, as a nightly calibrate
-    /// with nothing to do.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=10_000_000))]
+    /// with nothing to do. Range 1 – 1000000.
+    #[arg(long, value_name = "N", value_parser = bounds::count(1, bounds::MAX_SEGMENTS))]
     staleness: Option<u32>,
     /// Database of --recovery (default: DIR/pipewave.sqlite).
     #[arg(long, value_name = "PATH", requires = "recovery")]
