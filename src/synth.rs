@@ -559,11 +559,9 @@ fn with_noise<R: Rng + ?Sized>(
         .collect()
 }
 
-/// Detectability of a change between two campaigns at the same frequencies, a difference of
-/// two independent estimates over the root of the sum of their variances as in eq. P82,
-/// summed in quadrature over the frequencies and both parts: with the noiseless wavenumbers `a` before
-/// and `b` after and the stated sigmas of each,
-/// z = sqrt(Σ_f [(Δk_re)²/(σ_re,A² + σ_re,B²) + (Δα)²/(σ_α,A² + σ_α,B²)]), α = −Im k.
+/// Detectability of a change between two campaigns at the same frequencies, eq. P93 (model
+/// §7.14): with the noiseless wavenumbers `a` before and `b` after and the stated sigmas of
+/// each, z = sqrt(Σ_f [(Δk_re)²/(σ_re,A² + σ_re,B²) + (Δα)²/(σ_α,A² + σ_α,B²)]), α = −Im k.
 /// It is the length, in standard deviations, of the difference two noisy campaigns show on
 /// average; z ≈ 2–3 is where a test at the 95 % level starts to see it.
 pub fn change_z(a: &[Complex64], b: &[Complex64]) -> f64 {

@@ -361,6 +361,8 @@ fn kill_during_a_second_campaigns_import_loses_nothing() {
     let p = n.p("big.csv");
     std::fs::write(&p, big.join("\n") + "\n").unwrap();
     let whole = big.len() - 1;
+    // Kills that found the import still running: without one the test would show nothing.
+    let mut in_flight = 0;
     for delay_ms in [5u64, 20, 50, 100, 200] {
         let mut child = pipewave()
             .args(["import", "--db", &db, "--measurements"])
@@ -370,6 +372,9 @@ fn kill_during_a_second_campaigns_import_loses_nothing() {
             .spawn()
             .unwrap();
         std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        if child.try_wait().unwrap().is_none() {
+            in_flight += 1;
+        }
         let _ = child.kill();
         let _ = child.wait();
         let now = rows(&db);
@@ -384,4 +389,5 @@ fn kill_during_a_second_campaigns_import_loses_nothing() {
             "killed after {delay_ms} ms: {second} of {whole} rows of the second campaign"
         );
     }
+    assert!(in_flight >= 1, "every import had finished before its kill");
 }
