@@ -2,6 +2,7 @@
 //! around it from field measurements.
 pub mod batch;
 pub mod bench;
+pub mod change;
 pub mod db;
 pub mod diagnose;
 pub mod export;

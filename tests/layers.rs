@@ -16,6 +16,7 @@ const LAYERS: &[&[&str]] = &[
     &["export", "recordings", "forward"],
     &["report"],
     &["diagnose"],
+    &["change"],
     &["batch"],
     &["locate"],
     &["synth"],

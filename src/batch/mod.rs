@@ -33,6 +33,9 @@ use crate::db::{
     self, CurvePoint, DbError, FitRow, FitState, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
 };
+use crate::change::{self, CampaignName};
+use crate::db::changes::ChangeRecord;
+use crate::db::inventory::MeasurementRecord;
 use crate::invert::{fit_with_effects, FitSettings, Method, Param};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, Model};
@@ -229,6 +232,29 @@ pub struct CalibrateSummary {
     pub zones: Option<crate::zones::ZoneUpdate>,
     /// The soil field's update after the fits (model §7.12), if the run finished.
     pub field: Option<crate::field::FieldUpdate>,
+    /// Fits of segments measured in two or more campaigns: how many were tested and found
+    /// unchanged (pooled), and the changes by named cause (`unexplained` included), model §7.14.
+    pub changes: ChangeCounts,
+}
+
+/// The change tests of a run's fits (model §7.14).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ChangeCounts {
+    /// Segments whose latest campaign was tested against an earlier one.
+    pub tested: usize,
+    /// Of those, unchanged (their campaigns pooled).
+    pub unchanged: usize,
+    /// Changed, by named cause.
+    pub changed: BTreeMap<String, usize>,
+    /// With two campaigns but not tested (a failed fit, no standard deviations).
+    pub untested: usize,
+}
+
+impl ChangeCounts {
+    /// Changed segments in all.
+    pub fn changed_total(&self) -> usize {
+        self.changed.values().sum()
+    }
 }
 
 impl CalibrateSummary {
@@ -287,6 +313,27 @@ impl CalibrateSummary {
                 self.algorithm_refits,
                 crate::types::FIT_ALGORITHM_VERSION
             );
+        }
+        let c = &self.changes;
+        if c.tested + c.untested > 0 {
+            let _ = write!(
+                s,
+                "; campaigns: {} tested, {} unchanged (pooled), {} changed",
+                c.tested,
+                c.unchanged,
+                c.changed_total()
+            );
+            if !c.changed.is_empty() {
+                let parts: Vec<String> = c
+                    .changed
+                    .iter()
+                    .map(|(cause, n)| format!("{cause} {n}"))
+                    .collect();
+                let _ = write!(s, " ({})", parts.join(", "));
+            }
+            if c.untested > 0 {
+                let _ = write!(s, ", {} untested", c.untested);
+            }
         }
         if self.interrupted {
             let _ = write!(
@@ -352,12 +399,18 @@ struct Job {
     /// With effects: the fitted values of the segment's stored fit without them, made from
     /// the same inputs (`None`: there is none, the base is fitted first).
     base: Option<Vec<(Param, f64)>>,
+    /// The segment's latest campaign (`None`: no measurements).
+    latest: Option<CampaignName>,
+    /// The campaign before it with its measurements, tested against it (model §7.14).
+    earlier: Option<(CampaignName, Vec<MeasurementRecord>)>,
 }
 
 /// One segment computed by a worker, ready for the writer.
 struct Computed {
     fit: FitRow,
     curve: Vec<CurvePoint>,
+    /// The change test and the campaigns' speeds, stored with the fit.
+    change: Option<ChangeRecord>,
 }
 
 /// Run a calibration on an open, migrated database.
@@ -396,6 +449,7 @@ pub fn calibrate(
         worker_ms: 0.0,
         zones: None,
         field: None,
+        changes: ChangeCounts::default(),
     };
     let Some(lock) = acquire_lock(conn, opts.wait_for_lock, observer, stop)? else {
         return Ok(CalibrateSummary {
@@ -783,12 +837,15 @@ impl<'s> Feed<'s> {
                 } else {
                     self.selection.stored_base(conn, &record)?
                 };
+                let (latest, earlier) = campaigns_to_test(conn, &record.segment_id)?;
                 self.ready.push_back(Job {
                     seed: segment_seed(run_seed, &record.segment_id),
                     record,
                     settings: settings.clone(),
                     settings_hash: settings_hash.clone(),
                     base,
+                    latest,
+                    earlier,
                 });
             }
             self.tally.add(&verdict);
@@ -874,9 +931,10 @@ fn fit_and_store(
             if error.is_some() {
                 continue; // drain what is in flight; nothing more is stored
             }
-            match db::insert_fit_with_curves(conn, &c.fit, &c.curve) {
+            match db::insert_fit_with_change(conn, &c.fit, &c.curve, c.change.as_ref()) {
                 Ok(_) => {
                     summary.record(&c.fit);
+                    summary.record_change(c.change.as_ref());
                     observer.segment_done(&SegmentDone {
                         segment_id: &c.fit.segment_id,
                         status: c.fit.status,
@@ -906,6 +964,27 @@ fn fit_and_store(
 }
 
 impl CalibrateSummary {
+    /// Count one stored fit's change test.
+    fn record_change(&mut self, change: Option<&ChangeRecord>) {
+        let Some(c) = change.map(|c| &c.change) else {
+            return;
+        };
+        let counts = &mut self.changes;
+        match c.status.as_str() {
+            "changed" => {
+                counts.tested += 1;
+                let cause = c.effect.clone().unwrap_or_else(|| "unexplained".into());
+                *counts.changed.entry(cause).or_insert(0) += 1;
+            }
+            "unchanged" => {
+                counts.tested += 1;
+                counts.unchanged += 1;
+            }
+            "untested" => counts.untested += 1,
+            _ => {}
+        }
+    }
+
     /// Count one stored fit.
     fn record(&mut self, fit: &FitRow) {
         match fit.status {
@@ -964,6 +1043,7 @@ fn compute(job: &Job, run_id: i64) -> Computed {
                 // diagnosis's refits.
                 fit_with_effects(&data, settings, job.seed, job.base.clone())
             };
+            let change = test_campaigns(job, run_id, &data, settings, &mut result);
             if !notes.is_empty() {
                 let mut words = notes.join("; ");
                 if let Some(m) = result.message.take() {
@@ -972,14 +1052,26 @@ fn compute(job: &Job, run_id: i64) -> Computed {
                 result.message = Some(words);
             }
             let curve = curve_points(&result);
-            (result, curve)
+            (result, curve, change)
         })
     }));
-    let (mut fit, curve) = match outcome {
-        Ok(Ok((result, curve))) => (fit_row(rec, run_id, &result), curve),
+    let (mut fit, curve, change) = match outcome {
+        Ok(Ok((result, curve, change))) => {
+            let mut row = fit_row(rec, run_id, &result);
+            if let Some(c) = change.as_ref().filter(|c| c.change.pooled) {
+                // The current fit pools the latest campaign with the one before it.
+                row.campaigns = format!(
+                    "{},{}",
+                    c.change.campaign,
+                    c.change.since_campaign.as_deref().unwrap_or_default()
+                );
+            }
+            (row, curve, change)
+        }
         Ok(Err(e)) => (
             rows::failed_row(rec, run_id, settings, format!("invalid inputs: {e}")),
             Vec::new(),
+            None,
         ),
         Err(panic) => {
             let what = panic
@@ -995,6 +1087,7 @@ fn compute(job: &Job, run_id: i64) -> Computed {
                     format!("internal error in the fit (please report it): {what}"),
                 ),
                 Vec::new(),
+                None,
             )
         }
     };
@@ -1002,7 +1095,63 @@ fn compute(job: &Job, run_id: i64) -> Computed {
     fit.inputs_hash = rec.inputs_hash.clone();
     fit.settings_hash = settings_hash.to_string();
     fit.elapsed_ms = Some(t0.elapsed().as_secs_f64() * 1e3);
-    Computed { fit, curve }
+    Computed { fit, curve, change }
+}
+
+/// A segment's latest campaign, and the one before it with its measurements.
+#[allow(clippy::type_complexity)]
+fn campaigns_to_test(
+    conn: &Connection,
+    segment_id: &str,
+) -> Result<(Option<CampaignName>, Option<(CampaignName, Vec<MeasurementRecord>)>), BatchError> {
+    let mut cs = db::inventory::campaigns_of(conn, segment_id)?;
+    let name = |c: &db::inventory::CampaignOfSegment| CampaignName {
+        name: c.name.clone(),
+        measured_on: c.newest_measured_on.clone(),
+    };
+    let Some(latest) = cs.pop() else {
+        return Ok((None, None));
+    };
+    let earlier = match cs.pop() {
+        Some(e) => {
+            let rows = db::inventory::load_campaign(conn, segment_id, &e.name)?;
+            Some((name(&e), rows))
+        }
+        None => None,
+    };
+    Ok((Some(name(&latest)), earlier))
+}
+
+/// The change test of a segment measured in two or more campaigns (model §7.14): its latest
+/// campaign's fit `result` against the campaign before it. Where the pipe did not change,
+/// `result` becomes the fit of both campaigns pooled. `None` for a segment without
+/// measurements.
+fn test_campaigns(
+    job: &Job,
+    run_id: i64,
+    latest_data: &crate::invert::SegmentData,
+    settings: &FitSettings,
+    result: &mut crate::invert::FitResult,
+) -> Option<ChangeRecord> {
+    let latest = job.latest.as_ref()?;
+    let id = job.record.segment_id.as_str();
+    let Some((earlier_name, rows)) = &job.earlier else {
+        return Some(change::change_record(id, run_id, latest, None, result));
+    };
+    let mut earlier_rec = job.record.clone();
+    earlier_rec.measurements = rows.clone();
+    let test = match segment_data(&earlier_rec) {
+        Ok(earlier) => change::test_change(&earlier, latest_data, settings, result, job.seed),
+        Err(e) => change::ChangeTest::untested(format!(
+            "the earlier campaign {}'s inputs are invalid: {e}",
+            earlier_name.name
+        )),
+    };
+    let record = change::change_record(id, run_id, latest, Some((earlier_name, &test)), result);
+    if let Some(pooled) = test.pooled {
+        *result = pooled;
+    }
+    Some(record)
 }
 
 #[cfg(test)]
@@ -1100,6 +1249,7 @@ mod tests {
             worker_ms: 0.0,
             zones: None,
             field: None,
+            changes: ChangeCounts::default(),
         };
         assert_eq!(
             s.line(),

@@ -97,6 +97,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0015_measurement_campaigns.sql",
         sql: include_str!("../../migrations/0015_measurement_campaigns.sql"),
     },
+    Migration {
+        version: 16,
+        name: "0016_changes.sql",
+        sql: include_str!("../../migrations/0016_changes.sql"),
+    },
 ];
 
 /// The schema version this program writes: that of the last migration.

@@ -11,6 +11,7 @@
 //! Schema changes are append-only SQL files in `migrations/`, embedded in the binary and applied
 //! in order in one exclusive transaction, tracked by `PRAGMA user_version` ([`migrate`]).
 
+pub mod changes;
 pub mod crs;
 pub mod effects;
 pub mod field;
@@ -43,7 +44,8 @@ pub use inventory::{
 };
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{
-    curves_for, finish_run, fit_states_page, fit_with_settings, insert_fit_with_curves,
+    curves_for, finish_run, fit_states_page, fit_with_settings, insert_fit_with_change,
+    insert_fit_with_curves,
     latest_fits, load_run, segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun,
     RunCounts, RunRow, RunStatus,
 };

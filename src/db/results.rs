@@ -446,6 +446,17 @@ pub fn insert_fit_with_curves(
     fit: &FitRow,
     curve: &[CurvePoint],
 ) -> Result<i64, DbError> {
+    insert_fit_with_change(conn, fit, curve, None)
+}
+
+/// [`insert_fit_with_curves`], with the fit's change test and its campaigns' speeds
+/// ([`super::changes`]) in the same transaction: a killed run stores all of them or none.
+pub fn insert_fit_with_change(
+    conn: &mut Connection,
+    fit: &FitRow,
+    curve: &[CurvePoint],
+    change: Option<&super::changes::ChangeRecord>,
+) -> Result<i64, DbError> {
     let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate)?;
     let values = fit_values(fit);
     let names: Vec<&str> = values.iter().map(|(n, _)| *n).collect();
@@ -480,6 +491,9 @@ pub fn insert_fit_with_curves(
                 p.model_attenuation_db_per_m,
             ])?;
         }
+    }
+    if let Some(rec) = change {
+        super::changes::insert(&tx, fit_id, rec)?;
     }
     tx.commit()?;
     Ok(fit_id)

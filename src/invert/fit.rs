@@ -273,16 +273,46 @@ fn fit_once(
     seed: u64,
     start: Option<&[f64]>,
 ) -> FitResult {
+    fit_by_plan(data, settings, &Plan::Search { seed, start })
+}
+
+/// How a fit looks for its optimum.
+#[derive(Clone, Copy)]
+enum Plan<'p> {
+    /// The whole search (DE runs, faces, probes), seeded, with a nested start if given.
+    Search {
+        seed: u64,
+        start: Option<&'p [f64]>,
+    },
+    /// Only polishes from the given points (coordinates of the problem's space): the fit of a
+    /// campaign from the optimum of another campaign of the same pipe (model §7.14), where the
+    /// two optima lie in one basin unless the pipe changed.
+    FromStarts(&'p [Vec<f64>]),
+}
+
+/// Fit a segment by polishing from `starts` only (no global search): the optimum nearest the
+/// starts, checked on the reference path and assembled as every fit is, with its errors,
+/// curve and flags. Used where another fit of the same pipe gives a start in the right basin
+/// (the earlier campaign, or both campaigns pooled, model §7.14). Deterministic.
+pub fn refit_from(data: &SegmentData, settings: &FitSettings, starts: &[Vec<f64>]) -> FitResult {
+    let problem = problem_for(data, settings);
+    if data.measurements.is_empty() {
+        return FitResult::failed_by(settings, problem.weighting, 0, SearchError::NoMeasurements);
+    }
+    fit_by_plan(data, settings, &Plan::FromStarts(starts))
+}
+
+fn fit_by_plan(data: &SegmentData, settings: &FitSettings, plan: &Plan<'_>) -> FitResult {
     let problem = problem_for(data, settings);
     let n_meas = data.measurements.len();
-    match run(&problem, settings, seed, start) {
+    match run(&problem, settings, plan) {
         Ok(r) if r.path_checked => r,
         Ok(fast) => {
             // The fast search path tracked another root at its optimum: search again with the
             // safe path (continuation ramp wherever the soil moves the root far from in vacuo).
             let mut safe = problem_for(data, settings);
             safe.path = SolvePath::Safe;
-            match run(&safe, settings, seed, start) {
+            match run(&safe, settings, plan) {
                 Ok(mut r) => {
                     r.evaluations += fast.evaluations;
                     r
@@ -504,6 +534,17 @@ fn search(
             });
         }
     }
+    continued_polish(problem, settings, bounds, &mut s);
+    Ok(s)
+}
+
+/// The best optimum's continued polish (the last stage of every search).
+fn continued_polish(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    bounds: &crate::optimize::Bounds,
+    s: &mut Searched,
+) {
     // The best optimum's polish goes on: only the best's, since only the answer needs the
     // bottom of its valley. The candidates' polishes stop at a loose tolerance
     // ([`CANDIDATE_POLISH_RTOL`]); the best's goes on to LM's own, with forward differences
@@ -550,7 +591,32 @@ fn search(
         };
         s.close(problem, Stage::ContinuedPolish, stop, begun);
     }
-    Ok(s)
+}
+
+/// The search of [`refit_from`]: a polish from every start inside the box (projected onto it
+/// first), then the answer's continued polish as in [`search`].
+fn from_starts(
+    problem: &Problem<'_>,
+    settings: &FitSettings,
+    bounds: &crate::optimize::Bounds,
+    starts: &[Vec<f64>],
+) -> Searched {
+    let mut s = Searched::default();
+    let begun = s.begin(problem);
+    let found: Vec<_> = starts
+        .iter()
+        .filter(|x| x.len() == problem.specs.len())
+        .filter_map(|x| {
+            let mut x = x.clone();
+            bounds.clamp(&mut x);
+            let f0 = problem.value(&x);
+            f0.is_finite()
+                .then(|| refine(problem, settings, bounds, x, f0))
+        })
+        .collect();
+    s.polished(problem, Stage::CampaignStart, begun, found, StageStop::NoFiniteOptimum);
+    continued_polish(problem, settings, bounds, &mut s);
+    s
 }
 
 /// Rounds of the grazing probe at most: another round runs from the best optimum
@@ -590,8 +656,7 @@ fn refine(
 fn run(
     problem: &Problem<'_>,
     settings: &FitSettings,
-    seed: u64,
-    start: Option<&[f64]>,
+    plan: &Plan<'_>,
 ) -> Result<FitResult, SearchError> {
     let bounds = problem.bounds()?;
     let Searched {
@@ -599,7 +664,10 @@ fn run(
         found_by,
         stages,
         ..
-    } = search(problem, settings, seed, &bounds, start)?;
+    } = match *plan {
+        Plan::Search { seed, start } => search(problem, settings, seed, &bounds, start)?,
+        Plan::FromStarts(starts) => from_starts(problem, settings, &bounds, starts),
+    };
     let mut order: Vec<usize> = (0..optima.len()).collect();
     order.sort_by(|&a, &b| optima[a].cost.total_cmp(&optima[b].cost));
     if order.is_empty() {

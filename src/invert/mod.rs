@@ -31,7 +31,7 @@ pub mod speed_search;
 pub mod uncertainty;
 pub mod yardstick;
 
-pub use fit::{fit_extended, fit_segment, fit_with_effects, BaseOptimum, FitSettings};
+pub use fit::{fit_extended, fit_segment, fit_with_effects, refit_from, BaseOptimum, FitSettings};
 pub use flags::{Flag, FlagCode, Severity};
 pub use problem::{Measurement, Method, Param, Problem, SegmentData, Weighting};
 pub use provenance::{Provenance, SearchError, Stage, StageStatistics, StageStop};

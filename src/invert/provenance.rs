@@ -26,17 +26,20 @@ pub enum Stage {
     /// Polishes from the faces of r and ξ of the speed coordinates at the best optimum of the
     /// DE runs in those coordinates.
     SpeedFaces,
+    /// The polish from another campaign's optimum of the same pipe (model §7.14).
+    CampaignStart,
 }
 
 impl Stage {
     /// Every stage, in the search's order.
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 7] = [
         Stage::Global,
         Stage::NestedStart,
         Stage::Grazing,
         Stage::GrazingRescan,
         Stage::ContinuedPolish,
         Stage::SpeedFaces,
+        Stage::CampaignStart,
     ];
 
     /// Name used in reports.
@@ -48,6 +51,7 @@ impl Stage {
             Stage::GrazingRescan => "grazing rescan",
             Stage::ContinuedPolish => "continued polish",
             Stage::SpeedFaces => "speed faces",
+            Stage::CampaignStart => "campaign start",
         }
     }
 

@@ -163,6 +163,11 @@ impl FitResult {
     pub fn contact(&self) -> Option<f64> {
         self.get(Param::Contact).map(|e| e.value)
     }
+    /// The optimum in the search coordinates, in the order of the parameter space (empty for a
+    /// failed fit): a start for [`refit_from`](super::fit::refit_from).
+    pub fn coordinates(&self) -> Vec<f64> {
+        self.estimates.iter().map(|e| e.coordinate).collect()
+    }
     /// Comma-separated flag codes.
     pub fn flag_codes(&self) -> String {
         codes(&self.flags)

@@ -1,0 +1,590 @@
+//! Whether a pipe changed between two measurement campaigns, and why (model §7.14).
+//!
+//! The later campaign B is fitted as every segment is (the current state); the earlier
+//! campaign A and both campaigns pooled are then fitted from B's optimum ([`refit_from`]), which
+//! lies in their basin unless the pipe changed. The test compares one state for both campaigns
+//! with separate states (P94), at a level calibrated by simulation ([`CHANGE_ALPHA`]); where
+//! the pipe changed, the cause is the one quantity which, let change on its own, explains both
+//! campaigns at the lowest information criterion (P95, the diagnosis's [`aicc`]). Where it did
+//! not, the current fit pools both campaigns. No simulation runs per segment.
+
+pub mod joint;
+
+use crate::db::changes::{CampaignSpeedRow, ChangeRecord, ChangeRow};
+use crate::diagnose::{aicc, TIE_LR};
+use crate::invert::problem::{Measurement, SegmentData, Weighting};
+use crate::invert::{fit_segment, refit_from, FitResult, FitSettings, Method, Param, WithError};
+use crate::physics::effects::Effect;
+use crate::physics::Material;
+use crate::stats::chi2_upper_tail;
+use crate::types::FitStatus;
+
+use joint::Joint;
+
+/// The level of the change test: a pipe is reported `changed` when its p-value (P94) is below
+/// this. The p-value is that of χ² with as many degrees of freedom as the fit has parameters;
+/// the false-alarm rate this gives on unchanged pipes is measured by simulation
+/// (tests/change_test.rs; docs/campaigns.md).
+pub const CHANGE_ALPHA: f64 = 0.005;
+
+/// Two frequencies are one when they differ by less than this relative amount (import's
+/// tolerance, docs/interface.md).
+pub const SAME_FREQUENCY_RTOL: f64 = 1e-9;
+
+/// The causes of a change a second campaign can show (model §7.14).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Cause {
+    /// The soil's E_m, ν_m and ξ (drying, wetting, freezing, disturbance).
+    SoilChange,
+    /// Free air in the water (E3).
+    AirInWater,
+    /// The wall's effective thickness (E4; not plastic walls).
+    WallThinning,
+    /// The wall's loss factor (E2).
+    PipeLoss,
+}
+
+impl Cause {
+    /// Every cause, in the order reported.
+    pub const ALL: [Cause; 4] = [
+        Cause::SoilChange,
+        Cause::AirInWater,
+        Cause::WallThinning,
+        Cause::PipeLoss,
+    ];
+
+    /// The name in the database and the export (`change_effect`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Cause::SoilChange => "soil_change",
+            Cause::AirInWater => "air_in_water",
+            Cause::WallThinning => "wall_thinning",
+            Cause::PipeLoss => "pipe_loss",
+        }
+    }
+
+    /// The effect whose parameter this cause changes (`None`: the soil's own parameters).
+    pub fn effect(self) -> Option<Effect> {
+        match self {
+            Cause::SoilChange => None,
+            Cause::AirInWater => Some(Effect::AirInWater),
+            Cause::WallThinning => Some(Effect::WallThinning),
+            Cause::PipeLoss => Some(Effect::PipeLoss),
+        }
+    }
+
+    /// The parameters the later campaign has of its own under this cause.
+    pub fn parameters(self) -> Vec<Param> {
+        match self.effect() {
+            None => vec![Param::SoilModulus, Param::SoilPoisson, Param::Contact],
+            Some(e) => vec![Param::Effect(e)],
+        }
+    }
+
+    /// Whether a pipe of `material` can change this way (a plastic wall does not thin).
+    pub fn applies_to(self, material: Option<Material>) -> bool {
+        match (self.effect(), material) {
+            (Some(e), Some(m)) => e.applies_to(m),
+            _ => true,
+        }
+    }
+}
+
+/// The outcome of the change test of one segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// The later campaign differs from the earlier by more than their noise (P94).
+    Changed,
+    /// One state explains both campaigns: they are pooled.
+    Unchanged,
+    /// The segment has one campaign.
+    OneCampaign,
+    /// Two campaigns, but no test: a fit failed, or the measurements have no standard
+    /// deviations (the test is in χ²), or the method is the paper's.
+    Untested,
+}
+
+impl Status {
+    /// The name in the database and the export (`change_status`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Changed => "changed",
+            Status::Unchanged => "unchanged",
+            Status::OneCampaign => "one_campaign",
+            Status::Untested => "untested",
+        }
+    }
+}
+
+/// Both campaigns as one set of measurements (P96): at a frequency both measured, the
+/// inverse-variance mean of the two, with the error of the mean; elsewhere each campaign's own.
+/// Under one state the χ² of both campaigns is the pooled χ² plus `consistency_chi2`, the
+/// misfit between the campaigns at their shared frequencies, which no state changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pooled {
+    /// The pooled measurements (the later campaign's pipe and water).
+    pub data: SegmentData,
+    /// Σ over shared frequencies of (k_A − k_B)²/(σ_A² + σ_B²), both parts.
+    pub consistency_chi2: f64,
+    /// Frequencies both campaigns measured.
+    pub shared: usize,
+}
+
+/// Pool two campaigns (P96); `None` unless every measurement of both has its standard
+/// deviations.
+pub fn pool(earlier: &SegmentData, later: &SegmentData) -> Option<Pooled> {
+    let stds = |m: &Measurement| Some((m.k_re_std?, m.attenuation_std?));
+    if earlier
+        .measurements
+        .iter()
+        .chain(&later.measurements)
+        .any(|m| stds(m).is_none())
+    {
+        return None;
+    }
+    let mut out: Vec<Measurement> = Vec::new();
+    let (mut consistency, mut shared) = (0.0, 0usize);
+    let mut used = vec![false; earlier.measurements.len()];
+    for b in &later.measurements {
+        let same = earlier.measurements.iter().enumerate().find(|(i, a)| {
+            !used[*i] && (a.omega - b.omega).abs() <= SAME_FREQUENCY_RTOL * b.omega.abs()
+        });
+        let Some((i, a)) = same else {
+            out.push(*b);
+            continue;
+        };
+        used[i] = true;
+        shared += 1;
+        let (sa, ta) = stds(a)?;
+        let (sb, tb) = stds(b)?;
+        // Two independent measurements x_A ± σ_A, x_B ± σ_B of one value m: Σ (x − m)²/σ² =
+        // (x̄ − m)²/σ̄² + (x_A − x_B)²/(σ_A² + σ_B²), x̄ the inverse-variance mean, σ̄⁻² = σ_A⁻² + σ_B⁻².
+        let mean = |xa: f64, sa: f64, xb: f64, sb: f64| {
+            let (wa, wb) = (1.0 / (sa * sa), 1.0 / (sb * sb));
+            ((wa * xa + wb * xb) / (wa + wb), (wa + wb).recip().sqrt())
+        };
+        let (k, sk) = mean(a.k_re, sa, b.k_re, sb);
+        let (t, st) = mean(a.attenuation, ta, b.attenuation, tb);
+        consistency += (a.k_re - b.k_re).powi(2) / (sa * sa + sb * sb)
+            + (a.attenuation - b.attenuation).powi(2) / (ta * ta + tb * tb);
+        out.push(Measurement {
+            omega: b.omega,
+            k_re: k,
+            attenuation: t,
+            k_re_std: Some(sk),
+            attenuation_std: Some(st),
+        });
+    }
+    out.extend(
+        earlier
+            .measurements
+            .iter()
+            .zip(&used)
+            .filter(|(_, u)| !**u)
+            .map(|(a, _)| *a),
+    );
+    out.sort_by(|a, b| a.omega.total_cmp(&b.omega));
+    Some(Pooled {
+        data: SegmentData {
+            measurements: out,
+            ..later.clone()
+        },
+        consistency_chi2: consistency,
+        shared,
+    })
+}
+
+/// One cause's joint fit of both campaigns (P95).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CauseFit {
+    /// The cause.
+    pub cause: Cause,
+    /// Summed χ² of both campaigns.
+    pub chi2: f64,
+    /// Its AICc with the joint parameter count.
+    pub aicc: f64,
+    /// The later campaign's own values of the quantities that changed (physical units).
+    pub after: Vec<(Param, f64)>,
+}
+
+/// The change test of one segment (model §7.14).
+#[derive(Debug, Clone)]
+pub struct ChangeTest {
+    /// What the test found.
+    pub status: Status,
+    /// Λ = χ²_one − χ²_A − χ²_B (P94), before the misfit scale.
+    pub lr: f64,
+    /// The misfit scale s² ≥ 1 (P94) the statistic is divided by.
+    pub scale: f64,
+    /// Degrees of freedom of the reference χ² (the fit's parameters).
+    pub dof: usize,
+    /// P(χ²_dof > Λ / s²).
+    pub p_value: f64,
+    /// The summed χ² of both campaigns under one state.
+    pub chi2_one: f64,
+    /// The earlier campaign's own χ².
+    pub chi2_earlier: f64,
+    /// The later campaign's own χ².
+    pub chi2_later: f64,
+    /// The earlier campaign fitted on its own (its state and speed).
+    pub earlier: Option<FitResult>,
+    /// Both campaigns pooled (one state): the current fit when unchanged.
+    pub pooled: Option<FitResult>,
+    /// The named cause when changed; `None` there means unexplained.
+    pub cause: Option<Cause>,
+    /// Causes whose AICc is within [`TIE_LR`] of the named one's: the data cannot tell them
+    /// apart from it.
+    pub ambiguous_with: Vec<Cause>,
+    /// Every cause fitted, in [`Cause::ALL`]'s order.
+    pub causes: Vec<CauseFit>,
+    /// Why the test did not run, or what it leaves open.
+    pub note: Option<String>,
+}
+
+impl ChangeTest {
+    pub fn untested(note: impl Into<String>) -> ChangeTest {
+        ChangeTest {
+            status: Status::Untested,
+            lr: f64::NAN,
+            scale: f64::NAN,
+            dof: 0,
+            p_value: f64::NAN,
+            chi2_one: f64::NAN,
+            chi2_earlier: f64::NAN,
+            chi2_later: f64::NAN,
+            earlier: None,
+            pooled: None,
+            cause: None,
+            ambiguous_with: Vec::new(),
+            causes: Vec::new(),
+            note: Some(note.into()),
+        }
+    }
+
+    /// The change test's statistic Λ / s² (P94).
+    pub fn statistic(&self) -> f64 {
+        self.lr / self.scale
+    }
+}
+
+/// Seed stream of the earlier campaign's own search, where a polish from the latest state does
+/// not explain it.
+pub const EARLIER_STREAM: u64 = 0x6561_726c;
+
+/// Whether a fit leaves a misfit its noise does not explain (the `high_misfit` test, P88).
+fn misfits(fit: &FitResult) -> bool {
+    fit.status == FitStatus::Failed || fit.has_flag(crate::invert::FlagCode::HighMisfit)
+}
+
+/// The number of residuals of a segment's data (two per measurement).
+fn residuals_of(data: &SegmentData) -> usize {
+    2 * data.measurements.len()
+}
+
+/// Test whether the pipe of `later` (fitted as `fit_later` with `settings`) is the pipe of
+/// `earlier`, and name the cause where it is not (model §7.14, P94–P96). Deterministic.
+pub fn test_change(
+    earlier: &SegmentData,
+    later: &SegmentData,
+    settings: &FitSettings,
+    fit_later: &FitResult,
+    seed: u64,
+) -> ChangeTest {
+    if settings.method != Method::Default {
+        return ChangeTest::untested("the change test needs the default method's χ²");
+    }
+    if settings.effects.iter().any(|e| e.is_discrete()) {
+        return ChangeTest::untested("not tested with a choice among inventory records");
+    }
+    if fit_later.status == FitStatus::Failed || fit_later.weighting != Weighting::ChiSquare {
+        return ChangeTest::untested(if fit_later.status == FitStatus::Failed {
+            "the latest campaign's fit failed"
+        } else {
+            "the measurements have no standard deviations (the test is in χ²)"
+        });
+    }
+    let Some(pooled) = pool(earlier, later) else {
+        return ChangeTest::untested(
+            "the earlier campaign's measurements have no standard deviations",
+        );
+    };
+    let x_later = fit_later.coordinates();
+    let pooled_fit = refit_from(&pooled.data, settings, std::slice::from_ref(&x_later));
+    let mut starts = vec![x_later.clone()];
+    if pooled_fit.status != FitStatus::Failed {
+        starts.push(pooled_fit.coordinates());
+    }
+    let mut earlier_fit = refit_from(earlier, settings, &starts);
+    if misfits(&earlier_fit) {
+        // The latest state's basin is not the earlier campaign's (the pipe changed enough to
+        // move the soil that best explains it): the earlier campaign is searched on its own.
+        let searched = fit_segment(earlier, settings, crate::seed::derive(seed, EARLIER_STREAM));
+        if searched.status != FitStatus::Failed
+            && (earlier_fit.status == FitStatus::Failed || searched.misfit < earlier_fit.misfit)
+        {
+            earlier_fit = searched;
+        }
+    }
+    if earlier_fit.status == FitStatus::Failed || pooled_fit.status == FitStatus::Failed {
+        return ChangeTest {
+            earlier: (earlier_fit.status != FitStatus::Failed).then_some(earlier_fit),
+            ..ChangeTest::untested("the earlier campaign could not be fitted from the latest's state")
+        };
+    }
+    let p = x_later.len();
+    let n = residuals_of(earlier) + residuals_of(later);
+    let chi2_a = earlier_fit.misfit;
+    let chi2_b = fit_later.misfit;
+    let chi2_one = pooled_fit.misfit + pooled.consistency_chi2;
+    let causes = fit_causes(earlier, later, settings, &earlier_fit, fit_later, &pooled_fit);
+    // The alternatives to one state: separate states (every parameter the campaign's own), and
+    // each cause (one quantity its own). Each gives Λ_a = χ²_one − χ²_a on k_a degrees of
+    // freedom (P94); the misfit beyond the noise of the alternative that fits best per degree
+    // of freedom widens them all, as the Birge ratio widens a fit's errors (P88).
+    let mut alternatives: Vec<(f64, usize)> = vec![(chi2_a + chi2_b, p)];
+    alternatives.extend(
+        causes
+            .iter()
+            .filter(|c| c.cause != Cause::SoilChange || !settings.effects.is_empty())
+            .map(|c| (c.chi2, c.cause.parameters().len())),
+    );
+    let scale = alternatives
+        .iter()
+        .filter_map(|&(chi2, k)| {
+            let dof = n.checked_sub(p + k).filter(|d| *d > 0)?;
+            Some(chi2 / dof as f64)
+        })
+        .fold(f64::INFINITY, f64::min)
+        .max(1.0);
+    let scale = if scale.is_finite() { scale } else { 1.0 };
+    // The smallest p-value over the alternatives, Bonferroni-corrected for their number.
+    let (mut p_value, mut lr, mut dof) = (1.0f64, 0.0f64, p);
+    for &(chi2, k) in &alternatives {
+        let l = (chi2_one - chi2).max(0.0);
+        let pv = chi2_upper_tail(l / scale, k as f64);
+        if pv < p_value || (pv == p_value && l > lr) {
+            (p_value, lr, dof) = (pv, l, k);
+        }
+    }
+    let p_value = (p_value * alternatives.len() as f64).min(1.0);
+    let changed = p_value < CHANGE_ALPHA;
+    let mut t = ChangeTest {
+        status: if changed {
+            Status::Changed
+        } else {
+            Status::Unchanged
+        },
+        lr,
+        scale,
+        dof,
+        p_value,
+        chi2_one,
+        chi2_earlier: chi2_a,
+        chi2_later: chi2_b,
+        earlier: None,
+        pooled: None,
+        cause: None,
+        ambiguous_with: Vec::new(),
+        causes,
+        note: None,
+    };
+    if changed {
+        name_cause(&mut t, n, p, residuals_of(earlier));
+    } else {
+        t.pooled = Some(pooled_fit);
+    }
+    t.earlier = Some(earlier_fit);
+    t
+}
+
+/// Every applicable cause fitted jointly to both campaigns (P95), in [`Cause::ALL`]'s order.
+fn fit_causes(
+    earlier: &SegmentData,
+    later: &SegmentData,
+    settings: &FitSettings,
+    earlier_fit: &FitResult,
+    later_fit: &FitResult,
+    pooled_fit: &FitResult,
+) -> Vec<CauseFit> {
+    let Some(sys_a) = earlier_fit.system else {
+        return Vec::new();
+    };
+    let n = residuals_of(earlier) + residuals_of(later);
+    let (xa, xb, xp) = (
+        earlier_fit.coordinates(),
+        later_fit.coordinates(),
+        pooled_fit.coordinates(),
+    );
+    let mut out = Vec::new();
+    for cause in Cause::ALL {
+        if !cause.applies_to(earlier.material) {
+            continue;
+        }
+        let Some(j) = Joint::new(earlier, later, settings, &cause.parameters(), &sys_a) else {
+            continue;
+        };
+        let mut starts = j.spread_starts(&j.start(&xa, &xb));
+        starts.extend(j.spread_starts(&j.start(&xp, &xb)));
+        let Some(opt) = j.fit(&starts) else { continue };
+        out.push(CauseFit {
+            cause,
+            chi2: opt.chi2,
+            aicc: aicc(opt.chi2, n, j.dim()),
+            after: opt.own_values,
+        });
+    }
+    out
+}
+
+/// P95: the cause of lowest AICc is named; those within [`TIE_LR`] of it are ambiguous with
+/// it; none is named when even the best leaves both campaigns unexplained (χ² beyond the fit's
+/// misfit level) while the earlier campaign alone fits. `n` residuals in all, `p` parameters of
+/// one state, `n_earlier` residuals of the earlier campaign.
+fn name_cause(t: &mut ChangeTest, n: usize, p: usize, n_earlier: usize) {
+    let Some(best) = t
+        .causes
+        .iter()
+        .min_by(|a, b| a.aicc.total_cmp(&b.aicc))
+        .cloned()
+    else {
+        t.note = Some("no cause could be fitted to both campaigns".into());
+        return;
+    };
+    let k = p + best.cause.parameters().len();
+    let level = crate::invert::flags::MISFIT_P_VALUE;
+    let explained = chi2_upper_tail(best.chi2, n.saturating_sub(k) as f64) >= level;
+    let earlier_fits =
+        chi2_upper_tail(t.chi2_earlier, n_earlier.saturating_sub(p) as f64) >= level;
+    if !explained && earlier_fits {
+        t.note = Some(format!(
+            "no one quantity explains both campaigns (best: {}, χ² {:.1} on {} residuals)",
+            best.cause.as_str(),
+            best.chi2,
+            n
+        ));
+        return;
+    }
+    t.cause = Some(best.cause);
+    t.ambiguous_with = t
+        .causes
+        .iter()
+        .filter(|c| c.cause != best.cause && c.aicc <= best.aicc + TIE_LR)
+        .map(|c| c.cause)
+        .collect();
+}
+
+/// A campaign of a segment, as the stored rows name it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CampaignName {
+    /// Its name.
+    pub name: String,
+    /// Its newest `measured_on` on the segment.
+    pub measured_on: Option<String>,
+}
+
+/// The speed row of a campaign fitted on its own.
+fn speed_row(c: &CampaignName, fit: &FitResult) -> CampaignSpeedRow {
+    CampaignSpeedRow {
+        campaign: c.name.clone(),
+        measured_on: c.measured_on.clone(),
+        leak_band_speed_m_per_s: fit.leak_band_speed.map(|v| v.value),
+        leak_band_speed_std_m_per_s: fit.leak_band_speed.map(|v| v.std),
+        chi2: (fit.status != FitStatus::Failed).then_some(fit.misfit),
+        n_measurements: i64::try_from(fit.n_measurements).unwrap_or(i64::MAX),
+        soil_youngs_modulus_pa: fit.soil_modulus(),
+        soil_poisson: fit.soil_poisson(),
+        contact: fit.contact(),
+    }
+}
+
+/// The relative change of the leak-band speed from `before` to `after`, %, with its error
+/// (the two campaigns' fits are independent: their relative errors add in quadrature).
+pub fn speed_change_pct(before: WithError, after: WithError) -> Option<(f64, f64)> {
+    if !(before.value > 0.0 && after.value.is_finite()) {
+        return None;
+    }
+    let ratio = after.value / before.value;
+    let rel = ((before.std / before.value).powi(2) + (after.std / after.value).powi(2)).sqrt();
+    Some((100.0 * (ratio - 1.0), 100.0 * ratio * rel))
+}
+
+/// What a calibrate fit of a segment stores of its campaigns: the test of `latest` against
+/// `earlier` (`None`: one campaign) and each one's speed fitted on its own. `latest_alone` is
+/// the latest campaign's own fit.
+pub fn change_record(
+    segment_id: &str,
+    run_id: i64,
+    latest: &CampaignName,
+    earlier: Option<(&CampaignName, &ChangeTest)>,
+    latest_alone: &FitResult,
+) -> ChangeRecord {
+    let mut change = ChangeRow {
+        segment_id: segment_id.to_string(),
+        run_id,
+        campaign: latest.name.clone(),
+        status: Status::OneCampaign.as_str().to_string(),
+        ..ChangeRow::default()
+    };
+    let mut speeds = Vec::new();
+    let Some((ec, t)) = earlier else {
+        speeds.push(speed_row(latest, latest_alone));
+        return ChangeRecord { change, speeds };
+    };
+    let finite = |v: f64| v.is_finite().then_some(v);
+    change.since_campaign = Some(ec.name.clone());
+    change.status = t.status.as_str().to_string();
+    change.statistic = finite(t.statistic());
+    change.dof = (t.dof > 0).then(|| i64::try_from(t.dof).unwrap_or(i64::MAX));
+    change.p_value = finite(t.p_value);
+    change.alpha = (t.status != Status::Untested).then_some(CHANGE_ALPHA);
+    change.chi2_one_state = finite(t.chi2_one);
+    change.chi2_earlier = finite(t.chi2_earlier);
+    change.chi2_latest = finite(t.chi2_later);
+    change.pooled = t.pooled.is_some();
+    change.note = t.note.clone();
+    if t.status == Status::Changed {
+        change.effect = Some(t.cause.map_or("unexplained", Cause::as_str).to_string());
+    }
+    change.ambiguous_with = t
+        .ambiguous_with
+        .iter()
+        .map(|c| c.as_str())
+        .collect::<Vec<_>>()
+        .join(",");
+    change.causes = t
+        .causes
+        .iter()
+        .map(|c| format!("{} chi2 {:.2} AICc {:.2}", c.cause.as_str(), c.chi2, c.aicc))
+        .collect::<Vec<_>>()
+        .join("; ");
+    if let Some(e) = &t.earlier {
+        change.earlier_soil_youngs_modulus_pa = e.soil_modulus();
+        change.earlier_soil_poisson = e.soil_poisson();
+        change.earlier_contact = e.contact();
+        if let (Some(a), Some(b)) = (e.leak_band_speed, latest_alone.leak_band_speed) {
+            if let Some((pct, std)) = speed_change_pct(a, b) {
+                change.leak_band_speed_pct = Some(pct);
+                change.leak_band_speed_pct_std = Some(std);
+            }
+        }
+        if let Some(cf) = t
+            .cause
+            .and_then(|c| t.causes.iter().find(|f| f.cause == c))
+        {
+            // The quantity that changed: E_m for the soil, the effect's parameter otherwise;
+            // before is the earlier state's (an effect the fit lacks is at its neutral value).
+            let (param, after) = cf.after[0];
+            change.effect_value_after = Some(after);
+            change.effect_value_before = match param {
+                Param::Effect(eff) => e
+                    .get(param)
+                    .map(|v| v.value)
+                    .or_else(|| e.system.and_then(|s| eff.neutral_value(&s))),
+                _ => e.get(param).map(|v| v.value),
+            };
+        }
+        speeds.push(speed_row(ec, e));
+    }
+    speeds.push(speed_row(latest, latest_alone));
+    ChangeRecord { change, speeds }
+}
