@@ -28,14 +28,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
+use crate::change::{self, CampaignName};
+use crate::db::changes::ChangeRecord;
 use crate::db::hash::fnv1a64;
+use crate::db::inventory::MeasurementRecord;
 use crate::db::{
     self, CurvePoint, DbError, FitRow, FitState, FitStatus, NewRun, RunCounts, RunLock, RunStatus,
     SegmentRecord,
 };
-use crate::change::{self, CampaignName};
-use crate::db::changes::ChangeRecord;
-use crate::db::inventory::MeasurementRecord;
 use crate::invert::{fit_with_effects, FitSettings, Method, Param};
 use crate::physics::effects::{effects_text, parse_effects, Effect};
 use crate::physics::{ContactMode, Model};
@@ -1103,7 +1103,13 @@ fn compute(job: &Job, run_id: i64) -> Computed {
 fn campaigns_to_test(
     conn: &Connection,
     segment_id: &str,
-) -> Result<(Option<CampaignName>, Option<(CampaignName, Vec<MeasurementRecord>)>), BatchError> {
+) -> Result<
+    (
+        Option<CampaignName>,
+        Option<(CampaignName, Vec<MeasurementRecord>)>,
+    ),
+    BatchError,
+> {
     let mut cs = db::inventory::campaigns_of(conn, segment_id)?;
     let name = |c: &db::inventory::CampaignOfSegment| CampaignName {
         name: c.name.clone(),

@@ -244,7 +244,11 @@ impl<'a> Joint<'a> {
                     .enumerate()
                     .map(|(j, s)| (s.param, s.value(y[p + j])))
                     .collect();
-                best = Some(JointOptimum { y, chi2, own_values });
+                best = Some(JointOptimum {
+                    y,
+                    chi2,
+                    own_values,
+                });
             }
         }
         best

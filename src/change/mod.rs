@@ -12,7 +12,7 @@ pub mod joint;
 
 use crate::db::changes::{CampaignSpeedRow, ChangeRecord, ChangeRow};
 use crate::diagnose::{aicc, TIE_LR};
-use crate::invert::problem::{Measurement, SegmentData, Weighting};
+use crate::invert::problem::{pool, SegmentData, Weighting};
 use crate::invert::{fit_segment, refit_from, FitResult, FitSettings, Method, Param, WithError};
 use crate::physics::effects::Effect;
 use crate::physics::Material;
@@ -26,10 +26,6 @@ use joint::Joint;
 /// the false-alarm rate this gives on unchanged pipes is measured by simulation
 /// (tests/change_test.rs; docs/campaigns.md).
 pub const CHANGE_ALPHA: f64 = 0.005;
-
-/// Two frequencies are one when they differ by less than this relative amount (import's
-/// tolerance, docs/interface.md).
-pub const SAME_FREQUENCY_RTOL: f64 = 1e-9;
 
 /// The causes of a change a second campaign can show (model §7.14).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -114,84 +110,6 @@ impl Status {
             Status::Untested => "untested",
         }
     }
-}
-
-/// Both campaigns as one set of measurements (P96): at a frequency both measured, the
-/// inverse-variance mean of the two, with the error of the mean; elsewhere each campaign's own.
-/// Under one state the χ² of both campaigns is the pooled χ² plus `consistency_chi2`, the
-/// misfit between the campaigns at their shared frequencies, which no state changes.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Pooled {
-    /// The pooled measurements (the later campaign's pipe and water).
-    pub data: SegmentData,
-    /// Σ over shared frequencies of (k_A − k_B)²/(σ_A² + σ_B²), both parts.
-    pub consistency_chi2: f64,
-    /// Frequencies both campaigns measured.
-    pub shared: usize,
-}
-
-/// Pool two campaigns (P96); `None` unless every measurement of both has its standard
-/// deviations.
-pub fn pool(earlier: &SegmentData, later: &SegmentData) -> Option<Pooled> {
-    let stds = |m: &Measurement| Some((m.k_re_std?, m.attenuation_std?));
-    if earlier
-        .measurements
-        .iter()
-        .chain(&later.measurements)
-        .any(|m| stds(m).is_none())
-    {
-        return None;
-    }
-    let mut out: Vec<Measurement> = Vec::new();
-    let (mut consistency, mut shared) = (0.0, 0usize);
-    let mut used = vec![false; earlier.measurements.len()];
-    for b in &later.measurements {
-        let same = earlier.measurements.iter().enumerate().find(|(i, a)| {
-            !used[*i] && (a.omega - b.omega).abs() <= SAME_FREQUENCY_RTOL * b.omega.abs()
-        });
-        let Some((i, a)) = same else {
-            out.push(*b);
-            continue;
-        };
-        used[i] = true;
-        shared += 1;
-        let (sa, ta) = stds(a)?;
-        let (sb, tb) = stds(b)?;
-        // Two independent measurements x_A ± σ_A, x_B ± σ_B of one value m: Σ (x − m)²/σ² =
-        // (x̄ − m)²/σ̄² + (x_A − x_B)²/(σ_A² + σ_B²), x̄ the inverse-variance mean, σ̄⁻² = σ_A⁻² + σ_B⁻².
-        let mean = |xa: f64, sa: f64, xb: f64, sb: f64| {
-            let (wa, wb) = (1.0 / (sa * sa), 1.0 / (sb * sb));
-            ((wa * xa + wb * xb) / (wa + wb), (wa + wb).recip().sqrt())
-        };
-        let (k, sk) = mean(a.k_re, sa, b.k_re, sb);
-        let (t, st) = mean(a.attenuation, ta, b.attenuation, tb);
-        consistency += (a.k_re - b.k_re).powi(2) / (sa * sa + sb * sb)
-            + (a.attenuation - b.attenuation).powi(2) / (ta * ta + tb * tb);
-        out.push(Measurement {
-            omega: b.omega,
-            k_re: k,
-            attenuation: t,
-            k_re_std: Some(sk),
-            attenuation_std: Some(st),
-        });
-    }
-    out.extend(
-        earlier
-            .measurements
-            .iter()
-            .zip(&used)
-            .filter(|(_, u)| !**u)
-            .map(|(a, _)| *a),
-    );
-    out.sort_by(|a, b| a.omega.total_cmp(&b.omega));
-    Some(Pooled {
-        data: SegmentData {
-            measurements: out,
-            ..later.clone()
-        },
-        consistency_chi2: consistency,
-        shared,
-    })
 }
 
 /// One cause's joint fit of both campaigns (P95).
@@ -328,45 +246,64 @@ pub fn test_change(
     if earlier_fit.status == FitStatus::Failed || pooled_fit.status == FitStatus::Failed {
         return ChangeTest {
             earlier: (earlier_fit.status != FitStatus::Failed).then_some(earlier_fit),
-            ..ChangeTest::untested("the earlier campaign could not be fitted from the latest's state")
+            ..ChangeTest::untested(
+                "the earlier campaign could not be fitted from the latest's state",
+            )
         };
     }
     let p = x_later.len();
     let n = residuals_of(earlier) + residuals_of(later);
     let chi2_a = earlier_fit.misfit;
     let chi2_b = fit_later.misfit;
-    let chi2_one = pooled_fit.misfit + pooled.consistency_chi2;
-    let causes = fit_causes(earlier, later, settings, &earlier_fit, fit_later, &pooled_fit);
-    // The alternatives to one state: separate states (every parameter the campaign's own), and
-    // each cause (one quantity its own). Each gives Λ_a = χ²_one − χ²_a on k_a degrees of
-    // freedom (P94); the misfit beyond the noise of the alternative that fits best per degree
-    // of freedom widens them all, as the Birge ratio widens a fit's errors (P88).
-    let mut alternatives: Vec<(f64, usize)> = vec![(chi2_a + chi2_b, p)];
-    alternatives.extend(
-        causes
-            .iter()
-            .filter(|c| c.cause != Cause::SoilChange || !settings.effects.is_empty())
-            .map(|c| (c.chi2, c.cause.parameters().len())),
+    let mut pooled_fit = pooled_fit;
+    let mut chi2_one = pooled_fit.misfit + pooled.consistency_chi2;
+    let causes = fit_causes(
+        earlier,
+        later,
+        settings,
+        &earlier_fit,
+        fit_later,
+        &pooled_fit,
     );
-    let scale = alternatives
-        .iter()
-        .filter_map(|&(chi2, k)| {
-            let dof = n.checked_sub(p + k).filter(|d| *d > 0)?;
-            Some(chi2 / dof as f64)
-        })
-        .fold(f64::INFINITY, f64::min)
-        .max(1.0);
-    let scale = if scale.is_finite() { scale } else { 1.0 };
-    // The smallest p-value over the alternatives, Bonferroni-corrected for their number.
-    let (mut p_value, mut lr, mut dof) = (1.0f64, 0.0f64, p);
-    for &(chi2, k) in &alternatives {
-        let l = (chi2_one - chi2).max(0.0);
-        let pv = chi2_upper_tail(l / scale, k as f64);
-        if pv < p_value || (pv == p_value && l > lr) {
-            (p_value, lr, dof) = (pv, l, k);
+    let mut verdict = judge(n, p, chi2_one, chi2_a + chi2_b, &causes, settings, None);
+    if verdict.p_value < CHANGE_ALPHA {
+        // Before a change is reported, one state is given every chance: the pooled fit is
+        // polished from the earlier campaign's optimum too (a poorly determined soil has
+        // several basins), and a cause's effect is allowed in both campaigns alike, so that
+        // Λ_c measures the effect's change, not its presence (a defect both campaigns share,
+        // such as attenuations in dB/m, is absorbed by an effect in either).
+        let again = refit_from(&pooled.data, settings, &[earlier_fit.coordinates()]);
+        if again.status != FitStatus::Failed && again.misfit < pooled_fit.misfit {
+            pooled_fit = again;
+            chi2_one = pooled_fit.misfit + pooled.consistency_chi2;
         }
+        let shared: Vec<(Cause, f64)> = causes
+            .iter()
+            .filter_map(|c| {
+                let e = c.cause.effect()?;
+                if settings.effects.contains(&e) {
+                    return None;
+                }
+                let chi2 = shared_effect_chi2(earlier, later, settings, e, &pooled_fit)?;
+                Some((c.cause, chi2 + pooled.consistency_chi2))
+            })
+            .collect();
+        verdict = judge(
+            n,
+            p,
+            chi2_one,
+            chi2_a + chi2_b,
+            &causes,
+            settings,
+            Some(&shared),
+        );
     }
-    let p_value = (p_value * alternatives.len() as f64).min(1.0);
+    let Verdict {
+        p_value,
+        lr,
+        dof,
+        scale,
+    } = verdict;
     let changed = p_value < CHANGE_ALPHA;
     let mut t = ChangeTest {
         status: if changed {
@@ -395,6 +332,103 @@ pub fn test_change(
     }
     t.earlier = Some(earlier_fit);
     t
+}
+
+/// The change test's verdict before the cause is named.
+struct Verdict {
+    /// Bonferroni-corrected p-value over the alternatives.
+    p_value: f64,
+    /// Λ of the alternative that gave it.
+    lr: f64,
+    /// Its degrees of freedom.
+    dof: usize,
+    /// The misfit scale s².
+    scale: f64,
+}
+
+/// P94 over the alternatives to one state: separate states (every parameter the campaign's
+/// own, k = p) and each cause (its quantity the later campaign's own, k = its parameters).
+/// Each gives Λ_a = χ²_null,a − χ²_a on k_a degrees of freedom, where χ²_null,a is one state's
+/// χ², or where `shared` gives it, that of one state with the cause's effect shared by both
+/// campaigns. The misfit beyond the noise of the alternative that fits best per degree of
+/// freedom widens them all, as the Birge ratio widens a fit's errors (P88). The smallest
+/// p-value, Bonferroni-corrected for the number of alternatives, is the test's.
+fn judge(
+    n: usize,
+    p: usize,
+    chi2_one: f64,
+    chi2_separate: f64,
+    causes: &[CauseFit],
+    settings: &FitSettings,
+    shared: Option<&[(Cause, f64)]>,
+) -> Verdict {
+    let null_of = |c: Cause| {
+        shared
+            .and_then(|s| s.iter().find(|x| x.0 == c))
+            .map_or(chi2_one, |x| x.1.min(chi2_one))
+    };
+    let mut alternatives: Vec<(f64, usize, f64)> = vec![(chi2_separate, p, chi2_one)];
+    alternatives.extend(
+        causes
+            .iter()
+            .filter(|c| c.cause != Cause::SoilChange || !settings.effects.is_empty())
+            .map(|c| (c.chi2, c.cause.parameters().len(), null_of(c.cause))),
+    );
+    let scale = alternatives
+        .iter()
+        .filter_map(|&(chi2, k, _)| {
+            let dof = n.checked_sub(p + k).filter(|d| *d > 0)?;
+            Some(chi2 / dof as f64)
+        })
+        .fold(f64::INFINITY, f64::min)
+        .max(1.0);
+    let scale = if scale.is_finite() { scale } else { 1.0 };
+    let (mut p_value, mut lr, mut dof) = (1.0f64, 0.0f64, p);
+    for &(chi2, k, null) in &alternatives {
+        let l = (null - chi2).max(0.0);
+        let pv = chi2_upper_tail(l / scale, k as f64);
+        if pv < p_value || (pv == p_value && l > lr) {
+            (p_value, lr, dof) = (pv, l, k);
+        }
+    }
+    Verdict {
+        p_value: (p_value * alternatives.len() as f64).min(1.0),
+        lr,
+        dof,
+        scale,
+    }
+}
+
+/// The χ² of the pooled campaigns under one state with effect `e` (one value for both), from
+/// the pooled optimum with `e` at its neutral value and across its range.
+fn shared_effect_chi2(
+    earlier: &SegmentData,
+    later: &SegmentData,
+    settings: &FitSettings,
+    e: Effect,
+    pooled_fit: &FitResult,
+) -> Option<f64> {
+    let sys = pooled_fit.system?;
+    let mut with = settings.clone();
+    with.effects.push(e);
+    let pooled = pool(earlier, later)?;
+    let x = pooled_fit.coordinates();
+    let spec = crate::invert::problem::parameter_space(with.method, &with.effects)
+        .last()
+        .copied()?;
+    let neutral = spec
+        .coordinate(e.neutral_value(&sys)?)
+        .clamp(spec.lower, spec.upper);
+    let starts: Vec<Vec<f64>> = std::iter::once(neutral)
+        .chain(
+            joint::OWN_START_FRACTIONS
+                .iter()
+                .map(|f| spec.lower + f * (spec.upper - spec.lower)),
+        )
+        .map(|v| x.iter().copied().chain([v]).collect())
+        .collect();
+    let fit = refit_from(&pooled.data, &with, &starts);
+    (fit.status != FitStatus::Failed).then_some(fit.misfit)
 }
 
 /// Every applicable cause fitted jointly to both campaigns (P95), in [`Cause::ALL`]'s order.
@@ -453,8 +487,7 @@ fn name_cause(t: &mut ChangeTest, n: usize, p: usize, n_earlier: usize) {
     let k = p + best.cause.parameters().len();
     let level = crate::invert::flags::MISFIT_P_VALUE;
     let explained = chi2_upper_tail(best.chi2, n.saturating_sub(k) as f64) >= level;
-    let earlier_fits =
-        chi2_upper_tail(t.chi2_earlier, n_earlier.saturating_sub(p) as f64) >= level;
+    let earlier_fits = chi2_upper_tail(t.chi2_earlier, n_earlier.saturating_sub(p) as f64) >= level;
     if !explained && earlier_fits {
         t.note = Some(format!(
             "no one quantity explains both campaigns (best: {}, χ² {:.1} on {} residuals)",
@@ -567,10 +600,7 @@ pub fn change_record(
                 change.leak_band_speed_pct_std = Some(std);
             }
         }
-        if let Some(cf) = t
-            .cause
-            .and_then(|c| t.causes.iter().find(|f| f.cause == c))
-        {
+        if let Some(cf) = t.cause.and_then(|c| t.causes.iter().find(|f| f.cause == c)) {
             // The quantity that changed: E_m for the soil, the effect's parameter otherwise;
             // before is the earlier state's (an effect the fit lacks is at its neutral value).
             let (param, after) = cf.after[0];

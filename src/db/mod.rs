@@ -45,9 +45,8 @@ pub use inventory::{
 pub use lock::{release_run_lock, try_acquire_run_lock, RunLock};
 pub use results::{
     curves_for, finish_run, fit_states_page, fit_with_settings, insert_fit_with_change,
-    insert_fit_with_curves,
-    latest_fits, load_run, segments_needing_fit, start_run, CurvePoint, FitRow, FitStatus, NewRun,
-    RunCounts, RunRow, RunStatus,
+    insert_fit_with_curves, latest_fits, load_run, segments_needing_fit, start_run, CurvePoint,
+    FitRow, FitStatus, NewRun, RunCounts, RunRow, RunStatus,
 };
 pub use staleness::{
     refresh_all_inputs_hashes, refresh_inputs_hash, stored_inputs_hash, InputsSweep,

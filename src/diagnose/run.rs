@@ -221,7 +221,13 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
                 // The stored fit's method, so that its refit below reproduces it ("diagnose"
                 // rows were made by the default method).
                 let method: Method = f.method.parse().unwrap_or(Method::Default);
-                todo.push((rec, settings, method));
+                // A current fit that pools the latest campaign with the one before it (model
+                // §7.14) is diagnosed on both campaigns pooled.
+                let earlier = match f.campaigns.split(',').nth(1) {
+                    Some(c) => Some(db::inventory::load_campaign(conn, &rec.segment_id, c)?),
+                    None => None,
+                };
+                todo.push((rec, settings, method, earlier));
             }
         }
     }
@@ -243,13 +249,21 @@ fn locked(conn: &mut Connection, opts: &DiagnoseOptions) -> Result<DiagnoseSumma
         .map_err(|_| DiagnoseError::Threads(opts.jobs))?;
     let done: Vec<Result<Done, (String, String)>> = pool.install(|| {
         todo.into_par_iter()
-            .map(|(record, settings, method)| {
+            .map(|(record, settings, method, earlier)| {
                 // A panic inside one segment's diagnosis skips that segment with its reason
                 // instead of ending the run.
                 let id = record.segment_id.clone();
                 std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    let data = segment_data(&record)
-                        .map_err(|e| (record.segment_id.clone(), format!("invalid inputs: {e}")))?;
+                    let invalid = |e| (record.segment_id.clone(), format!("invalid inputs: {e}"));
+                    let mut data = segment_data(&record).map_err(invalid)?;
+                    if let Some(rows) = earlier {
+                        let mut rec_a = record.clone();
+                        rec_a.measurements = rows;
+                        let data_a = segment_data(&rec_a).map_err(invalid)?;
+                        if let Some(p) = crate::invert::problem::pool(&data_a, &data) {
+                            data = p.data;
+                        }
+                    }
                     // The current fit, reproduced: same settings and seed give the stored fit
                     // bit for bit. Without stated stds the diagnosis refits with assumed noise.
                     let has_stds = data

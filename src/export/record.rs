@@ -62,6 +62,13 @@ pub struct SegmentExport {
     pub speed_source: &'static str,
     /// Why, in words (what a prediction rests on, why there is no speed).
     pub speed_source_reason: String,
+    /// The change test of the latest calibrate fit (model §7.14; view `latest_changes`).
+    pub change: Option<db::changes::ChangeRow>,
+    /// The leak-band speed of each campaign fitted on its own, oldest first (view
+    /// `speed_history`).
+    pub speed_history: Vec<db::changes::CampaignSpeedRow>,
+    /// [`Self::speed_history`] as one line ([`speed_by_campaign`]).
+    pub speed_by_campaign: Option<String>,
 }
 
 /// `speed_source` of a segment whose speed is its own fit's.
@@ -102,6 +109,9 @@ impl SegmentExport {
             field: None,
             speed_source: SPEED_NONE,
             speed_source_reason: String::new(),
+            change: None,
+            speed_history: Vec::new(),
+            speed_by_campaign: None,
         }
         .settled()
     }
@@ -391,7 +401,10 @@ impl<'a> Records<'a> {
         let id = rec.segment.segment_id.clone();
         let field = db::field::field_segment(conn, &id).map_err(&err)?;
         let prediction = db::field::prediction_for(conn, &id).map_err(&err)?;
-        let rec = rec.set_field(field, prediction);
+        let mut rec = rec.set_field(field, prediction);
+        rec.change = db::changes::latest_change(conn, &id).map_err(&err)?;
+        rec.speed_history = db::changes::speed_history(conn, &id).map_err(&err)?;
+        rec.speed_by_campaign = speed_by_campaign(&rec.speed_history);
         if let (Some(w), None) = (&rec.segment.geometry_wkt, &rec.geometry) {
             let why = crs::usable_line(w, rec.segment.srid)
                 .err()
@@ -973,7 +986,100 @@ pub const PROPERTIES: &[Property] = &[
               length is used",
         get: |r| Value::real(r.segment.risk_weight),
     },
+    Property {
+        name: "change_status",
+        kind: Kind::Text,
+        doc: "the change test of the latest campaign against the one before it (model §7.14): \
+              changed, unchanged (both campaigns pooled into the fit), one_campaign, or \
+              untested (no standard deviations, a failed fit); blank: not fitted since \
+              campaigns were tested",
+        get: |r| Value::text(r.change.as_ref().map(|c| c.status.as_str())),
+    },
+    Property {
+        name: "change_since",
+        kind: Kind::Text,
+        doc: "the earlier campaign the latest was tested against",
+        get: |r| Value::text(r.change.as_ref().and_then(|c| c.since_campaign.as_deref())),
+    },
+    Property {
+        name: "change_p_value",
+        kind: Kind::Real,
+        doc: "the change test's p-value (P94): the chance of so large a difference between \
+              the campaigns if the pipe had not changed; changed below 0.005",
+        get: |r| Value::real(r.change.as_ref().and_then(|c| c.p_value)),
+    },
+    Property {
+        name: "change_leak_band_speed_pct",
+        kind: Kind::Real,
+        doc: "the leak-band speed of the latest campaign against the earlier one, each fitted \
+              on its own, %",
+        get: |r| Value::real(r.change.as_ref().and_then(|c| c.leak_band_speed_pct)),
+    },
+    Property {
+        name: "change_leak_band_speed_pct_std",
+        kind: Kind::Real,
+        doc: "its one-sigma error, %",
+        get: |r| Value::real(r.change.as_ref().and_then(|c| c.leak_band_speed_pct_std)),
+    },
+    Property {
+        name: "change_effect",
+        kind: Kind::Text,
+        doc: "what changed, where the pipe changed (P95): soil_change, air_in_water, \
+              wall_thinning, pipe_loss, or unexplained",
+        get: |r| Value::text(r.change.as_ref().and_then(|c| c.effect.as_deref())),
+    },
+    Property {
+        name: "change_ambiguous_with",
+        kind: Kind::Text,
+        doc: "causes the data cannot tell apart from change_effect (AICc within 2), \
+              `; `-separated",
+        get: |r| {
+            Value::text(
+                r.change
+                    .as_ref()
+                    .filter(|c| !c.ambiguous_with.is_empty())
+                    .map(|c| c.ambiguous_with.as_str()),
+            )
+        },
+    },
+    Property {
+        name: "change_note",
+        kind: Kind::Text,
+        doc: "what the change test leaves open, or why it did not run",
+        get: |r| Value::text(r.change.as_ref().and_then(|c| c.note.as_deref())),
+    },
+    Property {
+        name: "speed_by_campaign",
+        kind: Kind::Text,
+        doc: "each campaign's leak-band speed fitted on its own, oldest first: \
+              `CAMPAIGN: SPEED ± STD m/s` joined by `; `",
+        get: |r| Value::text(r.speed_by_campaign.as_deref()),
+    },
 ];
+
+/// [`SegmentExport::speed_history`] as one line: `CAMPAIGN: SPEED ± STD m/s; …`, each speed
+/// printed to the place of its error (`None` when there is none).
+pub fn speed_by_campaign(history: &[db::changes::CampaignSpeedRow]) -> Option<String> {
+    let parts: Vec<String> = history
+        .iter()
+        .filter_map(|h| {
+            let v = h.leak_band_speed_m_per_s?;
+            Some(match h.leak_band_speed_std_m_per_s.filter(|e| *e > 0.0) {
+                Some(e) => {
+                    let place = super::numbers::error_place(e);
+                    format!(
+                        "{}: {} ± {} m/s",
+                        h.campaign,
+                        super::numbers::fixed(v, place),
+                        super::numbers::fixed(e, place)
+                    )
+                }
+                None => format!("{}: {v:.0} m/s", h.campaign),
+            })
+        })
+        .collect();
+    (!parts.is_empty()).then(|| parts.join("; "))
+}
 
 #[cfg(test)]
 mod tests {

@@ -280,10 +280,7 @@ fn fit_once(
 #[derive(Clone, Copy)]
 enum Plan<'p> {
     /// The whole search (DE runs, faces, probes), seeded, with a nested start if given.
-    Search {
-        seed: u64,
-        start: Option<&'p [f64]>,
-    },
+    Search { seed: u64, start: Option<&'p [f64]> },
     /// Only polishes from the given points (coordinates of the problem's space): the fit of a
     /// campaign from the optimum of another campaign of the same pipe (model §7.14), where the
     /// two optima lie in one basin unless the pipe changed.
@@ -614,7 +611,13 @@ fn from_starts(
                 .then(|| refine(problem, settings, bounds, x, f0))
         })
         .collect();
-    s.polished(problem, Stage::CampaignStart, begun, found, StageStop::NoFiniteOptimum);
+    s.polished(
+        problem,
+        Stage::CampaignStart,
+        begun,
+        found,
+        StageStop::NoFiniteOptimum,
+    );
     continued_polish(problem, settings, bounds, &mut s);
     s
 }

@@ -79,6 +79,88 @@ pub struct SegmentData {
     pub measurements: Vec<Measurement>,
 }
 
+/// Two frequencies of two campaigns are one when they differ by less than this relative amount
+/// (import's tolerance, docs/interface.md).
+pub const SAME_FREQUENCY_RTOL: f64 = 1e-9;
+
+/// Both campaigns as one set of measurements (P96): at a frequency both measured, the
+/// inverse-variance mean of the two, with the error of the mean; elsewhere each campaign's own.
+/// Under one state the χ² of both campaigns is the pooled χ² plus `consistency_chi2`, the
+/// misfit between the campaigns at their shared frequencies, which no state changes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pooled {
+    /// The pooled measurements (the later campaign's pipe and water).
+    pub data: SegmentData,
+    /// Σ over shared frequencies of (k_A − k_B)²/(σ_A² + σ_B²), both parts.
+    pub consistency_chi2: f64,
+    /// Frequencies both campaigns measured.
+    pub shared: usize,
+}
+
+/// Pool two campaigns (P96); `None` unless every measurement of both has its standard
+/// deviations.
+pub fn pool(earlier: &SegmentData, later: &SegmentData) -> Option<Pooled> {
+    let stds = |m: &Measurement| Some((m.k_re_std?, m.attenuation_std?));
+    if earlier
+        .measurements
+        .iter()
+        .chain(&later.measurements)
+        .any(|m| stds(m).is_none())
+    {
+        return None;
+    }
+    let mut out: Vec<Measurement> = Vec::new();
+    let (mut consistency, mut shared) = (0.0, 0usize);
+    let mut used = vec![false; earlier.measurements.len()];
+    for b in &later.measurements {
+        let same = earlier.measurements.iter().enumerate().find(|(i, a)| {
+            !used[*i] && (a.omega - b.omega).abs() <= SAME_FREQUENCY_RTOL * b.omega.abs()
+        });
+        let Some((i, a)) = same else {
+            out.push(*b);
+            continue;
+        };
+        used[i] = true;
+        shared += 1;
+        let (sa, ta) = stds(a)?;
+        let (sb, tb) = stds(b)?;
+        // Two independent measurements x_A ± σ_A, x_B ± σ_B of one value m: Σ (x − m)²/σ² =
+        // (x̄ − m)²/σ̄² + (x_A − x_B)²/(σ_A² + σ_B²), x̄ the inverse-variance mean, σ̄⁻² = σ_A⁻² + σ_B⁻².
+        let mean = |xa: f64, sa: f64, xb: f64, sb: f64| {
+            let (wa, wb) = (1.0 / (sa * sa), 1.0 / (sb * sb));
+            ((wa * xa + wb * xb) / (wa + wb), (wa + wb).recip().sqrt())
+        };
+        let (k, sk) = mean(a.k_re, sa, b.k_re, sb);
+        let (t, st) = mean(a.attenuation, ta, b.attenuation, tb);
+        consistency += (a.k_re - b.k_re).powi(2) / (sa * sa + sb * sb)
+            + (a.attenuation - b.attenuation).powi(2) / (ta * ta + tb * tb);
+        out.push(Measurement {
+            omega: b.omega,
+            k_re: k,
+            attenuation: t,
+            k_re_std: Some(sk),
+            attenuation_std: Some(st),
+        });
+    }
+    out.extend(
+        earlier
+            .measurements
+            .iter()
+            .zip(&used)
+            .filter(|(_, u)| !**u)
+            .map(|(a, _)| *a),
+    );
+    out.sort_by(|a, b| a.omega.total_cmp(&b.omega));
+    Some(Pooled {
+        data: SegmentData {
+            measurements: out,
+            ..later.clone()
+        },
+        consistency_chi2: consistency,
+        shared,
+    })
+}
+
 /// The inversion method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum Method {
