@@ -1154,8 +1154,8 @@ fn test_campaigns(
         )),
     };
     let record = change::change_record(id, run_id, latest, Some((earlier_name, &test)), result);
-    if let Some(pooled) = test.pooled {
-        *result = pooled;
+    if let Some(current) = test.pooled.or(test.current) {
+        *result = current;
     }
     Some(record)
 }

@@ -40,6 +40,9 @@ pub struct JointOptimum {
     pub chi2: f64,
     /// The later campaign's own parameters at `y`, in physical units.
     pub own_values: Vec<(Param, f64)>,
+    /// The later campaign's coordinates at `y` (its problem's space: the fit's, with the
+    /// cause's effect added where the fit lacks it).
+    pub later_x: Vec<f64>,
 }
 
 impl<'a> Joint<'a> {
@@ -244,10 +247,12 @@ impl<'a> Joint<'a> {
                     .enumerate()
                     .map(|(j, s)| (s.param, s.value(y[p + j])))
                     .collect();
+                let later_x = self.later_x(&y);
                 best = Some(JointOptimum {
                     y,
                     chi2,
                     own_values,
+                    later_x,
                 });
             }
         }

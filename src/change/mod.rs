@@ -123,6 +123,9 @@ pub struct CauseFit {
     pub aicc: f64,
     /// The later campaign's own values of the quantities that changed (physical units).
     pub after: Vec<(Param, f64)>,
+    /// The later campaign's coordinates at the joint optimum (the fit's space with the
+    /// cause's effect added where it lacks it): the start of the current state's fit.
+    pub later_x: Vec<f64>,
 }
 
 /// The change test of one segment (model §7.14).
@@ -148,6 +151,10 @@ pub struct ChangeTest {
     pub earlier: Option<FitResult>,
     /// Both campaigns pooled (one state): the current fit when unchanged.
     pub pooled: Option<FitResult>,
+    /// Where the pipe changed by a named effect the fit lacks (air, a thinner wall, more wall
+    /// loss), the latest campaign fitted with that effect, from the joint optimum: the current
+    /// state, described by the physics that changed.
+    pub current: Option<FitResult>,
     /// The named cause when changed; `None` there means unexplained.
     pub cause: Option<Cause>,
     /// Causes whose AICc is within [`TIE_LR`] of the named one's: the data cannot tell them
@@ -172,6 +179,7 @@ impl ChangeTest {
             chi2_later: f64::NAN,
             earlier: None,
             pooled: None,
+            current: None,
             cause: None,
             ambiguous_with: Vec::new(),
             causes: Vec::new(),
@@ -320,6 +328,7 @@ pub fn test_change(
         chi2_later: chi2_b,
         earlier: None,
         pooled: None,
+        current: None,
         cause: None,
         ambiguous_with: Vec::new(),
         causes,
@@ -327,11 +336,59 @@ pub fn test_change(
     };
     if changed {
         name_cause(&mut t, n, p, residuals_of(earlier));
+        t.current = current_with_cause(&t, later, settings, fit_later);
     } else {
-        t.pooled = Some(pooled_fit);
+        t.pooled = Some(widened_by_consistency(pooled_fit, pooled.consistency_chi2, n));
     }
     t.earlier = Some(earlier_fit);
     t
+}
+
+/// The latest campaign fitted with the named cause's effect, where the fit lacks it, polished
+/// from the joint optimum; kept when it fits the latest campaign better than the fit without.
+fn current_with_cause(
+    t: &ChangeTest,
+    later: &SegmentData,
+    settings: &FitSettings,
+    fit_later: &FitResult,
+) -> Option<FitResult> {
+    let cause = t.cause?;
+    let e = cause.effect()?;
+    if settings.effects.contains(&e) {
+        return None;
+    }
+    let cf = t.causes.iter().find(|c| c.cause == cause)?;
+    let mut with = settings.clone();
+    with.effects.push(e);
+    let fit = refit_from(later, &with, std::slice::from_ref(&cf.later_x));
+    (fit.status != FitStatus::Failed && fit.misfit < fit_later.misfit).then_some(fit)
+}
+
+/// The pooled fit with its errors widened by the campaigns' disagreement as well (P96): its χ²
+/// over both campaigns is its own plus the consistency term C, over n − p degrees of freedom,
+/// and the Birge ratio (P88) of that, not of the pooled χ² alone, widens its errors. A change
+/// too small to report still widens the errors of the speed that pools across it.
+fn widened_by_consistency(mut fit: FitResult, consistency: f64, n: usize) -> FitResult {
+    let p = fit.estimates.len();
+    let m = 2 * fit.n_measurements;
+    let own = crate::stats::birge_ratio(fit.misfit, m, p);
+    let both = crate::stats::birge_ratio(fit.misfit + consistency, n, p);
+    let f = both / own;
+    if !(f.is_finite() && f > 1.0) {
+        return fit;
+    }
+    for e in &mut fit.estimates {
+        e.std = e.std.map(|s| s * f);
+        e.coordinate_std *= f;
+    }
+    if let Some(v) = fit.leak_band_speed.as_mut() {
+        v.std *= f;
+    }
+    for c in &mut fit.curve {
+        c.phase_speed_std = c.phase_speed_std.map(|s| s * f);
+        c.attenuation_db_std = c.attenuation_db_std.map(|s| s * f);
+    }
+    fit
 }
 
 /// The change test's verdict before the cause is named.
@@ -465,6 +522,7 @@ fn fit_causes(
             chi2: opt.chi2,
             aicc: aicc(opt.chi2, n, j.dim()),
             after: opt.own_values,
+            later_x: opt.later_x,
         });
     }
     out
