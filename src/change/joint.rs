@@ -282,8 +282,8 @@ pub const JOINT_POLISH_ITERATIONS: usize = 60;
 /// −1.7 for air: −5.4, −4.35, −3.3 and −2.2, i.e. φ ≈ 4e-6 – 6e-3).
 pub const OWN_START_FRACTIONS: [f64; 4] = [0.3, 0.5, 0.7, 0.9];
 
-/// Starts polished per joint fit: the two of lowest misfit.
-pub const POLISHED_STARTS: usize = 2;
+/// Starts polished per joint fit: the one of lowest misfit.
+pub const POLISHED_STARTS: usize = 1;
 
 impl LeastSquares for Joint<'_> {
     fn n_params(&self) -> usize {
