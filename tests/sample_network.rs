@@ -84,7 +84,25 @@ fn sample_network_imports_cleanly() {
     let database = Database::open(&db).unwrap();
     let segs = db::load_segments(database.conn(), None).unwrap();
     assert_eq!(segs.len(), 202);
-    assert!(segs.iter().all(|s| !s.measurements.is_empty()));
+    // About a fifth of the synthetic pipes are unmeasured (issue 64), spread over every soil
+    // class, so that the first command shows predicted speeds and `plan` has candidates.
+    let unmeasured: Vec<_> = segs.iter().filter(|s| s.measurements.is_empty()).collect();
+    assert_eq!(unmeasured.len(), 40, "unmeasured pipes");
+    assert!(text.contains("measurements 940 written for 162 segments"), "{text}");
+    let mut classes: Vec<&str> = segs
+        .iter()
+        .filter_map(|s| s.soil_type.as_deref())
+        .collect();
+    classes.sort_unstable();
+    classes.dedup();
+    assert_eq!(classes.len(), 6, "{classes:?}");
+    for c in &classes {
+        let n = unmeasured
+            .iter()
+            .filter(|s| s.soil_type.as_deref() == Some(*c))
+            .count();
+        assert!(n >= 3, "soil class {c}: {n} unmeasured pipes");
+    }
     let truth = read_truth(&sample().join("truth.csv")).unwrap();
     assert_eq!(truth.len(), 202);
     let mut ids: Vec<&str> = truth.iter().map(|t| t.segment_id.as_str()).collect();
@@ -102,9 +120,9 @@ fn sample_network_recovery() {
     let dir = tmp.path().join("net");
     copy_sample(&dir);
     let text = run_ok(&["bench", "--recovery", dir.to_str().unwrap()]);
-    assert!(text.contains("calibrate: 202 fitted"), "{text}");
+    assert!(text.contains("calibrate: 162 fitted"), "{text}");
     assert!(
-        text.contains("recovery: 200 synthetic segments, 200 fitted"),
+        text.contains("recovery: 200 synthetic segments, 160 fitted"),
         "{text}"
     );
 
@@ -116,7 +134,7 @@ fn sample_network_recovery() {
         &truth,
         &recovery::soil_densities(database.conn()).unwrap(),
     );
-    assert_eq!(r.n_fitted, 200);
+    assert_eq!(r.n_fitted, 160);
     // Only a defective segment may fail.
     let defective: Vec<&str> = truth
         .iter()
@@ -141,9 +159,9 @@ fn sample_network_recovery() {
     // 5 % and the p90 several hundred per cent: some metal pipes' data fit a nearly
     // incompressible soil with c_P past grazing as well as the true one, the fit's global
     // optimum may be that soil, and its c_P error then says so (σ of the order of c_P).
-    assert!(r.n_ok >= 160, "{r}");
+    assert!(r.n_ok >= 130, "{r}");
     let determined = &r.p_speed_rel_err_determined;
-    assert!(determined.n >= 80, "{r}");
+    assert!(determined.n >= 64, "{r}");
     assert!(determined.median <= 0.05 && determined.p90 <= 0.15, "{r}");
     for (k, c) in r.coverage().iter().enumerate() {
         assert!(*c >= 0.9, "coverage {k}: {c:.2}\n{r}");
@@ -210,4 +228,61 @@ fn sample_network_recovery() {
         .unknown_truth
         .iter()
         .all(|u| u.fit.soil_youngs_modulus_pa.is_some_and(|e| e > 0.0)));
+}
+
+/// What a new user sees on the README's first command (issue 64): `run` says how many pipes
+/// were predicted, the export gives each unmeasured pipe a predicted speed with its error, the
+/// audit has its soil-field section, and `plan --count 10` writes 10 picks.
+#[test]
+fn the_first_command_shows_predicted_speeds_and_plan_works() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sample_network");
+    copy_sample(&dir);
+    let text = run_ok(&["run", dir.to_str().unwrap()]);
+    let field = text
+        .lines()
+        .find(|l| l.starts_with("field: "))
+        .unwrap_or_else(|| panic!("no field line: {text}"));
+    assert!(
+        field.starts_with("field: 40 segments predicted from 162 measured"),
+        "{field}"
+    );
+
+    let mut rdr = csv::Reader::from_path(dir.join("out/segments.csv")).unwrap();
+    let h = rdr.headers().unwrap().clone();
+    let col = |n: &str| h.iter().position(|x| x == n).unwrap();
+    let (source, speed, std) = (
+        col("speed_source"),
+        col("leak_band_speed_m_per_s"),
+        col("leak_band_speed_std_m_per_s"),
+    );
+    let mut predicted = 0;
+    for r in rdr.records() {
+        let r = r.unwrap();
+        if &r[source] == "predicted" {
+            predicted += 1;
+            let v: f64 = r[speed].parse().unwrap();
+            let e: f64 = r[std].parse().unwrap();
+            assert!((100.0..1500.0).contains(&v), "{}: speed {v}", &r[0]);
+            assert!(e > 0.0 && e < v, "{}: error {e}", &r[0]);
+        }
+    }
+    assert_eq!(predicted, 40);
+
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    assert!(html.contains("<section id=\"field\">"), "no field section");
+
+    let next = dir.join("next.csv");
+    let db = dir.join("pipewave.sqlite");
+    run_ok(&[
+        "plan",
+        "--db",
+        db.to_str().unwrap(),
+        "--count",
+        "10",
+        "--out",
+        next.to_str().unwrap(),
+    ]);
+    let picks = csv::Reader::from_path(&next).unwrap().records().count();
+    assert_eq!(picks, 10);
 }
