@@ -817,3 +817,24 @@ pub(super) fn failed(h: &mut String, t: &Tally) {
     }
     h.push_str("</section>");
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The audit's advice for every code is that code's own, never the fallback for codes of
+    /// an older version, and no two codes share one.
+    #[test]
+    fn every_code_gets_its_own_advice_in_the_audit() {
+        let mut seen = std::collections::BTreeSet::new();
+        for c in FlagCode::ALL {
+            assert_eq!(advice(c.as_str()), c.advice(), "{c}");
+            assert!(seen.insert(advice(c.as_str())), "{c} shares its advice");
+        }
+        for z in ZoneFlag::ALL {
+            assert_eq!(advice(z.as_str()), z.advice(), "{}", z.as_str());
+            assert!(seen.insert(advice(z.as_str())), "{} shares its advice", z.as_str());
+        }
+        assert!(advice("field_outlier").contains("neighbours"));
+    }
+}
