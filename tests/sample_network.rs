@@ -248,6 +248,9 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
         "{field}"
     );
 
+    // One line per row, lists in a cell joined with "; " (issue 64: 202 rows were 551 lines).
+    let text = std::fs::read_to_string(dir.join("out/segments.csv")).unwrap();
+    assert_eq!(text.lines().count(), 203, "segments.csv: one line per row");
     let mut rdr = csv::Reader::from_path(dir.join("out/segments.csv")).unwrap();
     let h = rdr.headers().unwrap().clone();
     let col = |n: &str| h.iter().position(|x| x == n).unwrap();
@@ -256,9 +259,12 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
         col("leak_band_speed_m_per_s"),
         col("leak_band_speed_std_m_per_s"),
     );
+    let reasons = col("flag_reasons");
     let mut predicted = 0;
+    let mut several = 0;
     for r in rdr.records() {
         let r = r.unwrap();
+        several += usize::from(r[reasons].contains("; "));
         if &r[source] == "predicted" {
             predicted += 1;
             let v: f64 = r[speed].parse().unwrap();
@@ -268,9 +274,15 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
         }
     }
     assert_eq!(predicted, 40);
+    assert!(several > 0, "no segment with two flag reasons to join");
 
     let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
     assert!(html.contains("<section id=\"field\">"), "no field section");
+    // The two field outliers get their own code's advice, not that of an unknown code.
+    assert!(!html.contains("older pipewave version"), "a code without its advice");
+    assert!(html.contains(&pipewave::report::svg::escape(
+        pipewave::invert::flags::FlagCode::FieldOutlier.advice()
+    )));
 
     let next = dir.join("next.csv");
     let db = dir.join("pipewave.sqlite");

@@ -2,8 +2,8 @@
 //! [`columns`] (first `segment_id`, the key to join onto an existing pipe layer, then the
 //! leak-band speed and its error), no geometry. Numbers as [`Precision`] says: rounded for
 //! people by default, or in Rust's shortest round-trip form (read back bit for bit) with
-//! `Precision::Full`; missing values are empty cells. Text cells are made safe to open in
-//! a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
+//! `Precision::Full`; missing values are empty cells. Text cells are on one line (lists
+//! joined with `; `, [`one_line`]) and made safe to open in a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
 //! like a formula.
 
 use std::path::Path;
@@ -11,7 +11,7 @@ use std::path::Path;
 use super::numbers::{columns, Cell, Precision};
 use super::record::Records;
 use super::{write_streamed, ExportError, SegmentExport, Tally};
-use crate::spreadsheet::{spreadsheet_safe, writer};
+use crate::spreadsheet::{one_line, spreadsheet_safe, writer};
 
 /// Write the header row.
 fn header<W: std::io::Write>(w: &mut csv::Writer<W>) -> Result<(), csv::Error> {
@@ -32,7 +32,7 @@ fn row<W: std::io::Write>(
             .into_iter()
             .map(|c| match c {
                 Cell::Null => String::new(),
-                Cell::Text(s) => spreadsheet_safe(s).into_owned(),
+                Cell::Text(s) => spreadsheet_safe(&one_line(s)).into_owned(),
                 Cell::Number(n) => n,
             }),
     );
@@ -77,6 +77,10 @@ pub(crate) fn write(
         let mut warnings = Vec::new();
         records.for_each(&mut warnings, |rec| {
             tally.add(&rec);
+            // The CSV has no geometry column: it counts the segments the GIS exports would
+            // draw (a readable line in a known system), so that their counts agree.
+            tally.summary.with_geometry +=
+                usize::from(rec.geometry.is_some() && rec.segment.srid.is_some());
             row(&mut w, &rec, precision, &mut buf).map_err(encode)
         })?;
         w.flush().map_err(|source| ExportError::Write {

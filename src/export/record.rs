@@ -73,7 +73,12 @@ pub const SPEED_NONE: &str = "none";
 
 impl SegmentExport {
     /// Build the record from its parts (the derived values are computed here).
-    pub fn new(segment: SegmentRecord, fit: Option<FitRow>, curve: Vec<CurvePoint>) -> Self {
+    pub fn new(segment: SegmentRecord, mut fit: Option<FitRow>, curve: Vec<CurvePoint>) -> Self {
+        // Reasons are stored one per line; every export gives them on one line, `; `-joined.
+        if let Some(f) = fit.as_mut() {
+            f.flag_reasons = crate::spreadsheet::one_line(&f.flag_reasons).into_owned();
+            f.note_reasons = crate::spreadsheet::one_line(&f.note_reasons).into_owned();
+        }
         let geometry = segment
             .geometry_wkt
             .as_deref()
@@ -185,7 +190,7 @@ impl SegmentExport {
                 _ => Some(item.to_string()),
             };
             self.flags = join(self.flags.take(), "field_outlier", ",");
-            self.flag_reasons = join(self.flag_reasons.take(), &reason, "\n");
+            self.flag_reasons = join(self.flag_reasons.take(), &reason, "; ");
         }
         self.field = field;
         self.settled()
@@ -224,7 +229,7 @@ impl SegmentExport {
                 }
             };
             self.flags = Some(join(&fit.flags, flag.as_str(), ","));
-            self.flag_reasons = Some(join(&fit.flag_reasons, &reason, "\n"));
+            self.flag_reasons = Some(join(&fit.flag_reasons, &reason, "; "));
         }
     }
 
@@ -586,7 +591,7 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "flag_reasons",
         kind: Kind::Text,
-        doc: "one line per flag: what to act on and why",
+        doc: "what to act on and why, one reason per flag, joined with '; '",
         get: |r| Value::text(r.flag_reasons.as_deref()),
     },
     Property {
@@ -598,7 +603,8 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "note_reasons",
         kind: Kind::Text,
-        doc: "one line per note, e.g. E_m and nu_m known only through c_P = 212 +- 9 m/s",
+        doc: "one reason per note, joined with '; ', e.g. E_m and nu_m known only through c_P \
+              = 212 +- 9 m/s",
         get: |r| Value::text(r.fit.as_ref().map(|f| f.note_reasons.as_str())),
     },
     Property {
