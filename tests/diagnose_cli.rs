@@ -90,13 +90,20 @@ fn diagnose_names_adds_and_the_next_calibrate_uses_the_effect() {
         let p = &r["p_value"];
         if !p.is_empty() {
             assert!(p.len() <= 10 && p.contains('e'), "p_value {p}");
-            assert!(p.parse::<f64>().is_ok_and(|v| (0.0..=1.0).contains(&v)), "{p}");
+            assert!(
+                p.parse::<f64>().is_ok_and(|v| (0.0..=1.0).contains(&v)),
+                "{p}"
+            );
         }
         for c in ["lr_statistic", "holdout_chi2_before", "holdout_chi2_after"] {
             assert!(r[c].len() <= 13, "{c} {}", r[c]);
         }
         let ev = r["evidence"].to_lowercase();
-        assert!(!ev.contains("inf") && !ev.contains("nan"), "{}", r["evidence"]);
+        assert!(
+            !ev.contains("inf") && !ev.contains("nan"),
+            "{}",
+            r["evidence"]
+        );
     }
     let mut named = Vec::new();
     for r in &diag {

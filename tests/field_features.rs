@@ -408,7 +408,10 @@ fn every_export_gives_every_segment_a_speed_source_and_its_reason() {
     );
     // No jargon; the gain is told in the user's units (issue 64).
     assert!(!stdout.contains("entrywise"), "{stdout}");
-    assert!(stdout.contains("their frequencies and their noise"), "{stdout}");
+    assert!(
+        stdout.contains("their frequencies and their noise"),
+        "{stdout}"
+    );
     let gain_line = stdout
         .lines()
         .find(|l| l.starts_with("plan: expected_gain is"))

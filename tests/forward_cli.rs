@@ -152,7 +152,11 @@ fn forward_takes_out_and_still_accepts_output() {
             .arg(&out)
             .output()
             .unwrap();
-        assert!(st.status.success(), "{name}: {}", String::from_utf8_lossy(&st.stderr));
+        assert!(
+            st.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&st.stderr)
+        );
         written.push(std::fs::read(&out).unwrap());
     }
     assert!(written[0] == written[1] && !written[0].is_empty());

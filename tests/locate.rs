@@ -699,7 +699,10 @@ fn synthetic_leak_recordings_go_through_the_binary() {
         "3",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(std::fs::read(&threaded).unwrap() == one, "--jobs 3 changed the answers");
+    assert!(
+        std::fs::read(&threaded).unwrap() == one,
+        "--jobs 3 changed the answers"
+    );
     let old = d.join("located_old.csv");
     let o = run(&[
         "locate",
@@ -716,7 +719,10 @@ fn synthetic_leak_recordings_go_through_the_binary() {
         "{}",
         stderr(&o)
     );
-    assert!(std::fs::read(&old).unwrap() == one, "--jobs FILE changed the answers");
+    assert!(
+        std::fs::read(&old).unwrap() == one,
+        "--jobs FILE changed the answers"
+    );
     let o = run(&[
         "locate",
         "--db",
@@ -729,7 +735,11 @@ fn synthetic_leak_recordings_go_through_the_binary() {
         "0",
     ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("the range is 1 – 512"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("the range is 1 – 512"),
+        "{}",
+        stderr(&o)
+    );
     for (t, g) in truth.iter().zip(&got) {
         assert_eq!(t["job_id"], g["job_id"]);
         let err = (num(t, "distance_from_sensor1_m") - num(g, "distance_from_sensor1_m")).abs();

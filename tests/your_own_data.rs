@@ -344,7 +344,10 @@ fn hints_and_help_speak_the_users_terms() {
     assert!(small.starts_with(&format!("{}:2:3:", s(&segs))), "{small}");
     assert!(small.contains("outer diameter of 4.3 mm"), "{small}");
     assert!(small.contains("0.2 mm wall"), "{small}");
-    assert!(!small.contains("0.00205") && !small.contains("(m)"), "{small}");
+    assert!(
+        !small.contains("0.00205") && !small.contains("(m)"),
+        "{small}"
+    );
     std::fs::write(
         &segs,
         "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n\

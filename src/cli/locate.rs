@@ -132,9 +132,15 @@ enum JobsArg {
 /// anything else is the jobs file of older versions.
 fn jobs_arg(text: &str) -> Result<JobsArg, String> {
     let t = text.trim();
-    if !t.is_empty() && t.trim_start_matches(['-', '+']).bytes().all(|b| b.is_ascii_digit()) {
+    if !t.is_empty()
+        && t.trim_start_matches(['-', '+'])
+            .bytes()
+            .all(|b| b.is_ascii_digit())
+    {
         return match t.parse::<i128>() {
-            Ok(n) if (1..=i128::from(bounds::MAX_JOBS)).contains(&n) => Ok(JobsArg::Threads(n as u32)),
+            Ok(n) if (1..=i128::from(bounds::MAX_JOBS)).contains(&n) => {
+                Ok(JobsArg::Threads(n as u32))
+            }
             _ => Err(format!(
                 "{t} worker threads: the range is 1 – {} (the jobs file is --input FILE)",
                 bounds::MAX_JOBS

@@ -88,7 +88,11 @@ impl SegmentExport {
         for (i, &f) in EXPORT_FREQUENCIES_HZ.iter().enumerate() {
             if let Some(p) = point_at(&curve, f) {
                 speed_at[i] = p.phase_speed_m_per_s.filter(|v| v.is_finite());
-                attenuation_at[i] = p.attenuation_db_per_m.filter(|v| v.is_finite());
+                // Never an attenuation below 0 (a curve stored by an older version may hold one
+                // where its correction ran away).
+                attenuation_at[i] = p
+                    .attenuation_db_per_m
+                    .filter(|v| v.is_finite() && *v >= 0.0);
             }
         }
         let leak_band_speed = band_mean_speed(&curve, LEAK_BAND_HZ);

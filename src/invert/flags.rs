@@ -231,6 +231,23 @@ pub struct Evidence<'a> {
     pub separated: Option<Separated>,
 }
 
+/// The `speed_uncertain` reason for the reported leak-band speed, from the very value and error
+/// the fit stores and the exports show; `None` when it is known within [`SPEED_RSTD_MAX`].
+pub fn speed_uncertain(leak_band_speed: Option<WithError>) -> Option<String> {
+    match leak_band_speed {
+        Some(s) if s.relative() <= SPEED_RSTD_MAX => None,
+        Some(s) => Some(format!(
+            "leak-band speed {} ± {} m/s ({:.1} %, one sigma)",
+            sig(s.value, 4),
+            sig(s.std, 2),
+            100.0 * s.relative()
+        )),
+        None => Some(
+            "the leak-band speed could not be predicted over the whole 100-800 Hz band".into(),
+        ),
+    }
+}
+
 /// Assess a fit: its flags and notes, flags first.
 pub fn assess(ev: &Evidence<'_>) -> Vec<Flag> {
     let mut out = Vec::new();
@@ -305,21 +322,8 @@ pub fn assess(ev: &Evidence<'_>) -> Vec<Flag> {
             );
         }
     }
-    match ev.leak_band_speed {
-        Some(s) if s.relative() <= SPEED_RSTD_MAX => {}
-        Some(s) => push(
-            FlagCode::SpeedUncertain,
-            format!(
-                "leak-band speed {} ± {} m/s ({:.1} %, one sigma)",
-                sig(s.value, 4),
-                sig(s.std, 2),
-                100.0 * s.relative()
-            ),
-        ),
-        None => push(
-            FlagCode::SpeedUncertain,
-            "the leak-band speed could not be predicted over the whole 100-800 Hz band".into(),
-        ),
+    if let Some(reason) = speed_uncertain(ev.leak_band_speed) {
+        push(FlagCode::SpeedUncertain, reason);
     }
     soil_notes(ev, &mut push);
     let grazing: Vec<String> = ev

@@ -674,8 +674,13 @@ mod tests {
     /// A small network's histogram labels each whole count once: 0, 1 (never 0, 0, 1, 1).
     #[test]
     fn a_count_axis_labels_whole_counts_once() {
-        let chart = log_histogram("misfit distribution", &[0.3, 0.8, 1.1, 0.5], "chi2/dof", &[])
-            .unwrap();
+        let chart = log_histogram(
+            "misfit distribution",
+            &[0.3, 0.8, 1.1, 0.5],
+            "chi2/dof",
+            &[],
+        )
+        .unwrap();
         let labels: Vec<String> = chart
             .svg
             .split("<text")
