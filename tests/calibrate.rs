@@ -508,7 +508,11 @@ fn a_second_concurrent_run_fails_at_once_or_waits_with_wait() {
     assert!(seconds < 1.5, "the wait was counted as fit time: {text}");
     let stored: f64 = Connection::open(&db)
         .unwrap()
-        .query_row("SELECT elapsed_s FROM runs ORDER BY id DESC LIMIT 1", [], |r| r.get(0))
+        .query_row(
+            "SELECT elapsed_s FROM runs ORDER BY id DESC LIMIT 1",
+            [],
+            |r| r.get(0),
+        )
         .unwrap();
     assert!(stored < 1.5, "runs.elapsed_s {stored}");
 }

@@ -384,8 +384,13 @@ fn the_readme_says_what_to_install_first() {
     let start = readme
         .find("## Before you start")
         .expect("README.md has a section Before you start");
-    let first_command = readme.find("cargo run --release -- run sample_network").unwrap();
-    assert!(start < first_command, "Before you start comes after the first command");
+    let first_command = readme
+        .find("cargo run --release -- run sample_network")
+        .unwrap();
+    assert!(
+        start < first_command,
+        "Before you start comes after the first command"
+    );
     let section = &readme[start..];
     let section = &section[..section[3..].find("\n## ").map_or(section.len(), |i| i + 3)];
     let cargo = read(&root().join("Cargo.toml"));
@@ -405,7 +410,10 @@ fn the_readme_says_what_to_install_first() {
                 .strip_prefix("#[ignore = \"needs ")
                 .and_then(|t| t.strip_suffix("\"]"))
             {
-                assert!(section.contains(tool), "the ignored tests need {tool}: {section}");
+                assert!(
+                    section.contains(tool),
+                    "the ignored tests need {tool}: {section}"
+                );
             }
         }
     }

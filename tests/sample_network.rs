@@ -273,8 +273,16 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
             let (v, e): (f64, f64) = (v.parse().unwrap(), e.parse().unwrap());
             let cv: f64 = r[speed].parse().unwrap();
             let ce: f64 = r[std].parse().unwrap();
-            assert!((v - cv).abs() <= 0.005 * cv, "{}: flag {v}, column {cv}", &r[0]);
-            assert!((e - ce).abs() <= 0.1 * ce, "{}: flag ± {e}, column ± {ce}", &r[0]);
+            assert!(
+                (v - cv).abs() <= 0.005 * cv,
+                "{}: flag {v}, column {cv}",
+                &r[0]
+            );
+            assert!(
+                (e - ce).abs() <= 0.1 * ce,
+                "{}: flag ± {e}, column ± {ce}",
+                &r[0]
+            );
         }
         if &r[source] == "predicted" {
             predicted += 1;
@@ -314,7 +322,9 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
     );
     let least = report_check::section(&html, "least-certain");
     assert!(
-        least.contains("202 segments have a leak-band speed with an error (162 fitted, 40 predicted"),
+        least.contains(
+            "202 segments have a leak-band speed with an error (162 fitted, 40 predicted"
+        ),
         "{least}"
     );
     let rows = report_check::table_rows(least);
@@ -323,7 +333,10 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
     let maps = report_check::svgs(map);
     assert_eq!(maps.len(), 2);
     for m in maps {
-        assert!(m.matches("stroke-dasharray").count() > 40, "predicted pipes missing from a map");
+        assert!(
+            m.matches("stroke-dasharray").count() > 40,
+            "predicted pipes missing from a map"
+        );
     }
     // One figure for the leave-one-out spread: the audit states calibrate's.
     let spread = field
@@ -333,10 +346,15 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
         .unwrap();
     let field_section = report_check::section(&html, "field");
     assert!(
-        field_section.contains(&format!("Leave-one-out z spread <b class=\"loo-spread\">{spread}</b>")),
+        field_section.contains(&format!(
+            "Leave-one-out z spread <b class=\"loo-spread\">{spread}</b>"
+        )),
         "{spread}: {field_section}"
     );
-    assert!(!field_section.contains("robust"), "a second figure for the spread");
+    assert!(
+        !field_section.contains("robust"),
+        "a second figure for the spread"
+    );
     // The two field outliers get their own code's advice, not that of an unknown code.
     assert!(
         !html.contains("older pipewave version"),

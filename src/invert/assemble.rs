@@ -143,7 +143,9 @@ pub(super) fn assemble(
     if curve_source == CurveSource::ModelPlusDiscrepancy {
         // The correction changed the reported leak-band speed and its error: the flag on it
         // reads the reported values, as the exports do.
-        let at = flags.iter().position(|f| f.code == FlagCode::SpeedUncertain);
+        let at = flags
+            .iter()
+            .position(|f| f.code == FlagCode::SpeedUncertain);
         match (at, super::flags::speed_uncertain(leak_band_speed)) {
             (Some(i), Some(reason)) => flags[i].reason = reason,
             (Some(i), None) => {

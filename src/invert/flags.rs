@@ -242,9 +242,9 @@ pub fn speed_uncertain(leak_band_speed: Option<WithError>) -> Option<String> {
             sig(s.std, 2),
             100.0 * s.relative()
         )),
-        None => Some(
-            "the leak-band speed could not be predicted over the whole 100-800 Hz band".into(),
-        ),
+        None => {
+            Some("the leak-band speed could not be predicted over the whole 100-800 Hz band".into())
+        }
     }
 }
 

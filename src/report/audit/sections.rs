@@ -150,7 +150,9 @@ pub(super) fn by_frequency(counts: &BTreeMap<String, usize>) -> Vec<(&str, usize
 pub(super) fn speed_with_std(r: &SegmentExport) -> Option<(f64, Option<f64>)> {
     let speed = r.leak_band_speed.filter(|v| v.is_finite() && *v > 0.0)?;
     // The exports' error: the fit's, or the soil field's for a predicted speed.
-    let std = r.leak_band_speed_std().filter(|s| s.is_finite() && *s >= 0.0);
+    let std = r
+        .leak_band_speed_std()
+        .filter(|s| s.is_finite() && *s >= 0.0);
     Some((speed, std))
 }
 
