@@ -347,7 +347,7 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
     let field_section = report_check::section(&html, "field");
     assert!(
         field_section.contains(&format!(
-            "Leave-one-out z spread <b class=\"loo-spread\">{spread}</b>"
+            "Leave-one-out z spread <b>{spread}</b>"
         )),
         "{spread}: {field_section}"
     );

@@ -343,7 +343,7 @@ fn hints_and_help_speak_the_users_terms() {
         .unwrap_or_else(|| panic!("{err}"));
     assert!(small.starts_with(&format!("{}:2:3:", s(&segs))), "{small}");
     assert!(small.contains("outer diameter of 4.3 mm"), "{small}");
-    assert!(small.contains("0.2 mm wall"), "{small}");
+    assert!(small.contains("wall of 0.2 mm"), "{small}");
     assert!(
         !small.contains("0.00205") && !small.contains("(m)"),
         "{small}"

@@ -585,6 +585,9 @@ fn correct_by_discrepancy(
 /// factor of 10 below the smallest and above the largest measured attenuation of the segment.
 pub const ATTENUATION_SUPPORT_FACTOR: f64 = 10.0;
 
+/// Per grid frequency (Hz), a value where there is one: the inputs of a band mean.
+type BandPoints = Vec<(f64, Option<f64>)>;
+
 /// One corrected value: the value, its one-sigma error, and the discrepancy's part of it.
 type Corrected = (f64, f64, f64);
 
@@ -630,7 +633,7 @@ pub(crate) fn correct_curve(
     att: Option<(&Discrepancy, (f64, f64))>,
     model_std_factor: f64,
     max_speed: f64,
-) -> (Vec<(f64, Option<f64>)>, Vec<(f64, Option<f64>)>) {
+) -> (BandPoints, BandPoints) {
     let mut band_pts = Vec::with_capacity(curve.len());
     let mut band_disc = Vec::with_capacity(curve.len());
     for p in curve.iter_mut() {
@@ -667,7 +670,7 @@ pub(crate) fn correct_curve(
             .filter(|c| (lo..=hi).contains(&f) && (v_lo..=v_hi).contains(&c.0) && c.1 < c.0);
             p.attenuation_db = c.map(|c| c.0);
             p.attenuation_db_std = c.map(|c| c.1);
-        } else if p.attenuation_db.is_some_and(|a| !(a >= 0.0)) {
+        } else if p.attenuation_db.is_some_and(|a| a.is_nan() || a < 0.0) {
             // No attenuation residual to correct by: the model's, where it is physical.
             p.attenuation_db = None;
             p.attenuation_db_std = None;

@@ -230,7 +230,7 @@ pub(crate) fn section(db: &Database) -> Result<String, ExportError> {
             "<h3>Leave-one-out check</h3><p class=\"note\">Each measured segment is predicted \
              from the others and compared with its own fit: z = (field − fit) / √(σ²<sub>field\
              </sub> + σ²<sub>fit</sub>) should be N(0, 1). Leave-one-out z spread \
-             <b class=\"loo-spread\">{spread_text}</b> (the standard deviation of z, the {outliers} \
+             <b>{spread_text}</b> (the standard deviation of z, the {outliers} \
              field outlier{} left out; near 1 when the predicted errors are honest, as \
              <code>calibrate</code> prints it); |z| &gt; 2 for {beyond2} of {} (about 5 % \
              expected). |z| &gt; {FIELD_OUTLIER_Z} is flagged <code>field_outlier</code>: a wrong \

@@ -476,7 +476,7 @@ fn in_the_users_terms(e: &InputError, record: &SegmentRecord) -> String {
             let (d, h) = (record.outer_diameter_mm, record.wall_thickness_mm);
             let (lo, hi) = (MEAN_RADIUS_RANGE.lo * 1e3, MEAN_RADIUS_RANGE.hi * 1e3);
             format!(
-                "an outer diameter of {} mm with a {} mm wall is outside what the model takes: \
+                "an outer diameter of {} mm with a wall of {} mm is outside what the model takes: \
                  its mean radius (D - h)/2 = {} mm must be {} - {} mm (an outer diameter of \
                  about {} mm to {} m); is the diameter given in mm?",
                 short(d),
