@@ -346,9 +346,7 @@ fn the_first_command_shows_predicted_speeds_and_plan_works() {
         .unwrap();
     let field_section = report_check::section(&html, "field");
     assert!(
-        field_section.contains(&format!(
-            "Leave-one-out z spread <b>{spread}</b>"
-        )),
+        field_section.contains(&format!("Leave-one-out z spread <b>{spread}</b>")),
         "{spread}: {field_section}"
     );
     assert!(
