@@ -2,8 +2,10 @@
 //! [`columns`] (first `segment_id`, the key to join onto an existing pipe layer, then the
 //! leak-band speed and its error), no geometry. Numbers as [`Precision`] says: rounded for
 //! people by default, or in Rust's shortest round-trip form (read back bit for bit) with
-//! `Precision::Full`; missing values are empty cells. Text cells are on one line (lists
-//! joined with `; `, [`one_line`]) and made safe to open in a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
+//! `Precision::Full`; missing values are empty cells. pipewave's own lists (the reasons) are on
+//! one line, joined with `; ` ([`crate::spreadsheet::one_line`], applied when the record is
+//! built); the inventory's text is written as given. Text cells are made safe to open in
+//! a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
 //! like a formula.
 
 use std::path::Path;
@@ -11,7 +13,7 @@ use std::path::Path;
 use super::numbers::{columns, Cell, Precision};
 use super::record::Records;
 use super::{write_streamed, ExportError, SegmentExport, Tally};
-use crate::spreadsheet::{one_line, spreadsheet_safe, writer};
+use crate::spreadsheet::{spreadsheet_safe, writer};
 
 /// Write the header row.
 fn header<W: std::io::Write>(w: &mut csv::Writer<W>) -> Result<(), csv::Error> {
@@ -32,7 +34,7 @@ fn row<W: std::io::Write>(
             .into_iter()
             .map(|c| match c {
                 Cell::Null => String::new(),
-                Cell::Text(s) => spreadsheet_safe(&one_line(s)).into_owned(),
+                Cell::Text(s) => spreadsheet_safe(s).into_owned(),
                 Cell::Number(n) => n,
             }),
     );
