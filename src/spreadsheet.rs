@@ -46,6 +46,27 @@ pub fn spreadsheet_safe(s: &str) -> Cow<'_, str> {
     }
 }
 
+/// A text cell on one line: the lines of `s` (split at `\n`, `\r\n` or `\r`, blank ones
+/// dropped) joined with `; `, so that a list in one cell neither breaks a row for `head` or
+/// `grep` nor opens as a tall cell in a spreadsheet; `s` itself (borrowed) when it is one line.
+///
+/// ```
+/// use pipewave::spreadsheet::one_line;
+/// assert_eq!(one_line("high_misfit: chi2 40\nspeed_uncertain: 3 %\n"), "high_misfit: chi2 40; speed_uncertain: 3 %");
+/// assert_eq!(one_line("one line"), "one line");
+/// ```
+pub fn one_line(s: &str) -> Cow<'_, str> {
+    if !s.contains(['\n', '\r']) {
+        return Cow::Borrowed(s);
+    }
+    let parts: Vec<&str> = s
+        .split(['\n', '\r'])
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect();
+    Cow::Owned(parts.join("; "))
+}
+
 /// The inverse of [`spreadsheet_safe`], as a spreadsheet reads the cell: a leading `'` that
 /// is followed by one of [`FORMULA_LEADS`] is dropped; any other text is returned unchanged. The
 /// CSV import reads every cell through this, so pipewave's own CSV output (e.g. the

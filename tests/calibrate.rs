@@ -490,11 +490,31 @@ fn a_second_concurrent_run_fails_at_once_or_waits_with_wait() {
         "it should be waiting"
     );
     assert_eq!(fits_so_far(&db), 0);
+    // The wait (2.5 s in all) is not fit time: the summary's time and rate, and the run's
+    // stored time, count from when the lock was taken (6 fits take a fraction of a second).
+    std::thread::sleep(Duration::from_millis(1900));
     db::release_run_lock(holder.conn(), &lock).unwrap();
     let out = waiting.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(stderr(&out).contains("waiting for another calibrate run"));
-    assert!(stdout(&out).starts_with("calibrate: 6 fitted"));
+    let text = stdout(&out);
+    assert!(text.starts_with("calibrate: 6 fitted"), "{text}");
+    let seconds: f64 = text
+        .split(", in ")
+        .nth(1)
+        .and_then(|t| t.split(" s").next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no time in {text}"));
+    assert!(seconds < 1.5, "the wait was counted as fit time: {text}");
+    let stored: f64 = Connection::open(&db)
+        .unwrap()
+        .query_row(
+            "SELECT elapsed_s FROM runs ORDER BY id DESC LIMIT 1",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert!(stored < 1.5, "runs.elapsed_s {stored}");
 }
 
 #[test]

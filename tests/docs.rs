@@ -375,6 +375,50 @@ fn the_readme_is_a_short_manual() {
     assert!(lines <= README_MAX_LINES, "README.md has {lines} lines");
 }
 
+/// The README says what to install before the first command (issue 64): the Rust version of
+/// Cargo.toml's `rust-version`, a C compiler for the bundled SQLite, the optional tools of the
+/// ignored tests (every one the tests name), and how to put `pipewave` on the PATH.
+#[test]
+fn the_readme_says_what_to_install_first() {
+    let readme = read(&root().join("README.md"));
+    let start = readme
+        .find("## Before you start")
+        .expect("README.md has a section Before you start");
+    let first_command = readme
+        .find("cargo run --release -- run sample_network")
+        .unwrap();
+    assert!(
+        start < first_command,
+        "Before you start comes after the first command"
+    );
+    let section = &readme[start..];
+    let section = &section[..section[3..].find("\n## ").map_or(section.len(), |i| i + 3)];
+    let cargo = read(&root().join("Cargo.toml"));
+    let version = cargo
+        .lines()
+        .find_map(|l| l.strip_prefix("rust-version = "))
+        .unwrap()
+        .trim_matches('"');
+    assert!(section.contains(&format!("Rust {version}")), "{section}");
+    for needed in ["C compiler", "SQLite", "cargo install --path ."] {
+        assert!(section.contains(needed), "{needed} missing: {section}");
+    }
+    for test in rust_files(&root().join("tests")) {
+        for line in read(&test).lines() {
+            if let Some(tool) = line
+                .trim()
+                .strip_prefix("#[ignore = \"needs ")
+                .and_then(|t| t.strip_suffix("\"]"))
+            {
+                assert!(
+                    section.contains(tool),
+                    "the ignored tests need {tool}: {section}"
+                );
+            }
+        }
+    }
+}
+
 /// The relative link targets of a Markdown text (`](target)`), without their `#fragment`.
 fn relative_links(markdown: &str) -> Vec<String> {
     markdown

@@ -866,6 +866,29 @@ fn csv_is_a_join_table_keyed_by_segment_id() {
     assert_eq!(ids, exp.keys().cloned().collect());
 }
 
+/// The CSV export counts the segments with geometry as the GeoPackage and GeoJSON exports do
+/// (it has no geometry column, but its summary must not say "0 with geometry" where they say
+/// 60), and every row of it is one line.
+#[test]
+fn csv_counts_geometry_as_the_gis_exports_do_and_rows_are_one_line() {
+    let (dir, database) = network(N);
+    let mut counts = Vec::new();
+    for (format, name) in [
+        (ExportFormat::Csv, "net.csv"),
+        (ExportFormat::Gpkg, "net.gpkg"),
+        (ExportFormat::GeoJson, "net.geojson"),
+    ] {
+        let out = dir.path().join(name);
+        let s = export::write_with_precision(&database, format, &out, Precision::People).unwrap();
+        counts.push((s.segments, s.with_geometry));
+    }
+    assert!(counts[0].1 > 0, "{counts:?}");
+    assert_eq!(counts[0], counts[1], "csv against gpkg");
+    assert_eq!(counts[0], counts[2], "csv against geojson");
+    let text = std::fs::read_to_string(dir.path().join("net.csv")).unwrap();
+    assert_eq!(text.lines().count(), counts[0].0 + 1, "one line per row");
+}
+
 #[test]
 fn export_never_overwrites_a_pipewave_database() {
     let (dir, database) = network(8);

@@ -19,7 +19,7 @@ fn forward_reproduces_reference_roots() {
     let st = pipewave()
         .args(["forward", "--input"])
         .arg(data_path("vectors/dispersion_roots.csv"))
-        .arg("--output")
+        .arg("--out")
         .arg(&out)
         .output()
         .unwrap();
@@ -130,4 +130,34 @@ fn forward_rejects_missing_columns() {
         .unwrap();
     assert_eq!(st.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&st.stderr).contains("missing column(s) fluid_density_kg_m3"));
+}
+
+/// `forward` writes to `--out`, named as in every other command; `--output`, its older name,
+/// is still accepted and writes the same file.
+#[test]
+fn forward_takes_out_and_still_accepts_output() {
+    let help = pipewave().args(["forward", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    let usage = help.lines().find(|l| l.starts_with("Usage:")).unwrap();
+    assert!(usage.contains("--out <FILE>"), "{usage}");
+    assert!(help.contains("[alias: --output]"), "{help}");
+    let dir = tempfile::tempdir().unwrap();
+    let mut written = Vec::new();
+    for name in ["--out", "--output"] {
+        let out = dir.path().join(format!("results{name}.csv"));
+        let st = pipewave()
+            .args(["forward", "--input"])
+            .arg(data_path("vectors/dispersion_roots.csv"))
+            .arg(name)
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        written.push(std::fs::read(&out).unwrap());
+    }
+    assert!(written[0] == written[1] && !written[0].is_empty());
 }

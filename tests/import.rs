@@ -925,7 +925,7 @@ fn layer_problems_name_the_layer_the_feature_and_the_field() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     let f = p.display().to_string();
     for want in [
-        format!("{f}: layer mains: feature 7: field DIAM_MM (outer_diameter_mm): mean radius (m) = 5e304 is outside the valid range 0.005 - 1.5"),
+        format!("{f}: layer mains: feature 7: field DIAM_MM (outer_diameter_mm): an outer diameter of 1e308 mm with a wall of 8 mm is outside what the model takes: its mean radius (D - h)/2 = 5e307 mm must be 5 - 1500 mm"),
         format!("{f}: layer mains: feature 8: field MATERIAL: unknown material 'Brass'"),
         format!("{f}: layer mains: feature 9: field geometry: the MultiLineString has 2 parts"),
     ] {

@@ -1,5 +1,5 @@
 //! The reports as a utility engineer reads them, on the sample network: the audit names every
-//! segment to distrust and draws WM10052 (371 ± 382 m/s, flagged) as distrusted on the map and
+//! segment to distrust and draws WM10052 (368 ± 26 m/s, flagged) as distrusted on the map and
 //! in the exports' QGIS style; and, in a real browser (headless Chromium), every HTML report's
 //! internal links resolve, no `NaN` is shown, and every flagged segment is listed.
 
@@ -305,4 +305,143 @@ fn every_report_reads_in_a_real_browser() {
         "{} bytes",
         png.len()
     );
+}
+
+/// Undo the entities a serialized DOM writes in text (`&amp;`, `&lt;`, `&gt;`, `&quot;`,
+/// `&#39;`, `&nbsp;`).
+fn decode(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&#39;", "'")
+        .replace("&nbsp;", "\u{a0}")
+        .replace("&amp;", "&")
+}
+
+/// The sample network's audit as headless Chromium builds it (issue 64): the pipes without
+/// measurements are on both maps and in the lists with their predicted speed; no attenuation
+/// below 0 is shown in the audit's plots or written to any export; and every flag of the flag
+/// table carries its own code's advice.
+#[test]
+#[ignore = "needs chromium"]
+fn the_sample_audit_shows_predicted_pipes_physical_attenuation_and_each_flags_advice() {
+    let dir = sample();
+    let profile = tempfile::tempdir().unwrap();
+    let dom = chromium_dom(&dir.join("out/report.html"), profile.path());
+    assert!(dom.contains("</html>"));
+
+    // The predicted pipes, as the CSV export says.
+    let mut rdr = csv::Reader::from_path(dir.join("out/segments.csv")).unwrap();
+    let h = rdr.headers().unwrap().clone();
+    let col = |n: &str| h.iter().position(|x| x == n).unwrap();
+    let (source, id_c) = (col("speed_source"), col("segment_id"));
+    let mut predicted = Vec::new();
+    for r in rdr.records() {
+        let r = r.unwrap();
+        for (name, cell) in h.iter().zip(r.iter()) {
+            if name.starts_with("attenuation_") && !cell.is_empty() {
+                let a: f64 = cell.parse().unwrap();
+                assert!(a >= 0.0, "csv {} {name} = {a}", &r[id_c]);
+            }
+        }
+        if &r[source] == "predicted" {
+            predicted.push(r[id_c].to_string());
+        }
+    }
+    assert_eq!(predicted.len(), 40);
+    let map = between(&dom, "<section id=\"map\">", "</section>");
+    for id in &predicted {
+        assert_eq!(
+            map.matches(&format!("<title>{id}: ")).count(),
+            2,
+            "{id} is not on both maps"
+        );
+    }
+    let trust = text(between(&dom, "<section id=\"trust\">", "</section>"));
+    assert!(
+        trust.contains("40 have a speed predicted by the soil field"),
+        "{trust}"
+    );
+    let least = between(&dom, "<section id=\"least-certain\">", "</section>");
+    let listed: Vec<&String> = predicted
+        .iter()
+        .filter(|id| least.contains(&format!(">{id}<")))
+        .collect();
+    assert!(
+        !listed.is_empty(),
+        "no predicted pipe among the least certain speeds"
+    );
+    assert!(text(least).contains("40 predicted"), "{least}");
+
+    // No attenuation below 0 on the audit's attenuation axes, nor in the other exports.
+    for plot in dom.split("<svg").skip(1) {
+        let plot = &plot[..plot.find("</svg>").unwrap_or(plot.len())];
+        if !plot.contains("dB/m") {
+            continue;
+        }
+        for label in text(plot).split_whitespace() {
+            if let Ok(v) = label.replace('−', "-").parse::<f64>() {
+                assert!(v >= 0.0, "an attenuation axis shows {label}");
+            }
+        }
+    }
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string({
+            let out = dir.join("out/segments.geojson");
+            ok(&[
+                "export",
+                "--db",
+                s(&dir.join("pipewave.sqlite")),
+                "--format",
+                "geojson",
+                "--out",
+                s(&out),
+            ]);
+            out
+        })
+        .unwrap(),
+    )
+    .unwrap();
+    for f in json["features"].as_array().unwrap() {
+        for (k, v) in f["properties"].as_object().unwrap() {
+            if k.starts_with("attenuation_") {
+                if let Some(a) = v.as_f64() {
+                    assert!(a >= 0.0, "geojson {k} = {a}");
+                }
+            }
+        }
+    }
+    let g = Connection::open(dir.join("out/segments.gpkg")).unwrap();
+    let negative: i64 = g
+        .query_row(
+            "SELECT count(*) FROM pipe_segments WHERE attenuation_100hz_db_per_m < 0 \
+             OR attenuation_200hz_db_per_m < 0 OR attenuation_500hz_db_per_m < 0 \
+             OR attenuation_1000hz_db_per_m < 0",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(negative, 0);
+
+    // Every flag of the table with its own code's advice.
+    let table = between(&dom, "<h3 id=\"flags\">", "</table>");
+    let mut codes = 0;
+    for row in table.split("<tr>").skip(2) {
+        let cells: Vec<String> = row
+            .split("<td")
+            .skip(1)
+            .map(|c| decode(text(&c[c.find('>').unwrap() + 1..]).trim()))
+            .collect();
+        let (code, advice) = (&cells[0], &cells[2]);
+        let own = pipewave::invert::FlagCode::ALL
+            .iter()
+            .find(|c| c.as_str() == code)
+            .map(|c| c.advice())
+            .or_else(|| pipewave::zones::ZoneFlag::from_code(code).map(|z| z.advice()))
+            .unwrap_or_else(|| panic!("{code}: not a code of this version"));
+        assert_eq!(advice, own, "{code}");
+        codes += 1;
+    }
+    assert!(codes >= 3, "{table}");
+    assert!(table.contains(">field_outlier<"), "{table}");
 }

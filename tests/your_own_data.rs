@@ -239,3 +239,144 @@ fn run_does_not_suggest_skip_invalid_for_a_missing_column() {
     );
     assert!(!err.contains("import the valid rows"), "{err}");
 }
+
+/// `run DIR --skip-invalid` imports the valid rows of a network directory, lists the bad row by
+/// file, line and column, and goes on to calibrate, export and audit; without it `run` imports
+/// nothing and says how to go on.
+#[test]
+fn run_skips_invalid_rows_when_asked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("net");
+    std::fs::create_dir_all(&dir).unwrap();
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("sample_network");
+    // The first 12 segments and their measurements, one measurement row made bad.
+    let segs = std::fs::read_to_string(src.join("segments.csv")).unwrap();
+    let segs: Vec<&str> = segs.lines().take(13).collect();
+    std::fs::write(dir.join("segments.csv"), segs.join("\n") + "\n").unwrap();
+    let ids: Vec<&str> = segs[1..]
+        .iter()
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    let meas = std::fs::read_to_string(src.join("measurements.csv")).unwrap();
+    let mut lines: Vec<String> = meas
+        .lines()
+        .enumerate()
+        .filter(|(i, l)| *i == 0 || ids.contains(&l.split(',').next().unwrap()))
+        .map(|(_, l)| l.to_string())
+        .collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let col = header.iter().position(|h| *h == "k_re_rad_per_m").unwrap();
+    let mut bad: Vec<String> = lines[3].split(',').map(str::to_string).collect();
+    bad[col] = "fast".to_string();
+    lines[3] = bad.join(",");
+    let n_rows = lines.len() - 1;
+    std::fs::write(dir.join("measurements.csv"), lines.join("\n") + "\n").unwrap();
+
+    let refused = run(&["run", s(&dir)]);
+    assert_eq!(refused.status.code(), Some(2));
+    let err = text(&refused.stderr);
+    assert!(
+        err.contains(&format!("{}:4:", s(&dir.join("measurements.csv")))),
+        "{err}"
+    );
+    assert!(err.contains("column k_re_rad_per_m"), "{err}");
+    assert!(err.contains("add --skip-invalid"), "{err}");
+
+    let done = run(&["run", s(&dir), "--skip-invalid"]);
+    let (out, err) = (text(&done.stdout), text(&done.stderr));
+    assert!(done.status.success(), "{out}\n{err}");
+    assert!(err.contains("skipped 1 invalid row"), "{err}");
+    assert!(
+        out.contains(&format!("measurements {} written", n_rows - 1)),
+        "{out}"
+    );
+    assert!(dir.join("out/report.html").is_file());
+    let rows = csv::Reader::from_path(dir.join("out/segments.csv"))
+        .unwrap()
+        .records()
+        .count();
+    assert_eq!(rows, 12);
+}
+
+/// The hints and help texts a new user meets first (issue 64): the empty-file hint gives a
+/// header `import` takes (with `frequency_hz`); a pipe too small for the model is reported in
+/// the file's own terms (outer diameter and wall in mm), not as a mean radius in m; `import
+/// --help` does not send the user to itself for `--db`; `diagnose --help` names groups.csv.
+#[test]
+fn hints_and_help_speak_the_users_terms() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let segs = d.join("segments.csv");
+    std::fs::write(
+        &segs,
+        "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n\
+         A1,PVC,4.3,0.2,1800\nA2,PVC,110,5.3,1800\n",
+    )
+    .unwrap();
+    let empty = d.join("measurements.csv");
+    std::fs::write(&empty, "").unwrap();
+    let o = run(&[
+        "import",
+        "--db",
+        s(&d.join("a.sqlite")),
+        "--measurements",
+        s(&empty),
+        "--segments",
+        s(&segs),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    let hint = err
+        .lines()
+        .find(|l| l.contains("the file is empty"))
+        .unwrap_or_else(|| panic!("{err}"));
+    let header = hint.rsplit("such as: ").next().unwrap().trim();
+    assert_eq!(
+        header,
+        "segment_id,frequency_hz,k_re_rad_per_m,attenuation_np_per_m"
+    );
+    // The suggested header imports, with a data row under it.
+    std::fs::write(&empty, format!("{header}\nA2,200,0.6,0.001\n")).unwrap();
+    let small = err
+        .lines()
+        .find(|l| l.contains("column outer_diameter_mm"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(small.starts_with(&format!("{}:2:3:", s(&segs))), "{small}");
+    assert!(small.contains("outer diameter of 4.3 mm"), "{small}");
+    assert!(small.contains("wall of 0.2 mm"), "{small}");
+    assert!(
+        !small.contains("0.00205") && !small.contains("(m)"),
+        "{small}"
+    );
+    std::fs::write(
+        &segs,
+        "segment_id,material,outer_diameter_mm,wall_thickness_mm,soil_density_kg_m3\n\
+         A2,PVC,110,5.3,1800\n",
+    )
+    .unwrap();
+    let o = run(&[
+        "import",
+        "--db",
+        s(&d.join("b.sqlite")),
+        "--segments",
+        s(&segs),
+        "--measurements",
+        s(&empty),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+
+    let help = long_help();
+    let db_help: String = help
+        .lines()
+        .skip_while(|l| !l.trim_start().starts_with("--db"))
+        .take_while(|l| !l.trim_start().starts_with("--segments"))
+        .collect();
+    assert!(!db_help.is_empty(), "{help}");
+    assert!(!db_help.contains("import --help"), "{db_help}");
+    let diag = text(&run(&["diagnose", "--help"]).stdout);
+    let out_line = diag
+        .lines()
+        .find(|l| l.trim_start().starts_with("--out"))
+        .unwrap();
+    assert!(out_line.contains("groups.csv"), "{out_line}");
+}

@@ -461,7 +461,8 @@ pub fn calibrate(
     if let Some((pid, at)) = &lock.took_over {
         observer.took_over_stale_lock(*pid, at);
     }
-    let result = locked_run(conn, opts, observer, stop, empty, started);
+    // The run's time starts once it holds the lock: a wait for another run is not fit time.
+    let result = locked_run(conn, opts, observer, stop, empty, Instant::now());
     // Give the lock back whatever happened; a failure to do so is reported only when the run
     // itself succeeded (a stale lock is taken over by the next run anyway).
     let released = db::release_run_lock(conn, &lock);

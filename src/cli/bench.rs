@@ -188,7 +188,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<Outcome> {
     if let Some(dir) = &args.recovery {
         let db_path = args.db.clone().unwrap_or_else(|| dir.join(DEFAULT_DB));
         let truth = read_truth(&dir.join(TRUTH_CSV))?;
-        let mut database = import_dir(dir, &db_path)?;
+        let mut database = import_dir(dir, &db_path, false)?;
         outcome = calibrate::execute(&mut database, &opts)?;
         let fits = db::latest_fits(database.conn(), None)?;
         print!(

@@ -22,7 +22,8 @@ pub struct DiagnoseArgs {
     /// Diagnose only this segment (repeat for several; default: every fitted segment).
     #[arg(long = "segment", value_name = "ID")]
     segments: Vec<String>,
-    /// Where to write diagnosis.csv and diagnosis.html.
+    /// Where to write diagnosis.csv (one row per segment), diagnosis.html (the report) and
+    /// groups.csv (the pooled test of each group of pipes, see --group-by).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Candidate effects, comma-separated (default: all of soil_damping, air_in_water,

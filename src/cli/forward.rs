@@ -1,4 +1,4 @@
-//! `pipewave forward --input cases.csv --output results.csv`.
+//! `pipewave forward --input cases.csv --out results.csv` (`--output` is accepted too).
 
 use std::path::PathBuf;
 
@@ -12,9 +12,9 @@ pub struct ForwardArgs {
     /// Cases to evaluate (columns of docs/interface.md, "forward input").
     #[arg(long, value_name = "FILE")]
     input: PathBuf,
-    /// Where to write the results (one row per input row); `--out` is the same option, named as
-    /// in every other command.
-    #[arg(long, value_name = "FILE", visible_alias = "out")]
+    /// Where to write the results (one row per input row), named as in every other command;
+    /// `--output`, its older name, is the same option.
+    #[arg(long = "out", value_name = "FILE", visible_alias = "output")]
     output: PathBuf,
 }
 

@@ -81,10 +81,13 @@ nothing. Then: pipewave calibrate --db DB.";
 /// Arguments of `import`.
 #[derive(Debug, Args)]
 #[command(after_long_help = FORMATS)]
+#[command(
+    after_help = "The columns, units and material codes of the files, with examples: `pipewave import --help`."
+)]
 #[command(group = clap::ArgGroup::new("files").required(true).multiple(true).args(["segments", "measurements"]))]
 pub struct ImportArgs {
-    /// The database (created if it does not exist). The columns, units and material codes of
-    /// the files: `pipewave import --help`.
+    /// The database (created if it does not exist); `pipewave calibrate --db DB` fits what is
+    /// imported into it.
     #[arg(long, value_name = "DB")]
     db: PathBuf,
     /// Inventory of pipe segments: segments.csv, or a GIS layer (GeoPackage .gpkg, GeoJSON

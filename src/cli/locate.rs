@@ -1,4 +1,5 @@
-//! `pipewave locate --db DB --jobs jobs.csv --out located.csv` or one correlation on the command
+//! `pipewave locate --db DB --input jobs.csv --out located.csv [--jobs N]` or one correlation on
+//! the command
 //! line (`--sensor1 ID:CHAINAGE --sensor2 ID:CHAINAGE --delay S --delay-std S`, or
 //! `--recording1 FILE:CH --recording2 FILE:CH`): the leak's position across a path of one or
 //! more segments with its 95 % interval and error budget (model §11, P84–P87).
@@ -40,7 +41,13 @@ pub struct LocateArgs {
     /// sensor2_segment, sensor2_chainage_m, then delay_s, delay_std_s or recording1, channel1,
     /// recording2, channel2; optional band_lo_hz, band_hi_hz, path).
     #[arg(long, value_name = "FILE", conflicts_with_all = ["sensor1", "sensor2", "delay", "recording1"])]
-    jobs: Option<PathBuf>,
+    input: Option<PathBuf>,
+    /// Worker threads for the rows of --input, as in every other command (default: one per
+    /// core, at most one per row); the answers do not depend on it. Range 1 – 512. A value that
+    /// is not a whole number is read as the jobs file, the option's old meaning (now --input),
+    /// with a note.
+    #[arg(long, value_name = "N", value_parser = jobs_arg)]
+    jobs: Option<JobsArg>,
     /// Where to write the answers as CSV.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
@@ -112,6 +119,37 @@ pub struct LocateArgs {
     span_std_fraction: f64,
 }
 
+/// `--jobs`: a thread count, or (its old meaning) the jobs file.
+#[derive(Debug, Clone, PartialEq)]
+enum JobsArg {
+    /// Worker threads.
+    Threads(u32),
+    /// A jobs file given the old way, `--jobs FILE`.
+    File(PathBuf),
+}
+
+/// Read `--jobs`: a whole number is a thread count, refused outside 1 – [`bounds::MAX_JOBS`];
+/// anything else is the jobs file of older versions.
+fn jobs_arg(text: &str) -> Result<JobsArg, String> {
+    let t = text.trim();
+    if !t.is_empty()
+        && t.trim_start_matches(['-', '+'])
+            .bytes()
+            .all(|b| b.is_ascii_digit())
+    {
+        return match t.parse::<i128>() {
+            Ok(n) if (1..=i128::from(bounds::MAX_JOBS)).contains(&n) => {
+                Ok(JobsArg::Threads(n as u32))
+            }
+            _ => Err(format!(
+                "{t} worker threads: the range is 1 – {} (the jobs file is --input FILE)",
+                bounds::MAX_JOBS
+            )),
+        };
+    }
+    Ok(JobsArg::File(PathBuf::from(text)))
+}
+
 fn sensor(text: &str, name: &str) -> anyhow::Result<SensorSpec> {
     if let Some((x, y)) = text.split_once(',') {
         let (x, y) = (x.trim().parse::<f64>(), y.trim().parse::<f64>());
@@ -180,29 +218,130 @@ fn detail(l: &Located) -> String {
     )
 }
 
+/// One job's answer, its failure worded for the command line or the jobs file.
+fn answer(locator: &mut Locator<'_>, job: Result<Job, RowFailure>, single: bool) -> Answer {
+    let job = job?;
+    locator.locate(&job).map_err(|e| RowFailure {
+        job_id: job.id.clone(),
+        message: if single {
+            e.to_string()
+        } else {
+            format!("{} line {}: {e}", job.source.display(), job.line)
+        },
+    })
+}
+
+/// Locate every job, in order, on `threads` workers: the first uses `locator`, each other its
+/// own connection to the database and its own locator, over a contiguous share of the rows.
+/// Every row is located alone, so the answers do not depend on the number of workers.
+fn locate_all(
+    args: &LocateArgs,
+    mut locator: Locator<'_>,
+    options: &LocateOptions,
+    jobs: Vec<Result<Job, RowFailure>>,
+    threads: usize,
+    single: bool,
+) -> anyhow::Result<Vec<Answer>> {
+    if threads <= 1 {
+        return Ok(jobs
+            .into_iter()
+            .map(|j| answer(&mut locator, j, single))
+            .collect());
+    }
+    let share = jobs.len().div_ceil(threads);
+    let mut chunks: Vec<Vec<Result<Job, RowFailure>>> = Vec::new();
+    let mut rest = jobs.into_iter();
+    loop {
+        let c: Vec<_> = rest.by_ref().take(share).collect();
+        if c.is_empty() {
+            break;
+        }
+        chunks.push(c);
+    }
+    let mut chunks = chunks.into_iter();
+    let first = chunks.next().unwrap_or_default();
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = chunks
+            .map(|chunk| {
+                scope.spawn(move || -> anyhow::Result<Vec<Answer>> {
+                    let db = open_database(&args.db)?;
+                    let mut own = Locator::new(db.conn(), options.clone(), args.join_tolerance)
+                        .with_context(|| {
+                            format!("cannot read the network of {}", args.db.display())
+                        })?;
+                    Ok(chunk
+                        .into_iter()
+                        .map(|j| answer(&mut own, j, single))
+                        .collect())
+                })
+            })
+            .collect();
+        let mut all: Vec<Answer> = first
+            .into_iter()
+            .map(|j| answer(&mut locator, j, single))
+            .collect();
+        for w in workers {
+            match w.join() {
+                Ok(part) => all.extend(part?),
+                Err(p) => std::panic::resume_unwind(p),
+            }
+        }
+        Ok(all)
+    })
+}
+
 /// Locate the correlations and write the answers.
 pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
+    let (input, threads) = match (&args.input, &args.jobs) {
+        (Some(_), Some(JobsArg::File(f))) => bail!(
+            "--jobs '{}' is not a number of worker threads (the jobs file is --input FILE, given \
+             already)",
+            f.display()
+        ),
+        (_, Some(JobsArg::File(f))) => {
+            if args.sensor1.is_some()
+                || args.sensor2.is_some()
+                || args.delay.is_some()
+                || args.recording1.is_some()
+            {
+                bail!(
+                    "--jobs '{}' reads as a jobs file, which cannot be combined with a single \
+                     correlation (--sensor1, --sensor2, --delay, --recording1); --jobs N is the \
+                     number of worker threads",
+                    f.display()
+                );
+            }
+            eprintln!(
+                "note: reading {} as the jobs file: that option is now --input FILE; --jobs N \
+                 sets the worker threads, as in every other command",
+                escape_controls(&f.display().to_string())
+            );
+            (Some(f.clone()), None)
+        }
+        (i, Some(JobsArg::Threads(n))) => (i.clone(), Some(*n as usize)),
+        (i, None) => (i.clone(), None),
+    };
     let mut outputs: Vec<(&std::path::Path, Contents)> = Vec::new();
     outputs.extend(args.out.as_deref().map(|p| (p, Contents::Plain)));
     outputs.extend(args.geojson.as_deref().map(|p| (p, Contents::Plain)));
     outputs.extend(args.gpkg.as_deref().map(|p| (p, Contents::GeoPackage)));
-    let inputs: Vec<&std::path::Path> = args.jobs.as_deref().into_iter().collect();
+    let inputs: Vec<&std::path::Path> = input.as_deref().into_iter().collect();
     super::guard_outputs(Some(&args.db), &inputs, &outputs)?;
     let weighting: Weighting = args.weighting.parse().map_err(anyhow::Error::msg)?;
     let given_weighting: Weighting = args.given_weighting.parse().map_err(anyhow::Error::msg)?;
     let band = args.band.unwrap_or(DEFAULT_BAND_HZ);
-    let single = args.jobs.is_none();
-    let jobs: Vec<Result<Job, RowFailure>> = match &args.jobs {
+    let single = input.is_none();
+    let jobs: Vec<Result<Job, RowFailure>> = match &input {
         Some(file) => {
             if args.out.is_none() {
-                bail!("--jobs needs --out FILE for the answers");
+                bail!("--input needs --out FILE for the answers");
             }
             read_jobs(file)?
         }
         None => {
             let (Some(s1), Some(s2)) = (&args.sensor1, &args.sensor2) else {
                 bail!(
-                    "give --jobs FILE --out FILE, or one correlation: --sensor1 ID:M --sensor2 \
+                    "give --input FILE --out FILE, or one correlation: --sensor1 ID:M --sensor2 \
                      ID:M with --delay S --delay-std S or --recording1 FILE:CH --recording2 FILE:CH"
                 );
             };
@@ -264,22 +403,13 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
         span_std_fraction: args.span_std_fraction,
         ..LocateOptions::default()
     };
-    let mut locator = Locator::new(db.conn(), options, args.join_tolerance)
+    let locator = Locator::new(db.conn(), options.clone(), args.join_tolerance)
         .with_context(|| format!("cannot read the network of {}", args.db.display()))?;
-    let answers: Vec<Answer> = jobs
-        .into_iter()
-        .map(|j| match j {
-            Err(f) => Err(f),
-            Ok(job) => locator.locate(&job).map_err(|e| RowFailure {
-                job_id: job.id.clone(),
-                message: if single {
-                    e.to_string()
-                } else {
-                    format!("{} line {}: {e}", job.source.display(), job.line)
-                },
-            }),
-        })
-        .collect();
+    let srid = locator.network.srid;
+    let threads = threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+        .clamp(1, jobs.len().max(1));
+    let answers = locate_all(args, locator, &options, jobs, threads, single)?;
     if single {
         match &answers[0] {
             Ok(l) => {
@@ -297,7 +427,6 @@ pub fn run(args: &LocateArgs) -> anyhow::Result<Outcome> {
     if let Some(out) = &args.out {
         write_csv(out, &answers).map_err(anyhow::Error::msg)?;
     }
-    let srid = locator.network.srid;
     let mut warnings = Vec::new();
     if let Some(p) = &args.geojson {
         warnings.extend(write_geojson(p, &answers, srid).map_err(anyhow::Error::msg)?);

@@ -63,13 +63,21 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<Outcome> {
         .with_context(|| format!("cannot read {}", args.db.display()))?;
     println!("plan: {} segments -> {}", picks.len(), args.out.display());
     println!("plan: {}", plan::HYPOTHETICAL_MEASUREMENT);
-    if risk_weighted > 0 {
+    let unit = if risk_weighted > 0 {
         println!(
             "plan: weight: risk_weight ({risk_weighted} segment{}), length in m elsewhere",
             if risk_weighted == 1 { "" } else { "s" }
         );
+        "risk_weight units (metres of pipe where none is given)"
     } else {
         println!("plan: weight: length in m (no risk_weight in the inventory)");
+        "metres of pipe"
+    };
+    if let Some(first) = picks.first() {
+        println!(
+            "plan: {} (the first pick's)",
+            plan::gain_in_words(first.expected_gain, unit)
+        );
     }
     Ok(Outcome::Done)
 }

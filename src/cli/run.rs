@@ -69,6 +69,11 @@ pub struct RunDirArgs {
     /// goes to DIR/out/diagnosis/.
     #[arg(long)]
     diagnose: bool,
+    /// Import the valid rows of DIR's files and list the invalid ones (file, line, column),
+    /// then go on with the other steps, instead of importing nothing (as `import
+    /// --skip-invalid`).
+    #[arg(long)]
+    skip_invalid: bool,
 }
 
 /// Directory of the diagnosis report inside the output directory (`run --diagnose`).
@@ -94,7 +99,7 @@ pub fn run(args: &RunDirArgs) -> anyhow::Result<Outcome> {
             (&report, Contents::Plain),
         ],
     )?;
-    let mut database = import_dir(&args.dir, &db_path)?;
+    let mut database = import_dir(&args.dir, &db_path, args.skip_invalid)?;
     let opts = CalibrateOptions {
         jobs: args.run.jobs.map(|j| j as usize),
         seed: args.run.seed,
@@ -151,8 +156,9 @@ fn diagnose_and_refit(
 }
 
 /// Import a network directory's two files into the database at `db_path` (created if
-/// missing), printing the import summary. Any invalid row rejects the import (exit 2).
-pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
+/// missing), printing the import summary. Any invalid row rejects the import (exit 2), unless
+/// `skip_invalid`: then the valid rows are imported and the invalid ones listed.
+pub fn import_dir(dir: &Path, db_path: &Path, skip_invalid: bool) -> anyhow::Result<Database> {
     if !dir.is_dir() {
         bail!(
             "{} is not a directory; give a network directory holding {SEGMENTS_CSV} and \
@@ -176,7 +182,10 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
         database.conn_mut(),
         Some(&sources[0]),
         Some(&sources[1]),
-        ImportOptions::default(),
+        ImportOptions {
+            skip_invalid,
+            ..ImportOptions::default()
+        },
     )
     .with_context(|| {
         format!(
@@ -187,6 +196,14 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
     for e in &report.errors {
         eprintln!("{e}");
     }
+    let n_bad = report.problems;
+    if n_bad > report.errors.len() {
+        eprintln!(
+            "... and {} more problems (the first {} are listed)",
+            n_bad - report.errors.len(),
+            report.errors.len()
+        );
+    }
     if report.rejected {
         bail!(
             "import rejected: {} problem(s) found in {}, nothing was written ({})",
@@ -194,10 +211,16 @@ pub fn import_dir(dir: &Path, db_path: &Path) -> anyhow::Result<Database> {
             dir.display(),
             super::import::rejected_hint(
                 &report,
-                "import the valid rows with `pipewave import --skip-invalid`"
+                "add --skip-invalid to import the valid rows and go on"
             )
         );
     }
     println!("{}", super::import::summary(&report));
+    if n_bad > 0 {
+        eprintln!(
+            "skipped {n_bad} invalid row{} (listed above); the valid rows were imported",
+            if n_bad == 1 { "" } else { "s" }
+        );
+    }
     Ok(database)
 }

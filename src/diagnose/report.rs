@@ -241,8 +241,21 @@ fn value_and_std(d: &Diagnosis) -> (String, String) {
     }
     d.named
         .and_then(|e| d.chosen().and_then(|r| effect_value(&r.fit, e)))
-        .map(|(v, s)| (v.to_string(), s.map(|s| s.to_string()).unwrap_or_default()))
+        .map(|(v, s)| with_error(v, s))
         .unwrap_or_default()
+}
+
+/// A value and its standard error by the export's rule: the error to 2 significant digits and
+/// the value to the same decimal place; without a usable error, the value to 6 digits.
+fn with_error(v: f64, s: Option<f64>) -> (String, String) {
+    use crate::export::numbers::{error_place, fixed};
+    match s.filter(|s| s.is_finite() && *s > 0.0) {
+        Some(s) if v.is_finite() => {
+            let place = error_place(s);
+            (fixed(v, place), fixed(s, place))
+        }
+        _ => (num(v), s.map(num).unwrap_or_default()),
+    }
 }
 
 /// Write `groups.csv`, one row per group tested; `ids[i]` is segment i's id (the members that
@@ -265,7 +278,7 @@ pub fn write_groups_csv(
                 .collect::<Vec<_>>()
                 .join(","),
             num(g.statistic()),
-            num(g.p_value()),
+            p_num(g.p_value()),
             g.n_refitted.to_string(),
             g.pooled
                 .iter()
@@ -320,8 +333,8 @@ pub fn evidence(d: &Diagnosis) -> String {
             sig(r.lr, 4),
             sig(r.p_value, 2),
             sig(r.d_aicc, 3),
-            sig(r.holdout_base, 3),
-            sig(r.holdout_ext, 3)
+            holdout_text(r.holdout_base),
+            holdout_text(r.holdout_ext)
         ),
         None if !d.structure.structured => {
             let p = d.structure.p_value;
@@ -350,8 +363,8 @@ pub fn evidence(d: &Diagnosis) -> String {
                     sig(r.p_value, 2),
                     chi(d.chi2_per_dof_before()),
                     chi(r.fit.chi2_per_dof.unwrap_or(f64::NAN)),
-                    sig(r.holdout_base, 3),
-                    sig(r.holdout_ext, 3)
+                    holdout_text(r.holdout_base),
+                    holdout_text(r.holdout_ext)
                 ),
                 None => "no candidate could lower the misfit".to_string(),
             }
@@ -390,7 +403,7 @@ pub fn write_csv(
                 .collect::<Vec<_>>()
                 .join(","),
             &r.map(|r| num(r.lr)).unwrap_or_default(),
-            &r.map(|r| num(r.p_value)).unwrap_or_default(),
+            &r.map(|r| p_num(r.p_value)).unwrap_or_default(),
             &r.map(|r| num(r.holdout_base)).unwrap_or_default(),
             &r.map(|r| num(r.holdout_ext)).unwrap_or_default(),
             &ambiguity_text(d),
@@ -411,11 +424,36 @@ pub fn write_csv(
     spreadsheet::finish(w)
 }
 
+/// A number cell, by the export's rule for values without an error: 6 significant digits,
+/// plain notation unless tiny or huge; empty when not finite.
 fn num(v: f64) -> String {
     if v.is_finite() {
-        v.to_string()
+        crate::export::numbers::significant(v, 6)
     } else {
         String::new()
+    }
+}
+
+/// A p-value cell: scientific notation with 3 significant digits (`1.23e-180`, `5.00e-1`),
+/// however small; empty when not finite.
+fn p_num(p: f64) -> String {
+    if p.is_finite() {
+        format!("{p:.2e}")
+    } else {
+        String::new()
+    }
+}
+
+/// A held-out χ² for the evidence text: 3 significant digits, or why there is none (∞: the
+/// model has no wave at a frequency once another is left out, or no base fit; NaN: fewer than
+/// 3 measurements or no stated noise).
+fn holdout_text(v: f64) -> String {
+    if v.is_finite() {
+        sig(v, 3)
+    } else if v.is_infinite() {
+        "not computable (the model loses its wave when a frequency is left out)".to_string()
+    } else {
+        "not computable (fewer than 3 measurements or no stated noise)".to_string()
     }
 }
 
@@ -920,5 +958,26 @@ mod tests {
             twin_text(&c),
             "wall_thinning 209.6 (fraction 0.75, deviation 0.123) over air_in_water 192.7 (fraction 0.42); 12 members"
         );
+    }
+}
+
+#[cfg(test)]
+mod number_cells {
+    use super::{holdout_text, num, p_num, with_error};
+
+    #[test]
+    fn cells_follow_the_export_rounding_and_p_values_are_scientific() {
+        assert_eq!(p_num(1.234_567e-180), "1.23e-180");
+        assert_eq!(p_num(0.5), "5.00e-1");
+        assert_eq!(p_num(f64::NAN), "");
+        assert_eq!(num(38.425_612_345), "38.4256");
+        assert_eq!(num(f64::INFINITY), "");
+        assert_eq!(
+            with_error(0.612_345_678, Some(0.013_579)),
+            ("0.612".to_string(), "0.014".to_string())
+        );
+        assert!(!holdout_text(f64::INFINITY).contains("inf"));
+        assert!(!holdout_text(f64::NAN).contains("NaN"));
+        assert_eq!(holdout_text(12.345), "12.3");
     }
 }

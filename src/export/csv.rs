@@ -2,7 +2,9 @@
 //! [`columns`] (first `segment_id`, the key to join onto an existing pipe layer, then the
 //! leak-band speed and its error), no geometry. Numbers as [`Precision`] says: rounded for
 //! people by default, or in Rust's shortest round-trip form (read back bit for bit) with
-//! `Precision::Full`; missing values are empty cells. Text cells are made safe to open in
+//! `Precision::Full`; missing values are empty cells. pipewave's own lists (the reasons) are on
+//! one line, joined with `; ` ([`crate::spreadsheet::one_line`], applied when the record is
+//! built); the inventory's text is written as given. Text cells are made safe to open in
 //! a spreadsheet ([`spreadsheet`](crate::spreadsheet)): quoted, with a leading `'` when they begin
 //! like a formula.
 
@@ -77,6 +79,10 @@ pub(crate) fn write(
         let mut warnings = Vec::new();
         records.for_each(&mut warnings, |rec| {
             tally.add(&rec);
+            // The CSV has no geometry column: it counts the segments the GIS exports would
+            // draw (a readable line in a known system), so that their counts agree.
+            tally.summary.with_geometry +=
+                usize::from(rec.geometry.is_some() && rec.segment.srid.is_some());
             row(&mut w, &rec, precision, &mut buf).map_err(encode)
         })?;
         w.flush().map_err(|source| ExportError::Write {

@@ -87,7 +87,8 @@ impl FromStr for ExportFormat {
 pub struct ExportSummary {
     /// Segments written (every segment of the inventory).
     pub segments: usize,
-    /// Of which with a geometry in the output.
+    /// Of which with a geometry: in the output (GeoPackage, GeoJSON), or for the CSV, which
+    /// has no geometry column, a readable line in a known system (what the others would draw).
     pub with_geometry: usize,
     /// Of which with a fit.
     pub fitted: usize,

@@ -80,7 +80,12 @@ pub const SPEED_NONE: &str = "none";
 
 impl SegmentExport {
     /// Build the record from its parts (the derived values are computed here).
-    pub fn new(segment: SegmentRecord, fit: Option<FitRow>, curve: Vec<CurvePoint>) -> Self {
+    pub fn new(segment: SegmentRecord, mut fit: Option<FitRow>, curve: Vec<CurvePoint>) -> Self {
+        // Reasons are stored one per line; every export gives them on one line, `; `-joined.
+        if let Some(f) = fit.as_mut() {
+            f.flag_reasons = crate::spreadsheet::one_line(&f.flag_reasons).into_owned();
+            f.note_reasons = crate::spreadsheet::one_line(&f.note_reasons).into_owned();
+        }
         let geometry = segment
             .geometry_wkt
             .as_deref()
@@ -90,7 +95,11 @@ impl SegmentExport {
         for (i, &f) in EXPORT_FREQUENCIES_HZ.iter().enumerate() {
             if let Some(p) = point_at(&curve, f) {
                 speed_at[i] = p.phase_speed_m_per_s.filter(|v| v.is_finite());
-                attenuation_at[i] = p.attenuation_db_per_m.filter(|v| v.is_finite());
+                // Never an attenuation below 0 (a curve stored by an older version may hold one
+                // where its correction ran away).
+                attenuation_at[i] = p
+                    .attenuation_db_per_m
+                    .filter(|v| v.is_finite() && *v >= 0.0);
             }
         }
         let leak_band_speed = band_mean_speed(&curve, LEAK_BAND_HZ);
@@ -195,7 +204,7 @@ impl SegmentExport {
                 _ => Some(item.to_string()),
             };
             self.flags = join(self.flags.take(), "field_outlier", ",");
-            self.flag_reasons = join(self.flag_reasons.take(), &reason, "\n");
+            self.flag_reasons = join(self.flag_reasons.take(), &reason, "; ");
         }
         self.field = field;
         self.settled()
@@ -234,7 +243,7 @@ impl SegmentExport {
                 }
             };
             self.flags = Some(join(&fit.flags, flag.as_str(), ","));
-            self.flag_reasons = Some(join(&fit.flag_reasons, &reason, "\n"));
+            self.flag_reasons = Some(join(&fit.flag_reasons, &reason, "; "));
         }
     }
 
@@ -599,7 +608,7 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "flag_reasons",
         kind: Kind::Text,
-        doc: "one line per flag: what to act on and why",
+        doc: "what to act on and why, one reason per flag, joined with '; '",
         get: |r| Value::text(r.flag_reasons.as_deref()),
     },
     Property {
@@ -611,7 +620,8 @@ pub const PROPERTIES: &[Property] = &[
     Property {
         name: "note_reasons",
         kind: Kind::Text,
-        doc: "one line per note, e.g. E_m and nu_m known only through c_P = 212 +- 9 m/s",
+        doc: "one reason per note, joined with '; ', e.g. E_m and nu_m known only through c_P \
+              = 212 +- 9 m/s",
         get: |r| Value::text(r.fit.as_ref().map(|f| f.note_reasons.as_str())),
     },
     Property {

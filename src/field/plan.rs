@@ -25,10 +25,26 @@ use super::Site;
 
 /// What a candidate's measurement is taken to be, as `plan` states it to the user (the
 /// information of [`typical_information`]).
-pub const HYPOTHETICAL_MEASUREMENT: &str = "each candidate is valued as if measured like the \
-network's fitted pipes of its material: the median information (entrywise) of their fits, \
-i.e. their frequency plans at their noise; of all fitted pipes when none of its material is \
-fitted";
+pub const HYPOTHETICAL_MEASUREMENT: &str = "each candidate is valued as if it were measured the \
+way the network's fitted pipes of its material were (a typical one of their fits: their \
+frequencies and their noise), or like all fitted pipes when none of its material is fitted";
+
+/// The length of pipe in which `plan` expresses a gain: a gain g is as much as removing a
+/// relative speed error of √(g / L) from L metres of pipe.
+pub const GAIN_REFERENCE_LENGTH_M: f64 = 100.0;
+
+/// `expected_gain` in the user's units: the fall of Σ w (σ / ĉ)² over the network, w in the
+/// weight's unit (metres of pipe without risk weights), told as the speed error it would
+/// remove from [`GAIN_REFERENCE_LENGTH_M`] of pipe (`gain` finite and ≥ 0).
+pub fn gain_in_words(gain: f64, weight_unit: &str) -> String {
+    let rel = (gain.max(0.0) / GAIN_REFERENCE_LENGTH_M).sqrt();
+    format!(
+        "expected_gain is how much the measurement would lower the network's sum of weight x \
+         (speed error / speed)^2, the weight in {weight_unit}: {gain:.3} is as much as removing a \
+         {:.1} % error of the leak-band speed from {GAIN_REFERENCE_LENGTH_M:.0} m of pipe",
+        100.0 * rel
+    )
+}
 
 /// A segment's weight w_i in P83: its `risk_weight` where the inventory gives one, else its
 /// length in metres (1 when it has none).

@@ -119,7 +119,7 @@ pub(super) fn assemble(
     };
     let soil_information =
         (!determined.curvature_unknown).then(|| determined.speed_information.map(|v| v / variance));
-    let (flags, notes): (Vec<Flag>, Vec<Flag>) = findings
+    let (mut flags, notes): (Vec<Flag>, Vec<Flag>) = findings
         .into_iter()
         .partition(|f| f.code.severity() == Severity::Flag);
     let mut curve = curve;
@@ -140,6 +140,24 @@ pub(super) fn assemble(
     } else {
         CurveSource::Model
     };
+    if curve_source == CurveSource::ModelPlusDiscrepancy {
+        // The correction changed the reported leak-band speed and its error: the flag on it
+        // reads the reported values, as the exports do.
+        let at = flags
+            .iter()
+            .position(|f| f.code == FlagCode::SpeedUncertain);
+        match (at, super::flags::speed_uncertain(leak_band_speed)) {
+            (Some(i), Some(reason)) => flags[i].reason = reason,
+            (Some(i), None) => {
+                flags.remove(i);
+            }
+            (None, Some(reason)) => flags.push(Flag {
+                code: FlagCode::SpeedUncertain,
+                reason,
+            }),
+            (None, None) => {}
+        }
+    }
     let measured_hz: Vec<f64> = problem
         .data
         .measurements
@@ -512,7 +530,8 @@ fn log_residuals(problem: &Problem<'_>, predicted: &[Complex64]) -> (Vec<Residua
 /// model's and the band mean of the discrepancy's one-sigma (taken fully correlated across the
 /// band, since a discrepancy is smooth in frequency). The model's errors are multiplied by
 /// `model_std_factor` (1/R_B: the discrepancy explains the misfit). The model's values stay in
-/// `model_phase_speed` and `model_attenuation_db`.
+/// `model_phase_speed` and `model_attenuation_db`. The corrected curve is kept physical
+/// ([`correct_curve`]).
 fn correct_by_discrepancy(
     problem: &Problem<'_>,
     predicted: &[Complex64],
@@ -525,32 +544,29 @@ fn correct_by_discrepancy(
         return CurveSource::Model;
     };
     let att = Discrepancy::fit(&att_res);
-    let correct = |v: Option<f64>, s: Option<f64>, d: &Discrepancy, f: f64| {
-        let (mean, var) = d.at(f);
-        let v = v?;
-        let c = v * mean.exp();
-        let model_std = s.unwrap_or(0.0) * model_std_factor * mean.exp();
-        Some((
-            c,
-            (model_std * model_std + c * c * var).sqrt(),
-            c * var.sqrt(),
-        ))
-    };
-    let mut band_pts = Vec::with_capacity(curve.len());
-    let mut band_disc = Vec::with_capacity(curve.len());
-    for p in curve.iter_mut() {
-        let f = p.frequency_hz;
-        let corrected = correct(p.model_phase_speed, p.phase_speed_std, &speed, f);
-        p.phase_speed = corrected.map(|c| c.0);
-        p.phase_speed_std = corrected.map(|c| c.1);
-        band_pts.push((f, p.phase_speed));
-        band_disc.push((f, corrected.map(|c| c.2)));
-        if let Some(a) = &att {
-            let corrected = correct(p.model_attenuation_db, p.attenuation_db_std, a, f);
-            p.attenuation_db = corrected.map(|c| c.0);
-            p.attenuation_db_std = corrected.map(|c| c.1);
-        }
-    }
+    let measured_db: Vec<f64> = problem
+        .data
+        .measurements
+        .iter()
+        .map(|m| crate::units::np_to_db(m.attenuation))
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .collect();
+    let att_range = (!measured_db.is_empty()).then(|| {
+        (
+            measured_db.iter().copied().fold(f64::INFINITY, f64::min),
+            measured_db
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max),
+        )
+    });
+    let (band_pts, band_disc) = correct_curve(
+        curve,
+        &speed,
+        att.as_ref().zip(att_range),
+        model_std_factor,
+        problem.data.fluid.sound_speed(),
+    );
     let model_band_std = leak_band_speed.map_or(0.0, |b| b.std * model_std_factor);
     *leak_band_speed = match (
         band_mean(&band_pts, LEAK_BAND_HZ),
@@ -563,6 +579,104 @@ fn correct_by_discrepancy(
         _ => None,
     };
     CurveSource::ModelPlusDiscrepancy
+}
+
+/// How far a corrected attenuation may lie from the measured ones and still be given: within a
+/// factor of 10 below the smallest and above the largest measured attenuation of the segment.
+pub const ATTENUATION_SUPPORT_FACTOR: f64 = 10.0;
+
+/// Per grid frequency (Hz), a value where there is one: the inputs of a band mean.
+type BandPoints = Vec<(f64, Option<f64>)>;
+
+/// One corrected value: the value, its one-sigma error, and the discrepancy's part of it.
+type Corrected = (f64, f64, f64);
+
+/// `model` × exp(δ̂) at `f` with its error, or `None` where the model gives no positive value.
+fn corrected(
+    model: Option<f64>,
+    model_std: Option<f64>,
+    model_std_factor: f64,
+    d: &Discrepancy,
+    f: f64,
+) -> Option<Corrected> {
+    let v = model.filter(|v| v.is_finite() && *v > 0.0)?;
+    let (mean, var) = d.at(f);
+    let c = v * mean.exp();
+    let model_std = model_std.unwrap_or(0.0) * model_std_factor * mean.exp();
+    let out = (
+        c,
+        (model_std * model_std + c * c * var).sqrt(),
+        c * var.sqrt(),
+    );
+    (out.0.is_finite() && out.1.is_finite() && out.2.is_finite()).then_some(out)
+}
+
+/// Correct a model curve by the discrepancies of its speed and attenuation (P89), physically:
+///
+/// - a corrected phase speed lies in (0, `max_speed`), `max_speed` the water's free speed c_f
+///   (the pipe's wave is slower than sound in the unconfined water); where exp(δ̂) would take
+///   it out, the point keeps the model's speed, with the discrepancy's error (tapered to the
+///   model). Outside the measured band δ̂ is held at its edge value (`Discrepancy::at`);
+/// - a corrected attenuation is given only where it is supported: within the measured band
+///   widened by [`super::discrepancy::SUPPORT_MARGIN_OCTAVES`], where the model's attenuation
+///   is positive, where its one-sigma error is below the value itself, and where it lies within
+///   [`ATTENUATION_SUPPORT_FACTOR`] of the measured attenuations (`att`'s range, dB/m: a
+///   correction that multiplies a model attenuation near zero by the ratio found next to it
+///   gives values no measurement is near); elsewhere it and its error are `None` (the exports
+///   leave them blank, the plots leave them out). Never below 0.
+///
+/// Returns the leak-band mean's inputs: each point's speed and the discrepancy's part of its
+/// error.
+pub(crate) fn correct_curve(
+    curve: &mut [PredictedPoint],
+    speed: &Discrepancy,
+    att: Option<(&Discrepancy, (f64, f64))>,
+    model_std_factor: f64,
+    max_speed: f64,
+) -> (BandPoints, BandPoints) {
+    let mut band_pts = Vec::with_capacity(curve.len());
+    let mut band_disc = Vec::with_capacity(curve.len());
+    for p in curve.iter_mut() {
+        let f = p.frequency_hz;
+        let model_speed = p.model_phase_speed.filter(|v| v.is_finite() && *v > 0.0);
+        let c = corrected(model_speed, p.phase_speed_std, model_std_factor, speed, f)
+            .filter(|c| c.0 > 0.0 && c.0 < max_speed)
+            .or_else(|| {
+                // Tapered to the model: its speed, with the discrepancy's error.
+                model_speed.filter(|v| *v < max_speed).and_then(|v| {
+                    let m = p.phase_speed_std.unwrap_or(0.0) * model_std_factor;
+                    let d = v * speed.at(f).1.sqrt();
+                    let s = (m * m + d * d).sqrt();
+                    (d.is_finite() && s.is_finite()).then_some((v, s, d))
+                })
+            });
+        p.phase_speed = c.map(|c| c.0);
+        p.phase_speed_std = c.map(|c| c.1);
+        band_pts.push((f, p.phase_speed));
+        band_disc.push((f, c.map(|c| c.2)));
+        if let Some((a, (a_lo, a_hi))) = att {
+            let (lo, hi) = a.support_hz();
+            let (v_lo, v_hi) = (
+                a_lo / ATTENUATION_SUPPORT_FACTOR,
+                a_hi * ATTENUATION_SUPPORT_FACTOR,
+            );
+            let c = corrected(
+                p.model_attenuation_db,
+                p.attenuation_db_std,
+                model_std_factor,
+                a,
+                f,
+            )
+            .filter(|c| (lo..=hi).contains(&f) && (v_lo..=v_hi).contains(&c.0) && c.1 < c.0);
+            p.attenuation_db = c.map(|c| c.0);
+            p.attenuation_db_std = c.map(|c| c.1);
+        } else if p.attenuation_db.is_some_and(|a| a.is_nan() || a < 0.0) {
+            // No attenuation residual to correct by: the model's, where it is physical.
+            p.attenuation_db = None;
+            p.attenuation_db_std = None;
+        }
+    }
+    (band_pts, band_disc)
 }
 
 /// Mean phase speed over [`LEAK_BAND_HZ`] of `sys`, m/s: the leak-band speed every fit and
@@ -714,6 +828,76 @@ fn separated_minima(
 mod tests {
     use super::*;
     use crate::invert::uncertainty::{Interval, Z_95};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+        /// Every curve a fit can store is physical: whatever the residuals (a model several
+        /// decades off, few or many frequencies, any noise) and whatever the model curve (an
+        /// attenuation near, at or below zero, a speed past the water's), the corrected phase
+        /// speed lies in (0, c_f) and the corrected attenuation is absent or non-negative,
+        /// inside the support band and near the measured attenuations.
+        #[test]
+        fn every_corrected_curve_is_physical(
+            pts in proptest::collection::vec(
+                (20.0..3000.0f64, -12.0..12.0f64, 1e-4..2.0f64, -12.0..12.0f64, 1e-3..2.0f64),
+                1..12,
+            ),
+            model in proptest::collection::vec((10.0..2500.0f64, -0.05..2.0f64), STANDARD_GRID_HZ.len()),
+            range in (1e-4..1.0f64, 1.0..100.0f64),
+        ) {
+            const C_F: f64 = 1481.0;
+            let speed_res: Vec<Residual> = pts
+                .iter()
+                .map(|&(f, r, s, _, _)| Residual { frequency_hz: f, ln_ratio: r, sigma: s })
+                .collect();
+            let att_res: Vec<Residual> = pts
+                .iter()
+                .map(|&(f, _, _, r, s)| Residual { frequency_hz: f, ln_ratio: r, sigma: s })
+                .collect();
+            let (speed, att) = (Discrepancy::fit(&speed_res), Discrepancy::fit(&att_res));
+            prop_assume!(speed.is_some() && att.is_some());
+            let (speed, att) = (speed.unwrap(), att.unwrap());
+            let mut curve: Vec<PredictedPoint> = STANDARD_GRID_HZ
+                .iter()
+                .zip(&model)
+                .map(|(&f, &(c, a))| PredictedPoint {
+                    frequency_hz: f,
+                    phase_speed: Some(c),
+                    phase_speed_std: Some(0.01 * c),
+                    attenuation_db: Some(a),
+                    attenuation_db_std: Some(0.05 * a.abs()),
+                    model_phase_speed: Some(c),
+                    model_attenuation_db: Some(a),
+                })
+                .collect();
+            let (lo_a, hi_a) = (range.0, range.0 * range.1);
+            correct_curve(&mut curve, &speed, Some((&att, (lo_a, hi_a))), 1.0, C_F);
+            let (lo, hi) = att.support_hz();
+            for p in &curve {
+                if let Some(c) = p.phase_speed {
+                    prop_assert!(c > 0.0 && c < C_F, "{} Hz: speed {c}", p.frequency_hz);
+                    prop_assert!(p.phase_speed_std.is_some_and(f64::is_finite));
+                }
+                if let Some(a) = p.attenuation_db {
+                    prop_assert!(a.is_finite() && a >= 0.0, "{} Hz: attenuation {a}", p.frequency_hz);
+                    prop_assert!((lo..=hi).contains(&p.frequency_hz), "{} Hz outside {lo}-{hi}", p.frequency_hz);
+                    prop_assert!(a <= hi_a * ATTENUATION_SUPPORT_FACTOR && a >= lo_a / ATTENUATION_SUPPORT_FACTOR);
+                    prop_assert!(p.attenuation_db_std.is_some_and(|s| s < a));
+                }
+            }
+            // Without an attenuation correction the model's attenuation is kept where physical.
+            let mut bare = curve.clone();
+            for (p, &(c, a)) in bare.iter_mut().zip(&model) {
+                p.phase_speed = Some(c);
+                p.attenuation_db = Some(a);
+            }
+            correct_curve(&mut bare, &speed, None, 1.0, C_F);
+            for (p, &(_, a)) in bare.iter().zip(&model) {
+                prop_assert_eq!(p.attenuation_db, (a >= 0.0).then_some(a));
+            }
+        }
+    }
     use crate::physics::soil::soil_speeds;
     use crate::physics::{ContactMode, Model};
 

@@ -51,6 +51,13 @@ pub const ASSUMED_RELATIVE_SPEED_STD: f64 = 0.01;
 /// Relative one-sigma error of the attenuation assumed where none is stated.
 pub const ASSUMED_RELATIVE_ATTENUATION_STD: f64 = 0.10;
 
+/// How far beyond the measured frequencies, in octaves on each side, a corrected attenuation
+/// is still reported: half an octave. Further out the correction rests on no measurement, and
+/// a model attenuation near zero (a soil faster than the pipe's wave radiates almost nothing)
+/// multiplied by the measured band's ratio gives values no pipe has; there the curve is not
+/// given and the exports leave it blank.
+pub const SUPPORT_MARGIN_OCTAVES: f64 = 0.5;
+
 /// Bisection steps for s² (the interval shrinks 2⁻⁶⁰: far below any residual's precision).
 const NUGGET_BISECTION_STEPS: usize = 60;
 
@@ -204,6 +211,13 @@ impl Discrepancy {
             (self.beta[0] * self.beta[0] + c[0]) / (std::f64::consts::LN_2 * std::f64::consts::LN_2)
         };
         (mean, var_here + var_trend + growth * d * d)
+    }
+
+    /// The frequencies where the correction is supported, Hz: the measured band widened by
+    /// [`SUPPORT_MARGIN_OCTAVES`] on each side.
+    pub fn support_hz(&self) -> (f64, f64) {
+        let m = SUPPORT_MARGIN_OCTAVES * std::f64::consts::LN_2;
+        ((self.band.0 - m).exp(), (self.band.1 + m).exp())
     }
 
     /// Variance s² of the smooth remainder, (ln q)².

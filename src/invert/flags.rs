@@ -92,6 +92,9 @@ pub enum FlagCode {
     NearGrazing,
     /// Equally good, separated optima that predict the same speed (note).
     EquivalentMinima,
+    /// The fitted speed is far from what the measured neighbours predict, leave-one-out
+    /// (flag; raised by the soil field, not by a segment's fit).
+    FieldOutlier,
 }
 
 impl FlagCode {
@@ -114,6 +117,7 @@ impl FlagCode {
             FlagCode::NearGrazing => "near_grazing",
             FlagCode::EquivalentMinima => "equivalent_minima",
             FlagCode::UnstableRoot => "unstable_root",
+            FlagCode::FieldOutlier => "field_outlier",
         }
     }
 
@@ -126,7 +130,8 @@ impl FlagCode {
             | FlagCode::OutOfValidity
             | FlagCode::MultipleMinima
             | FlagCode::SpeedUncertain
-            | FlagCode::UnstableRoot => Severity::Flag,
+            | FlagCode::UnstableRoot
+            | FlagCode::FieldOutlier => Severity::Flag,
             _ => Severity::Note,
         }
     }
@@ -150,11 +155,12 @@ impl FlagCode {
             FlagCode::NearGrazing => "the predicted wave is within 2 % of a soil wave speed: the model is near a singular point there",
             FlagCode::EquivalentMinima => "separated optima fit equally well but predict the same speed; nothing to do",
             FlagCode::UnstableRoot => "the model's wave jumps between branches next to the fitted soil, so no uncertainty can be computed: do not use the values; check the inventory record and run `diagnose`",
+            FlagCode::FieldOutlier => "the fitted leak-band speed is far from what the measured neighbours predict (leave-one-out, |z| > 3.29): a wrong record, a changed soil or a leak; check the record and re-measure",
         }
     }
 
     /// Every code.
-    pub const ALL: [FlagCode; 16] = [
+    pub const ALL: [FlagCode; 17] = [
         FlagCode::HighMisfit,
         FlagCode::TooFewMeasurements,
         FlagCode::InconsistentMeasurements,
@@ -162,6 +168,7 @@ impl FlagCode {
         FlagCode::MultipleMinima,
         FlagCode::SpeedUncertain,
         FlagCode::UnstableRoot,
+        FlagCode::FieldOutlier,
         FlagCode::SoilViaCp,
         FlagCode::SoilViaCs,
         FlagCode::SoilViaSpeeds,
@@ -222,6 +229,23 @@ pub struct Evidence<'a> {
     pub leak_band_speed: Option<WithError>,
     /// A separated, equally good optimum, if the restarts found one.
     pub separated: Option<Separated>,
+}
+
+/// The `speed_uncertain` reason for the reported leak-band speed, from the very value and error
+/// the fit stores and the exports show; `None` when it is known within [`SPEED_RSTD_MAX`].
+pub fn speed_uncertain(leak_band_speed: Option<WithError>) -> Option<String> {
+    match leak_band_speed {
+        Some(s) if s.relative() <= SPEED_RSTD_MAX => None,
+        Some(s) => Some(format!(
+            "leak-band speed {} ± {} m/s ({:.1} %, one sigma)",
+            sig(s.value, 4),
+            sig(s.std, 2),
+            100.0 * s.relative()
+        )),
+        None => {
+            Some("the leak-band speed could not be predicted over the whole 100-800 Hz band".into())
+        }
+    }
 }
 
 /// Assess a fit: its flags and notes, flags first.
@@ -298,21 +322,8 @@ pub fn assess(ev: &Evidence<'_>) -> Vec<Flag> {
             );
         }
     }
-    match ev.leak_band_speed {
-        Some(s) if s.relative() <= SPEED_RSTD_MAX => {}
-        Some(s) => push(
-            FlagCode::SpeedUncertain,
-            format!(
-                "leak-band speed {} ± {} m/s ({:.1} %, one sigma)",
-                sig(s.value, 4),
-                sig(s.std, 2),
-                100.0 * s.relative()
-            ),
-        ),
-        None => push(
-            FlagCode::SpeedUncertain,
-            "the leak-band speed could not be predicted over the whole 100-800 Hz band".into(),
-        ),
+    if let Some(reason) = speed_uncertain(ev.leak_band_speed) {
+        push(FlagCode::SpeedUncertain, reason);
     }
     soil_notes(ev, &mut push);
     let grazing: Vec<String> = ev
@@ -541,6 +552,17 @@ mod tests {
             .iter()
             .filter(|c| c.severity() == Severity::Flag)
             .count();
-        assert_eq!(flags, 7);
+        assert_eq!(flags, 8);
+    }
+
+    #[test]
+    fn every_code_has_its_own_advice() {
+        let advice: std::collections::BTreeSet<&str> =
+            FlagCode::ALL.iter().map(|c| c.advice()).collect();
+        assert_eq!(advice.len(), FlagCode::ALL.len());
+        assert!(FlagCode::ALL.contains(&FlagCode::FieldOutlier));
+        assert!(FlagCode::FieldOutlier
+            .advice()
+            .contains(&format!("{:.2}", crate::field::FIELD_OUTLIER_Z)));
     }
 }

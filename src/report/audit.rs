@@ -264,6 +264,11 @@ struct Tally {
     with_speed_error: usize,
     above_speed_error: usize,
     without_speed_error: usize,
+    /// Segments whose speed is the soil field's prediction, of them not fitted, and with an
+    /// error.
+    predicted: usize,
+    predicted_unfitted: usize,
+    predicted_with_error: usize,
     least_certain: Top<LeastCertain>,
     soil: BTreeMap<String, SoilTally>,
     speed_points: Vec<SpeedPoint<'static>>,
@@ -296,6 +301,9 @@ impl Tally {
             with_speed_error: 0,
             above_speed_error: 0,
             without_speed_error: 0,
+            predicted: 0,
+            predicted_unfitted: 0,
+            predicted_with_error: 0,
             least_certain: Top::new(LEAST_CERTAIN_LISTED, |a, b| {
                 b.rel.total_cmp(&a.rel).then(a.id.cmp(&b.id))
             }),
@@ -391,6 +399,25 @@ impl Tally {
                 t.nu.extend(f.soil_poisson);
             }
         }
+        let predicted = r.speed_source == crate::export::record::SPEED_PREDICTED;
+        if predicted {
+            self.predicted += 1;
+            self.predicted_unfitted += usize::from(r.fit.is_none());
+            if let Some((v, Some(e))) = speed_with_std(r) {
+                self.predicted_with_error += 1;
+                self.above_speed_error += usize::from(e / v > SPEED_RSTD_MAX);
+                self.least_certain.push(LeastCertain {
+                    id: r.id().to_string(),
+                    material: r.segment.material.code(),
+                    soil_type: r.segment.soil_type.clone().unwrap_or_default(),
+                    speed: v,
+                    std: e,
+                    rel: e / v,
+                    status: "predicted",
+                    flags: r.flags.clone().unwrap_or_default(),
+                });
+            }
+        }
         let Some(f) = &r.fit else { return };
         self.run_ids.insert(f.run_id);
         if f.status == FitStatus::Failed {
@@ -406,7 +433,7 @@ impl Tally {
         self.all_chi2 &= f.chi2_per_dof.is_some_and(f64::is_finite);
         self.misfits.extend(f.misfit.filter(|v| v.is_finite()));
         self.chi2.extend(f.chi2_per_dof.filter(|v| v.is_finite()));
-        match speed_with_std(r) {
+        match speed_with_std(r).filter(|_| !predicted) {
             Some((v, Some(e))) => {
                 self.with_speed_error += 1;
                 self.above_speed_error += usize::from(e / v > SPEED_RSTD_MAX);

@@ -133,7 +133,8 @@ pub fn log_histogram(
             .x_desc(x_desc)
             .y_desc("segments")
             .x_label_formatter(&|v| sig(10f64.powf(*v), 2))
-            .y_label_formatter(&|v| format!("{v:.0}"))
+            .y_labels(count_ticks(ymax))
+            .y_label_formatter(&|v| count_label(*v))
             .label_style((FONT, 12))
             .draw()
             .map_err(e2s)?;
@@ -179,6 +180,22 @@ pub fn log_histogram(
         svg,
         off_axis: below,
     })
+}
+
+/// How many y ticks a count axis up to `ymax` asks for: one per whole count when they are few
+/// (so that a small network's axis reads 0, 1, 2), at most 10.
+fn count_ticks(ymax: f64) -> usize {
+    (ymax.floor() as usize + 1).clamp(2, 10)
+}
+
+/// A count axis' tick label: the count where the tick is a whole number, nothing between (a
+/// count of 0.4 segments printed as "0" would repeat the label).
+pub fn count_label(v: f64) -> String {
+    if (v - v.round()).abs() < 1e-9 {
+        format!("{:.0}", v.round())
+    } else {
+        String::new()
+    }
 }
 
 /// One point of the speed–diameter chart.
@@ -653,6 +670,34 @@ pub fn curve_with_points(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small network's histogram labels each whole count once: 0, 1 (never 0, 0, 1, 1).
+    #[test]
+    fn a_count_axis_labels_whole_counts_once() {
+        let chart = log_histogram(
+            "misfit distribution",
+            &[0.3, 0.8, 1.1, 0.5],
+            "chi2/dof",
+            &[],
+        )
+        .unwrap();
+        let labels: Vec<String> = chart
+            .svg
+            .split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let t = &t[t.find('>')? + 1..];
+                Some(t[..t.find('<')?].trim().to_string())
+            })
+            .filter(|t| !t.is_empty() && t.chars().all(|c| c.is_ascii_digit()))
+            .collect();
+        let mut unique = labels.clone();
+        unique.dedup();
+        assert_eq!(labels, unique, "repeated count labels");
+        assert!(labels.contains(&"0".to_string()) && labels.contains(&"1".to_string()));
+        assert_eq!(count_label(0.4), "");
+        assert_eq!(count_label(2.0), "2");
+    }
 
     fn points(n: usize) -> Vec<SpeedPoint<'static>> {
         (0..n)

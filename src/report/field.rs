@@ -218,16 +218,24 @@ pub(crate) fn section(db: &Database) -> Result<String, ExportError> {
     let mut measured: Vec<&FieldSegmentRow> = rows.iter().filter(|r| r.loo_z.is_some()).collect();
     if measured.len() >= 2 {
         let z: Vec<f64> = measured.iter().filter_map(|r| r.loo_z).collect();
-        let (sd, robust) = spread(&z);
         let beyond2 = z.iter().filter(|v| v.abs() > 2.0).count();
+        let outliers = measured.iter().filter(|r| r.field_outlier).count();
+        // The spread is the stored figure, the one `calibrate` prints and the database holds:
+        // one name, one figure.
+        let spread_text = run
+            .loo_z_std
+            .map_or_else(|| "–".to_string(), |v| format!("{v:.2}"));
         let _ = write!(
             h,
             "<h3>Leave-one-out check</h3><p class=\"note\">Each measured segment is predicted \
              from the others and compared with its own fit: z = (field − fit) / √(σ²<sub>field\
-             </sub> + σ²<sub>fit</sub>) should be N(0, 1). Spread of z: standard deviation \
-             {sd:.2}, robust (1.4826 MAD) {robust:.2}; |z| &gt; 2 for {beyond2} of {} \
-             (about 5 % expected). |z| &gt; {FIELD_OUTLIER_Z} is flagged \
-             <code>field_outlier</code>: a wrong record, a changed soil or a leak.</p>",
+             </sub> + σ²<sub>fit</sub>) should be N(0, 1). Leave-one-out z spread \
+             <b>{spread_text}</b> (the standard deviation of z, the {outliers} \
+             field outlier{} left out; near 1 when the predicted errors are honest, as \
+             <code>calibrate</code> prints it); |z| &gt; 2 for {beyond2} of {} (about 5 % \
+             expected). |z| &gt; {FIELD_OUTLIER_Z} is flagged <code>field_outlier</code>: a wrong \
+             record, a changed soil or a leak.</p>",
+            if outliers == 1 { "" } else { "s" },
             z.len()
         );
         let ids: Vec<String> = measured.iter().map(|r| r.segment_id.clone()).collect();

@@ -191,7 +191,7 @@ fn jobs_file(dir: &Path, bad: &str) -> PathBuf {
     f
 }
 
-/// `locate --jobs` on [`jobs_file`]: exit 1, the good row located, the bad one failed with
+/// `locate --input` on [`jobs_file`]: exit 1, the good row located, the bad one failed with
 /// `why` in its message.
 fn only_the_row_fails(bad: &str, why: &str) {
     let d = tempfile::tempdir().unwrap();
@@ -201,12 +201,12 @@ fn only_the_row_fails(bad: &str, why: &str) {
         "locate",
         "--db",
         p(&fixture().db),
-        "--jobs",
+        "--input",
         p(&jobs),
         "--out",
         p(&out),
     ]);
-    assert!(!r.hung(), "locate --jobs with the row {bad} hung");
+    assert!(!r.hung(), "locate --input with the row {bad} hung");
     assert_eq!(r.code(), Some(1), "{}{}", r.stdout, r.stderr);
     assert!(
         r.stdout.contains("1 of 2 jobs located, 1 failed"),
@@ -381,7 +381,7 @@ fn defect_09_locate_escapes_control_characters_of_ids() {
         "locate",
         "--db",
         p(&db),
-        "--jobs",
+        "--input",
         p(&jobs),
         "--out",
         p(&out),
@@ -392,8 +392,8 @@ fn defect_09_locate_escapes_control_characters_of_ids() {
         "{}",
         r.stderr
     );
-    no_controls("locate --jobs (stderr)", &r.stderr);
-    no_controls("locate --jobs (stdout)", &r.stdout);
+    no_controls("locate --input (stderr)", &r.stderr);
+    no_controls("locate --input (stdout)", &r.stdout);
 }
 
 #[test]
@@ -588,7 +588,7 @@ const LOCATE_RECORDING2: &[&str] = &[
 const LOCATE_JOBS: &[&str] = &[
     "--db",
     "{db}",
-    "--jobs",
+    "--input",
     "{net}/leaks/jobs.csv",
     "--out",
     "{tmp}/located.csv",
@@ -858,6 +858,7 @@ const TARGETS: &[Target] = &[
     ),
     t("locate", "--band", Shape::Pair, None, LOCATE),
     t("locate", "--band", Shape::Pair, None, LOCATE_JOBS),
+    t("locate", "--jobs", Shape::Plain, None, LOCATE_JOBS),
     t("locate", "--snap-tolerance", Shape::Plain, None, LOCATE),
     t("locate", "--join-tolerance", Shape::Plain, None, LOCATE),
     t("locate", "--span-std-fraction", Shape::Plain, None, LOCATE),

@@ -96,9 +96,9 @@ pub(super) const COLUMNS: &[ColumnSpec] = &[
 // constructors, which remain the authority.
 use crate::physics::inputs::{
     FLUID_BULK_MODULUS_RANGE as FLUID_BULK_MODULUS, FLUID_DENSITY_RANGE as FLUID_DENSITY,
-    PIPE_DENSITY_RANGE as PIPE_DENSITY, PIPE_LOSS_FACTOR_RANGE as PIPE_LOSS_FACTOR,
-    PIPE_POISSON_RANGE as PIPE_POISSON, PIPE_YOUNGS_MODULUS_RANGE as PIPE_YOUNGS_MODULUS,
-    SOIL_DENSITY_RANGE as SOIL_DENSITY,
+    MEAN_RADIUS_RANGE, PIPE_DENSITY_RANGE as PIPE_DENSITY,
+    PIPE_LOSS_FACTOR_RANGE as PIPE_LOSS_FACTOR, PIPE_POISSON_RANGE as PIPE_POISSON,
+    PIPE_YOUNGS_MODULUS_RANGE as PIPE_YOUNGS_MODULUS, SOIL_DENSITY_RANGE as SOIL_DENSITY,
 };
 
 /// Smallest wall thickness to mean radius ratio h/a accepted (the largest is the thin-shell
@@ -401,7 +401,7 @@ fn check_row(c: &mut RowCheck<'_>, default_srid: Option<i64>) -> Option<SegmentR
     // The checked constructors are the final word: the thin-shell limit h/a <= 0.25 and the
     // mean-radius range are only known once the pipe is built.
     if let Err(e) = record.pipe() {
-        c.err(pipe_error_column(&e), e.to_string());
+        c.err(pipe_error_column(&e), in_the_users_terms(&e, &record));
         return None;
     }
     // The lower limit of h/a, with the mean radius a = (D_o − h)/2 (model P6), once the
@@ -463,6 +463,32 @@ pub(super) fn keep_stored(rec: &mut SegmentRecord, old: &SegmentRecord, absent: 
             }
             _ => {}
         }
+    }
+}
+
+/// The constructor's refusal in the terms of the file: a mean radius out of range is reported
+/// as the outer diameter and wall the row gives, in mm, with the diameters the model takes.
+fn in_the_users_terms(e: &InputError, record: &SegmentRecord) -> String {
+    match e {
+        InputError::OutOfRange { name, .. } | InputError::NotFinite { name, .. }
+            if *name == MEAN_RADIUS_RANGE.name =>
+        {
+            let (d, h) = (record.outer_diameter_mm, record.wall_thickness_mm);
+            let (lo, hi) = (MEAN_RADIUS_RANGE.lo * 1e3, MEAN_RADIUS_RANGE.hi * 1e3);
+            format!(
+                "an outer diameter of {} mm with a wall of {} mm is outside what the model takes: \
+                 its mean radius (D - h)/2 = {} mm must be {} - {} mm (an outer diameter of \
+                 about {} mm to {} m); is the diameter given in mm?",
+                short(d),
+                short(h),
+                short((d - h) / 2.0),
+                short(lo),
+                short(hi),
+                short(2.0 * lo),
+                short(2.0 * hi / 1e3)
+            )
+        }
+        _ => e.to_string(),
     }
 }
 

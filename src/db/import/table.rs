@@ -654,10 +654,13 @@ fn read_csv(
     ))
 }
 
+/// The header an empty file's message suggests: the required columns and, of the frequency
+/// columns (the header needs one of `frequency_hz` and `omega_rad_s`), `frequency_hz`, in the
+/// order of `specs`.
 fn required_names(specs: &[ColumnSpec]) -> String {
     specs
         .iter()
-        .filter(|s| s.required)
+        .filter(|s| s.required || s.name == "frequency_hz")
         .map(|s| s.name)
         .collect::<Vec<_>>()
         .join(",")

@@ -149,10 +149,9 @@ pub(super) fn by_frequency(counts: &BTreeMap<String, usize>) -> Vec<(&str, usize
 /// The leak-band speed of a fitted record, m/s, with its one-sigma error when stored.
 pub(super) fn speed_with_std(r: &SegmentExport) -> Option<(f64, Option<f64>)> {
     let speed = r.leak_band_speed.filter(|v| v.is_finite() && *v > 0.0)?;
+    // The exports' error: the fit's, or the soil field's for a predicted speed.
     let std = r
-        .fit
-        .as_ref()
-        .and_then(|f| f.leak_band_speed_std_m_per_s)
+        .leak_band_speed_std()
         .filter(|s| s.is_finite() && *s >= 0.0);
     Some((speed, std))
 }
@@ -172,7 +171,9 @@ pub(super) fn trust(h: &mut String, t: &Tally) {
         "<section id=\"trust\"><h2>Trustworthy predictions</h2><p><b>{ok} of {all} segments \
          ({pct}) have a trustworthy wave speed</b> (status ok): the model explains their \
          measurements and their leak-band speed is known within {lim:.0} % (one sigma). \
-         {flagged} are flagged for action, {failed} failed, {unfitted} are not fitted.</p><table>\
+         {flagged} are flagged for action, {failed} failed, {unfitted} are not fitted. \
+         <b>{predicted} have a speed predicted by the soil field</b> with its error \
+         ({predicted_unfitted} of the {unfitted} not fitted).</p><table>\
          <tr><th>status</th><th>segments</th><th></th></tr>",
         ok = n("ok"),
         all = t.segments,
@@ -181,6 +182,8 @@ pub(super) fn trust(h: &mut String, t: &Tally) {
         flagged = n("flagged"),
         failed = n("failed"),
         unfitted = n(UNFITTED),
+        predicted = t.predicted,
+        predicted_unfitted = t.predicted_unfitted,
     );
     for s in ["ok", "flagged", "failed", UNFITTED] {
         let colour = match s {
@@ -396,12 +399,15 @@ pub(super) fn least_certain(h: &mut String, t: &Tally) {
     let (above, without_error) = (t.above_speed_error, t.without_speed_error);
     let _ = write!(
         h,
-        "<section id=\"least-certain\"><h2>The least certain wave speeds</h2><p>{} fitted \
-         segments have a leak-band speed with an error; {above} of them are uncertain by more \
-         than {:.0} % (one sigma). The {} with the largest relative error:</p>",
+        "<section id=\"least-certain\"><h2>The least certain wave speeds</h2><p>{} \
+         segments have a leak-band speed with an error ({} fitted, {} predicted by the soil \
+         field); {above} of them are uncertain by more than {:.0} % (one sigma). The {} with \
+         the largest relative error:</p>",
+        t.with_speed_error + t.predicted_with_error,
         t.with_speed_error,
+        t.predicted_with_error,
         100.0 * SPEED_RSTD_MAX,
-        t.with_speed_error.min(LEAST_CERTAIN_LISTED),
+        (t.with_speed_error + t.predicted_with_error).min(LEAST_CERTAIN_LISTED),
     );
     if without_error > 0 {
         let _ = write!(
@@ -431,7 +437,7 @@ pub(super) fn least_certain(h: &mut String, t: &Tally) {
         );
     }
     if rows.is_empty() {
-        h.push_str("<tr><td colspan=\"7\">no fitted segment with a speed error</td></tr>");
+        h.push_str("<tr><td colspan=\"7\">no segment with a speed error</td></tr>");
     }
     h.push_str("</table></section>");
 }
@@ -715,7 +721,8 @@ pub(super) fn worst_fits(
             .filter_map(|p| {
                 Some((
                     p.frequency_hz,
-                    p.attenuation_db_per_m.filter(|v| v.is_finite())?,
+                    p.attenuation_db_per_m
+                        .filter(|v| v.is_finite() && *v >= 0.0)?,
                 ))
             })
             .collect();
@@ -777,6 +784,29 @@ pub(super) fn worst_fits(
         for c in &drawn {
             h.push_str(&c.svg);
         }
+        // Where a corrected attenuation is not supported (far outside the measured band, or
+        // not near any measured value) the curve leaves it out; say so, with the span shown.
+        let unsupported = r
+            .curve
+            .iter()
+            .filter(|p| {
+                p.phase_speed_m_per_s.is_some() && !att.iter().any(|a| a.0 == p.frequency_hz)
+            })
+            .count();
+        if unsupported > 0 {
+            let span = match (att.first(), att.last()) {
+                (Some(a), Some(b)) => format!("shown at {}–{} Hz", sig(a.0, 3), sig(b.0, 3)),
+                _ => "shown nowhere".to_string(),
+            };
+            let _ = write!(
+                h,
+                "<p class=\"note unsupported\">attenuation {span}: at {unsupported} of {} \
+                 frequencies the {} curve is not supported by the measurements and is left \
+                 out (blank in the exports).</p>",
+                r.curve.len(),
+                escape(&fit.curve_source)
+            );
+        }
         let off: usize = drawn.iter().map(|c| c.off_axis).sum();
         if off > 0 {
             let _ = write!(
@@ -816,4 +846,29 @@ pub(super) fn failed(h: &mut String, t: &Tally) {
         h.push_str("</table>");
     }
     h.push_str("</section>");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The audit's advice for every code is that code's own, never the fallback for codes of
+    /// an older version, and no two codes share one.
+    #[test]
+    fn every_code_gets_its_own_advice_in_the_audit() {
+        let mut seen = std::collections::BTreeSet::new();
+        for c in FlagCode::ALL {
+            assert_eq!(advice(c.as_str()), c.advice(), "{c}");
+            assert!(seen.insert(advice(c.as_str())), "{c} shares its advice");
+        }
+        for z in ZoneFlag::ALL {
+            assert_eq!(advice(z.as_str()), z.advice(), "{}", z.as_str());
+            assert!(
+                seen.insert(advice(z.as_str())),
+                "{} shares its advice",
+                z.as_str()
+            );
+        }
+        assert!(advice("field_outlier").contains("neighbours"));
+    }
 }
