@@ -147,7 +147,11 @@ fn changes_are_found_and_named_and_unchanged_pipes_pooled() {
         .iter()
         .filter(|(id, _)| f[*id].status == "changed")
         .count();
-    assert!(alarms <= 1, "{alarms} of {} unchanged reported changed", unchanged.len());
+    assert!(
+        alarms <= 1,
+        "{alarms} of {} unchanged reported changed",
+        unchanged.len()
+    );
     // The summary counts what the table holds.
     let n_changed = f.values().filter(|x| x.status == "changed").count();
     let n_pooled = f.values().filter(|x| x.pooled).count();
@@ -233,7 +237,10 @@ fn changes_are_found_and_named_and_unchanged_pipes_pooled() {
     // The current speed of a changed pipe covers the truth after the change.
     let mut covered = 0;
     let mut changed = 0;
-    for (id, x) in t.iter().filter(|(_, x)| x.effect != "none" && x.after.is_finite()) {
+    for (id, x) in t
+        .iter()
+        .filter(|(_, x)| x.effect != "none" && x.after.is_finite())
+    {
         let (v, s): (f64, f64) = conn
             .query_row(
                 "SELECT leak_band_speed_m_per_s, leak_band_speed_std_m_per_s FROM latest_fits \
@@ -245,7 +252,10 @@ fn changes_are_found_and_named_and_unchanged_pipes_pooled() {
         changed += 1;
         covered += usize::from((v - x.after).abs() <= 2.0 * s);
     }
-    assert!(covered * 10 >= changed * 8, "{covered} of {changed} covered");
+    assert!(
+        covered * 10 >= changed * 8,
+        "{covered} of {changed} covered"
+    );
 }
 
 /// The level's false-alarm rate, measured by simulation: on a network where no pipe changed,
@@ -257,14 +267,20 @@ fn the_false_alarm_rate_is_measured_on_unchanged_pipes() {
     let f = found(&dir.path().join("net/pipewave.sqlite"));
     assert_eq!(f.len(), 250);
     let alarms = f.values().filter(|x| x.status == "changed").count();
-    assert!(alarms <= 5, "{alarms} of 250 unchanged pipes reported changed");
+    assert!(
+        alarms <= 5,
+        "{alarms} of 250 unchanged pipes reported changed"
+    );
     let pooled = f.values().filter(|x| x.pooled).count();
     assert_eq!(pooled + alarms, 250);
     let small = f
         .values()
         .filter(|x| x.p_value.is_some_and(|p| p < 0.5))
         .count();
-    assert!(small >= 10, "{small} p-values below 0.5: the test never looks");
+    assert!(
+        small >= 10,
+        "{small} p-values below 0.5: the test never looks"
+    );
 }
 
 /// Same inputs and seed, same findings, whatever the thread count.
@@ -326,7 +342,9 @@ fn the_export_and_fit_report_the_change() {
         out.to_str().unwrap(),
     ])
     .stdout;
-    assert!(String::from_utf8(stdout).unwrap().contains("campaigns: 12 tested"));
+    assert!(String::from_utf8(stdout)
+        .unwrap()
+        .contains("campaigns: 12 tested"));
     assert_eq!(check(&out), 12);
 }
 

@@ -229,15 +229,17 @@ impl<'a> Joint<'a> {
             .ok()?
             .final_jacobian(false);
         let mut best: Option<JointOptimum> = None;
+        // Each start is a candidate too: the answer is never worse than a start on the
+        // reference path (a polish on the search path can cross onto another root there).
+        let mut candidates: Vec<Vec<f64>> = starts.clone();
         for y0 in &starts {
-            let y = match lm.minimize(self, y0, Some(&bounds)) {
-                Ok(r) if r.cost.is_finite() => r.x,
-                _ => {
-                    let mut y = y0.clone();
-                    bounds.clamp(&mut y);
-                    y
+            if let Ok(r) = lm.minimize(self, y0, Some(&bounds)) {
+                if r.cost.is_finite() {
+                    candidates.push(r.x);
                 }
-            };
+            }
+        }
+        for y in candidates {
             let chi2 = self.chi2_on_reference(&y);
             if chi2.is_finite() && best.as_ref().is_none_or(|b| chi2 < b.chi2) {
                 let p = self.earlier.specs.len();
@@ -282,8 +284,8 @@ pub const JOINT_POLISH_ITERATIONS: usize = 60;
 /// −1.7 for air: −5.4, −4.35, −3.3 and −2.2, i.e. φ ≈ 4e-6 – 6e-3).
 pub const OWN_START_FRACTIONS: [f64; 4] = [0.3, 0.5, 0.7, 0.9];
 
-/// Starts polished per joint fit: the one of lowest misfit.
-pub const POLISHED_STARTS: usize = 1;
+/// Starts polished per joint fit: the two of lowest misfit.
+pub const POLISHED_STARTS: usize = 2;
 
 impl LeastSquares for Joint<'_> {
     fn n_params(&self) -> usize {

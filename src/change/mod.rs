@@ -338,7 +338,11 @@ pub fn test_change(
         name_cause(&mut t, n, p, residuals_of(earlier));
         t.current = current_with_cause(&t, later, settings, fit_later);
     } else {
-        t.pooled = Some(widened_by_consistency(pooled_fit, pooled.consistency_chi2, n));
+        t.pooled = Some(widened_by_consistency(
+            pooled_fit,
+            pooled.consistency_chi2,
+            n,
+        ));
     }
     t.earlier = Some(earlier_fit);
     t
