@@ -139,25 +139,36 @@ fn a_second_campaign_adds_rows_and_keeps_every_row_of_the_first() {
     let after = rows(&db);
     assert_eq!(after.len(), 2 * count);
     assert_eq!(only_campaign(&after, "FD-2026"), before);
-    // The current fit is made from the latest campaign alone.
+    // The current fit is made from the latest campaign alone where the pipe changed (every
+    // wavenumber is 3 % higher), and from both where the test finds no change (P96).
     ok(&["calibrate", "--db", &db, "--jobs", "2"]);
     let conn = Connection::open(&db).unwrap();
-    let campaigns: Vec<String> = conn
-        .prepare("SELECT DISTINCT campaigns FROM latest_fits")
+    let fits: Vec<(String, String, String, i64)> = conn
+        .prepare(
+            "SELECT segment_id, f.campaigns, c.status, f.n_measurements FROM latest_fits f \
+             JOIN latest_changes c USING (segment_id)",
+        )
         .unwrap()
-        .query_map([], |r| r.get(0))
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
         .unwrap()
         .collect::<Result<_, _>>()
         .unwrap();
-    assert_eq!(campaigns, ["FD-2027"]);
-    let used: i64 = conn
-        .query_row("SELECT SUM(n_measurements) FROM latest_fits", [], |r| {
-            r.get(0)
-        })
-        .unwrap();
-    assert_eq!(
-        used as usize, count,
-        "the fits used the latest campaign's rows alone"
+    let own = |id: &str| before.keys().filter(|k| k.0 == id).count() as i64;
+    assert_eq!(fits.iter().map(|f| own(&f.0)).sum::<i64>() as usize, count);
+    for (id, campaigns, status, n) in &fits {
+        // Pooled, the two campaigns' rows at one frequency merge into one (P96).
+        let want = if status == "changed" {
+            "FD-2027"
+        } else {
+            "FD-2027,FD-2026"
+        };
+        assert_eq!((campaigns.as_str(), *n), (want, own(id)), "{id}: {status}");
+    }
+    let changed = fits.iter().filter(|f| f.2 == "changed").count();
+    assert!(
+        2 * changed > fits.len(),
+        "{changed} of {} changed",
+        fits.len()
     );
 }
 

@@ -331,6 +331,34 @@ fn the_export_and_fit_report_the_change() {
         n
     };
     assert_eq!(check(&net.join("out/segments.csv")), 12);
+    // The audit's section: the count, every changed pipe listed (and no other) and the map.
+    let html = std::fs::read_to_string(net.join("out/report.html")).unwrap();
+    let at = html
+        .find("<section id=\"changes\">")
+        .expect("the changes section");
+    let section = &html[at..at + html[at..].find("</section>").unwrap()];
+    let changed: Vec<&String> = f
+        .iter()
+        .filter(|(_, x)| x.status == "changed")
+        .map(|(id, _)| id)
+        .collect();
+    assert!(!changed.is_empty() && changed.len() < 12, "{changed:?}");
+    assert!(
+        section.contains(&format!(
+            "<b>{} of 12 re-measured segments changed</b>",
+            changed.len()
+        )),
+        "{section}"
+    );
+    let table = &section[section.find("<table class=\"changes\">").unwrap()..];
+    for (id, x) in &f {
+        let cell = format!("<td class=\"segment\">{id}</td>");
+        assert_eq!(table.contains(&cell), x.status == "changed", "{id}");
+    }
+    assert!(
+        section.contains("<h3>Change of the leak-band speed"),
+        "no map"
+    );
     let out = dir.path().join("fit.csv");
     let stdout = ok(&[
         "fit",

@@ -4,7 +4,8 @@
 //! Sections (each a `<section id=...>`), in order: `trust` (how many predictions are
 //! trustworthy, status `ok`, and the flags that need action, each with its advice), `actions`
 //! (every flagged or failed segment with its flags, what to do and its speed ± error, longest
-//! pipe first: what a wrong speed would cost), `map`
+//! pipe first: what a wrong speed would cost), `changes` (what changed since the last
+//! campaign: the change test's findings by cause, the changed pipes and a map), `map`
 //! (segments coloured by the leak-band wave speed, and a second map of its relative error),
 //! `least-certain` (the segments whose leak-band speed is least certain), `soil-speeds` (the
 //! soil's c_P and c_S by soil type, with errors), `notes` (what the data leave undetermined,
@@ -106,7 +107,8 @@ pub fn write_paged(
             worst.push((r, v));
         }
     }
-    let map = map_section(&records, &mut t)? + &super::field::section(db)?;
+    let (map, change_map) = map_section(&records, &mut t)?;
+    let map = map + &super::field::section(db)?;
     let encode = |e: ChartError| ExportError::Encode {
         path: out_path.to_path_buf(),
         message: e.to_string(),
@@ -116,6 +118,7 @@ pub fn write_paged(
         &t,
         &runs,
         &map,
+        change_map,
         (name, &worst),
         &warnings,
     )
@@ -190,6 +193,8 @@ struct LeastCertain {
 /// A segment drawn on the map: its leak-band speed ± σ ([`speed_with_std`]) and status.
 struct Drawn {
     speed: Option<(f64, Option<f64>)>,
+    /// %Δv of the leak-band speed since the previous campaign, of a changed pipe.
+    change_pct: Option<f64>,
     status: &'static str,
     trust: Trust,
 }
@@ -281,6 +286,7 @@ struct Tally {
     bbox: [f64; 4],
     drawn: Vec<Drawn>,
     actions: Vec<Action>,
+    changes: ChangeTally,
 }
 
 impl Tally {
@@ -323,6 +329,7 @@ impl Tally {
             ],
             drawn: Vec::new(),
             actions: Vec::new(),
+            changes: ChangeTally::new(),
         }
     }
 
@@ -335,6 +342,7 @@ impl Tally {
         count_codes(&mut self.notes, r.fit.as_ref().map(|f| f.notes.as_str()));
         self.speeds
             .extend(r.leak_band_speed.filter(|v| v.is_finite()));
+        let change_pct = self.changes.add(r);
         if let Some(line) =
             self.common
                 .line(r.id(), r.geometry.as_ref(), r.segment.srid, map_warnings)
@@ -351,6 +359,7 @@ impl Tally {
             }
             self.drawn.push(Drawn {
                 speed: speed_with_std(r),
+                change_pct,
                 status: r.status(),
                 // A segment without a fit of its own but with the soil field's speed is drawn
                 // as a prediction (model §7.12), whatever its fit status says.
@@ -506,6 +515,7 @@ impl Tally {
         });
         self.worst_chi2.finish();
         self.worst_misfit.finish();
+        self.changes.listed.finish();
     }
 
     /// The fit-quality figure the report ranks by: χ²/dof when every non-failed fit has it
@@ -584,7 +594,10 @@ struct SoilTally {
     c_s: Vec<WithStd>,
 }
 
+mod changes;
 mod sections;
+
+use changes::ChangeTally;
 
 pub use sections::weighted_mean;
 use sections::*;

@@ -39,6 +39,13 @@ pub const BAD_IS_RED_8: [&str; 8] = [
     "#4393c3", "#92c5de", "#d1e5f0", "#fddbc7", "#f4a582", "#d6604d", "#b2182b", "#67001f",
 ];
 
+/// A fall to a rise, for a signed change with no good end (a wave speed's change between
+/// campaigns): ColorBrewer "RdBu" with 8 classes (colour-blind safe), red for a fall, blue for
+/// a rise, pale about zero.
+pub const FALL_RED_RISE_BLUE_8: [&str; 8] = [
+    "#b2182b", "#d6604d", "#f4a582", "#fddbc7", "#d1e5f0", "#92c5de", "#4393c3", "#2166ac",
+];
+
 /// Colour of segments without a value.
 pub const NO_VALUE_COLOUR: &str = "#b0b0b0";
 

@@ -12,6 +12,7 @@ pub(super) fn render(
     t: &Tally,
     runs: &[RunRow],
     map: &str,
+    change_map: Option<String>,
     worst: (&str, &[(SegmentExport, f64)]),
     warnings: &[String],
 ) -> Result<String, ChartError> {
@@ -29,6 +30,7 @@ pub(super) fn render(
     );
     trust(&mut h, t);
     actions(&mut h, t);
+    super::changes::section(&mut h, t, change_map);
     h.push_str(map);
     least_certain(&mut h, t);
     soil_speeds(&mut h, t)?;
@@ -286,12 +288,17 @@ pub(super) fn relative_error(d: &Drawn) -> Option<f64> {
 }
 
 /// The map section: the segments [`Tally::add`] put on the map, drawn from a second pass over
-/// the geometries alone (in the same order, so the k-th line drawn is the k-th tallied).
-pub(super) fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String, ExportError> {
+/// the geometries alone (in the same order, so the k-th line drawn is the k-th tallied); and,
+/// from the same pass, the map of the speed changes since the previous campaign, when a
+/// segment changed (for the section of [`super::changes`]).
+pub(super) fn map_section(
+    records: &Records<'_>,
+    t: &mut Tally,
+) -> Result<(String, Option<String>), ExportError> {
     let mut h = String::from("<section id=\"map\"><h2>Map: leak-band wave speed ± its error</h2>");
     let Some(srid) = t.common.srid().filter(|_| !t.drawn.is_empty()) else {
         h.push_str("<p class=\"note\">No segment has a geometry.</p></section>");
-        return Ok(h);
+        return Ok((h, None));
     };
     let n = t.drawn.len();
     let name = crs::lookup(srid).map_or("unknown system", |d| d.name);
@@ -340,6 +347,7 @@ pub(super) fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String
     };
     let mut speed_map = MapCanvas::new(t.bbox, n, &speed_values, geographic, &speed_style);
     let mut error_map = MapCanvas::new(t.bbox, n, &error_values, geographic, &error_style);
+    let mut change_map = super::changes::change_canvas(t, geographic, scale_units);
     let tooltips = n <= svg::MAP_TOOLTIP_LIMIT;
     let (common, drawn) = (&mut t.common, &t.drawn);
     let mut k = 0;
@@ -379,6 +387,18 @@ pub(super) fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String
                 .filter(|_| tooltips)
                 .map(|p| format!("{} % of the speed", sig(p, 2))),
         });
+        if let Some(m) = change_map.as_mut() {
+            m.add(&MapLine {
+                id: &g.segment_id,
+                line: &line,
+                trust: Trust::Trusted,
+                value: d.change_pct,
+                label: d
+                    .change_pct
+                    .filter(|_| tooltips)
+                    .map(|p| format!("{p:+.1} % since the previous campaign")),
+            });
+        }
         Ok(())
     })
     .map_err(ExportError::db(records.db()))?;
@@ -391,7 +411,7 @@ pub(super) fn map_section(records: &Records<'_>, t: &mut Tally) -> Result<String
         "<h3>Relative error of the leak-band speed (%)</h3>{}</section>",
         error_map.finish()
     );
-    Ok(h)
+    Ok((h, change_map.map(MapCanvas::finish)))
 }
 
 pub(super) fn least_certain(h: &mut String, t: &Tally) {
