@@ -39,6 +39,8 @@ pub(super) struct ChangeTally {
     pub pairs: BTreeMap<(String, String), usize>,
     /// The changed pipes, largest |%Δv| first.
     pub listed: Top<ChangeEntry>,
+    /// The levels the tests were judged at, as stored with each finding (`changes.alpha`).
+    pub levels: BTreeSet<String>,
 }
 
 /// Largest speed change first (a change without a figure last), then by id.
@@ -58,6 +60,7 @@ impl ChangeTally {
             by_effect: BTreeMap::new(),
             pairs: BTreeMap::new(),
             listed: Top::new(CHANGES_LISTED, largest_first),
+            levels: BTreeSet::new(),
         }
     }
 
@@ -73,6 +76,9 @@ impl ChangeTally {
             _ => return None,
         }
         self.tested += 1;
+        if let Some(a) = c.alpha {
+            self.levels.insert(sig(a, 2));
+        }
         if let Some(since) = &c.since_campaign {
             *self
                 .pairs
@@ -217,7 +223,11 @@ pub(super) fn section(h: &mut String, t: &Tally, map: Option<String>) {
         } else {
             String::new()
         },
-        alpha = crate::change::CHANGE_ALPHA,
+        alpha = if c.levels.is_empty() {
+            "–".to_string()
+        } else {
+            c.levels.iter().cloned().collect::<Vec<_>>().join(", ")
+        },
     );
     if c.changed == 0 {
         h.push_str("</section>");
