@@ -160,7 +160,7 @@ pub struct NoiseLaw {
 }
 
 impl NoiseLaw {
-    fn draw<R: Rng>(rng: &mut R, plan: &Plan) -> Self {
+    pub(crate) fn draw<R: Rng>(rng: &mut R, plan: &Plan) -> Self {
         let f = &plan.frequencies;
         NoiseLaw {
             rel_re: log_uniform(rng, 0.003, 0.03),
@@ -296,7 +296,7 @@ fn plan_points<R: Rng>(rng: &mut R, n: usize, lo: f64, hi: f64, spacing: Spacing
 /// A campaign's plan: 5–12 points in a band drawn per segment within 50 Hz – `f_max`: the low
 /// end log-uniform on 50–250 Hz, the band 2.5–10 times as wide, log-spaced (45 %), linear
 /// (40 %) or jittered linear (15 %).
-fn draw_plan<R: Rng>(rng: &mut R, f_max: f64) -> Plan {
+pub(crate) fn draw_plan<R: Rng>(rng: &mut R, f_max: f64) -> Plan {
     let n = rng.gen_range(5..=12);
     let mut lo = log_uniform(rng, F_MIN_HZ, 250.0);
     let hi = (lo * log_uniform(rng, 2.5, 10.0)).min(f_max);
@@ -445,7 +445,12 @@ pub fn noiseless(sys: &System, frequencies: &[f64]) -> Option<Vec<Complex64>> {
 
 /// Measured rows of one campaign: k_re and α each with an independent Gaussian error of the
 /// stated σ (P5: α ≥ 0; a negative α, probability ≤ 3e-5, is drawn again).
-fn measure<R: Rng>(rng: &mut R, plan: &Plan, k: &[Complex64], law: &NoiseLaw) -> Option<Vec<Row>> {
+pub(crate) fn measure<R: Rng>(
+    rng: &mut R,
+    plan: &Plan,
+    k: &[Complex64],
+    law: &NoiseLaw,
+) -> Option<Vec<Row>> {
     let mut rows = Vec::with_capacity(k.len());
     for (&f, &kt) in plan.frequencies.iter().zip(k) {
         let (s_re, s_att) = law.sigma(f, kt);

@@ -37,3 +37,11 @@ pub fn std_normal<R: Rng>(rng: &mut R) -> f64 {
     let u2 = rng.gen::<f64>();
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
+
+/// The stream of zone `g` (groups set): stream g of a generator seeded apart from the
+/// segments' (the seed plus the 64-bit golden ratio), so zones and segments never share one.
+pub fn zone_rng(seed: u64, g: usize) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(0x9e37_79b9_7f4a_7c15));
+    rng.set_stream(g as u64);
+    rng
+}

@@ -6,5 +6,7 @@
 //! `pipewave synth` is judged on data it was not designed on.
 pub mod campaigns;
 pub mod catalogue;
+pub mod diagnosis;
 pub mod draw;
 pub mod score;
+pub mod score_diagnosis;

@@ -84,11 +84,13 @@ impl Table {
     }
 }
 
-fn cell(row: &[String], i: usize) -> &str {
+/// Cell i of a row, blank when the row is short.
+pub fn cell(row: &[String], i: usize) -> &str {
     row.get(i).map_or("", |s| s.as_str())
 }
 
-fn cell_opt(row: &[String], i: Option<usize>) -> &str {
+/// Cell of an optional column, blank when the column is missing.
+pub fn cell_opt(row: &[String], i: Option<usize>) -> &str {
     i.map_or("", |i| cell(row, i))
 }
 
@@ -249,7 +251,8 @@ pub struct Rate {
 }
 
 impl Rate {
-    fn add(&mut self, hit: bool) {
+    /// Count one case, a hit or not.
+    pub fn add(&mut self, hit: bool) {
         self.of += 1;
         self.hits += usize::from(hit);
     }
