@@ -20,6 +20,7 @@
 //! target is written, the link kept); a character device or FIFO (`/dev/null`, a pipe to
 //! another program) is written directly, never replaced (`resolve_out`).
 
+pub mod columns;
 pub mod csv;
 pub mod field;
 pub mod geojson;
