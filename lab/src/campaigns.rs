@@ -262,6 +262,36 @@ impl Segment {
     }
 }
 
+/// The buried pipe of a drawn wall, size, soil and contact ξ in water, with the full model
+/// (model §3, P13) and reciprocal contact, and the top of its frequency plan: 0.9 of the
+/// validity limit (P7), at most [`F_MAX_HZ`]. None when that leaves a band narrower than
+/// 2.5 × [`F_MIN_HZ`].
+pub fn buried_pipe(
+    wall: &Wall,
+    size: &Size,
+    soil: Soil,
+    contact: f64,
+) -> Result<Option<(System, f64)>> {
+    let props = MaterialProps {
+        youngs_modulus: wall.youngs,
+        poisson: wall.poisson,
+        density: wall.density,
+        loss_factor: wall.loss,
+    };
+    let pipe = Pipe::from_outside_diameter(props, size.od_mm / 1000.0, size.wall_mm / 1000.0)?;
+    let fluid = Fluid::water();
+    let system = System::new(
+        fluid,
+        pipe,
+        soil,
+        contact,
+        Model::Full,
+        ContactMode::Reciprocal,
+    )?;
+    let f_max = (0.9 * validity_limit_hz(&pipe, &fluid)).min(F_MAX_HZ);
+    Ok((f_max >= 2.5 * F_MIN_HZ).then_some((system, f_max)))
+}
+
 /// Highest frequency the membrane-shell model is valid at (P7), Hz: half the ring frequency
 /// and half the first higher fluid mode's cut-on, whichever is lower.
 pub fn validity_limit_hz(pipe: &Pipe, fluid: &Fluid) -> f64 {
@@ -516,26 +546,9 @@ fn try_segment<R: Rng>(rng: &mut R, index: usize, changed: bool) -> Result<Optio
         Material::DuctileIron => 1965..=2020,
         _ => 1970..=2022,
     });
-    let props = MaterialProps {
-        youngs_modulus: wall.youngs,
-        poisson: wall.poisson,
-        density: wall.density,
-        loss_factor: wall.loss,
-    };
-    let pipe = Pipe::from_outside_diameter(props, size.od_mm / 1000.0, size.wall_mm / 1000.0)?;
-    let fluid = Fluid::water();
-    let before = System::new(
-        fluid,
-        pipe,
-        soil,
-        contact,
-        Model::Full,
-        ContactMode::Reciprocal,
-    )?;
-    let f_max = (0.9 * validity_limit_hz(&pipe, &fluid)).min(F_MAX_HZ);
-    if f_max < 2.5 * F_MIN_HZ {
+    let Some((before, f_max)) = buried_pipe(&wall, &size, soil, contact)? else {
         return Ok(None);
-    }
+    };
     let plan_a = draw_plan(rng, f_max);
     let plan_b = draw_plan_b(rng, &plan_a, f_max);
     let (change, after) = if changed {

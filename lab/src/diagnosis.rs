@@ -51,15 +51,14 @@ use num_complex::Complex64;
 use pipewave::invert::assemble::leak_band_speed_of;
 use pipewave::physics::effects::{exponent_of_loss_factor, Effect};
 use pipewave::physics::inputs::MAX_SOIL_POISSON;
-use pipewave::physics::{ContactMode, Fluid, Material, MaterialProps, Model, Pipe, Soil, System};
+use pipewave::physics::{Material, Pipe, Soil, System};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use crate::campaigns::{
-    draw_plan, is_plastic, measure, noiseless, validity_limit_hz, NoiseLaw, Plan, Row, F_MAX_HZ,
-    F_MIN_HZ,
+    buried_pipe, draw_plan, is_plastic, measure, noiseless, NoiseLaw, Plan, Row,
 };
 use crate::catalogue::{
     draw_contact, draw_wall, pick, sizes, Size, SoilClass, Wall, MATERIAL_SHARES, SOIL_CLASSES,
@@ -879,26 +878,9 @@ fn try_segment(
         },
         _ => truth,
     };
-    let props = MaterialProps {
-        youngs_modulus: wall.youngs,
-        poisson: wall.poisson,
-        density: wall.density,
-        loss_factor: wall.loss,
-    };
-    let pipe = Pipe::from_outside_diameter(props, size.od_mm / 1000.0, size.wall_mm / 1000.0)?;
-    let fluid = Fluid::water();
-    let base = System::new(
-        fluid,
-        pipe,
-        soil,
-        contact,
-        Model::Full,
-        ContactMode::Reciprocal,
-    )?;
-    let f_max = (0.9 * validity_limit_hz(&pipe, &fluid)).min(F_MAX_HZ);
-    if f_max < 2.5 * F_MIN_HZ {
+    let Some((base, f_max)) = buried_pipe(&wall, &size, soil, contact)? else {
         return Ok(None);
-    }
+    };
     let plan = draw_plan(rng, f_max);
     let noise = NoiseLaw::draw(rng, &plan);
     let Some(k_base) = noiseless(&base, &plan.frequencies) else {

@@ -4,16 +4,15 @@
 //! The checks read the written files back and rebuild every pipe from them with pipewave's
 //! physics alone, so they test what a user of the files gets, not the generator's own structs.
 
+mod common;
+
+use common::{fnv1a, num, rows, solve, Meas};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
-use num_complex::Complex64;
 use pipewave::db::import::{import, ImportOptions, ImportSource, SourceKind};
 use pipewave::db::Database;
 use pipewave::physics::effects::Effect;
-use pipewave::physics::{
-    solve_curve, ContactMode, Continuation, Fluid, Material, MaterialProps, Model, Pipe, Soil,
-    System,
-};
+use pipewave::physics::{ContactMode, Fluid, Material, MaterialProps, Model, Pipe, Soil, System};
 use pipewave_lab::diagnosis::{
     generate, measurements_csv, nominal_dn, segments_csv, truth_csv, Options, Set, FLOOR_TOLERANCE,
     Z_FLOOR, Z_MAIN_MIN,
@@ -42,32 +41,6 @@ fn files(set: Set, segments: usize, seed: u64) -> Files {
         ..Options::new(set, seed)
     })
 }
-
-/// Rows of a CSV text as maps column → cell.
-fn rows(text: &str) -> Vec<HashMap<String, String>> {
-    let mut r = csv::Reader::from_reader(text.as_bytes());
-    let headers: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
-    r.records()
-        .map(|rec| {
-            let rec = rec.unwrap();
-            headers
-                .iter()
-                .cloned()
-                .zip(rec.iter().map(String::from))
-                .collect()
-        })
-        .collect()
-}
-
-fn num(row: &HashMap<String, String>, col: &str) -> f64 {
-    row.get(col)
-        .unwrap_or_else(|| panic!("no column {col}"))
-        .parse()
-        .unwrap_or_else(|e| panic!("{col} = {:?}: {e}", row[col]))
-}
-
-/// One measured row: frequency, k_re, α, σ_re, σ_α.
-type Meas = (f64, f64, f64, f64, f64);
 
 fn measurements(f: &Files) -> BTreeMap<String, Vec<Meas>> {
     let mut out: BTreeMap<String, Vec<Meas>> = BTreeMap::new();
@@ -138,24 +111,6 @@ fn systems(f: &Files) -> BTreeMap<String, (System, System, HashMap<String, Strin
         out.insert(t["segment_id"].clone(), (base, measured, t));
     }
     out
-}
-
-fn solve(sys: &System, f: &[f64]) -> Vec<Complex64> {
-    let w: Vec<f64> = f.iter().map(|f| 2.0 * std::f64::consts::PI * f).collect();
-    solve_curve(sys, &w, Continuation::default())
-        .into_iter()
-        .map(|r| r.expect("a root").k1)
-        .collect()
-}
-
-/// FNV-1a, 64 bit.
-fn fnv1a(text: &str) -> u64 {
-    let mut h: u64 = 0xcbf29ce484222325;
-    for b in text.bytes() {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x100000001b3);
-    }
-    h
 }
 
 fn count_kinds(truth: &str) -> BTreeMap<String, usize> {
