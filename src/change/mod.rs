@@ -353,8 +353,11 @@ pub fn test_change(
         name_cause(&mut t, n, p, residuals_of(earlier));
         t.current = current_with_cause(&t, later, settings, fit_later);
     } else {
-        let widened = widened_by_consistency(pooled_fit, pooled.consistency_chi2, n);
-        t.pooled = Some(with_pooling_bias(widened, fit_later));
+        t.pooled = Some(widened_by_consistency(
+            pooled_fit,
+            pooled.consistency_chi2,
+            n,
+        ));
     }
     t.earlier = Some(earlier_fit);
     t
@@ -403,45 +406,6 @@ fn widened_by_consistency(mut fit: FitResult, consistency: f64, n: usize) -> Fit
     for c in &mut fit.curve {
         c.phase_speed_std = c.phase_speed_std.map(|s| s * f);
         c.attenuation_db_std = c.attenuation_db_std.map(|s| s * f);
-    }
-    fit
-}
-
-/// The pooled fit's speed errors with the bias pooling may carry as an estimate of the latest
-/// state (P97): where the pipe changed by less than the test finds, the pooled speed lies
-/// between the two states. v_P − v_B estimates that bias with variance σ_B² − σ_P² when the
-/// pipe did not change (the pooled estimate is the efficient one of the same state), so
-/// b̂² = max(0, (v_P − v_B)² − (σ_B² − σ_P²)) estimates the squared bias and σ² = σ_P² + b̂²
-/// the pooled speed's mean squared error. Applied to the leak-band speed and to each point of
-/// the curve at the latest fit's frequencies.
-fn with_pooling_bias(mut fit: FitResult, latest: &FitResult) -> FitResult {
-    let widen = |vp: f64, sp: f64, vb: f64, sb: f64| -> f64 {
-        let b2 = ((vp - vb).powi(2) - (sb * sb - sp * sp).max(0.0)).max(0.0);
-        if b2.is_finite() {
-            (sp * sp + b2).sqrt()
-        } else {
-            sp
-        }
-    };
-    if let (Some(p), Some(b)) = (fit.leak_band_speed.as_mut(), latest.leak_band_speed) {
-        p.std = widen(p.value, p.std, b.value, b.std);
-    }
-    for c in &mut fit.curve {
-        let Some(b) = latest
-            .curve
-            .iter()
-            .find(|b| (b.frequency_hz - c.frequency_hz).abs() <= 1e-9 * c.frequency_hz.abs())
-        else {
-            continue;
-        };
-        if let (Some(vp), Some(sp), Some(vb), Some(sb)) = (
-            c.phase_speed,
-            c.phase_speed_std,
-            b.phase_speed,
-            b.phase_speed_std,
-        ) {
-            c.phase_speed_std = Some(widen(vp, sp, vb, sb));
-        }
     }
     fit
 }
@@ -508,7 +472,8 @@ fn alternatives(
     out.extend(
         causes
             .iter()
-            .filter(|c| c.cause != Cause::SoilChange || !settings.effects.is_empty())
+            // Only causes that apply to the pipe's material were fitted (`fit_causes`).
+            .filter(|c| is_alternative(c.cause, settings, None))
             .map(|c| Alternative {
                 cause: Some(c.cause),
                 chi2: c.chi2,
@@ -808,4 +773,56 @@ pub fn change_record(
     }
     speeds.push(speed_row(latest, latest_alone));
     ChangeRecord { change, speeds }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn screen(lr: f64, pa: f64, pb: f64) -> Screen {
+        Screen {
+            lr_separate: lr,
+            alternatives: 4,
+            earlier_misfit_p: pa,
+            later_misfit_p: pb,
+        }
+    }
+
+    #[test]
+    fn the_screen_fits_causes_where_a_change_could_be_reported() {
+        // K · P(χ²_1 > Λ) with K = 4: Λ = 4 gives 0.182 ≥ 0.1 (screened out), Λ = 6 gives
+        // 0.057 (fitted).
+        assert!(!screen(4.0, 0.5, 0.5).passes());
+        assert!(screen(6.0, 0.5, 0.5).passes());
+        // Either campaign unexplained by the fit's physics: fitted whatever Λ_sep.
+        assert!(screen(0.0, 0.005, 0.5).passes());
+        assert!(screen(0.0, 0.5, 0.005).passes());
+        // A statistic that is not a number is never screened out.
+        assert!(screen(f64::NAN, 0.5, 0.5).passes());
+    }
+
+    #[test]
+    fn the_bonferroni_count_is_that_of_the_planned_alternatives() {
+        let alt = |cause, chi2, k, null| Alternative {
+            cause,
+            chi2,
+            k,
+            null,
+        };
+        // n = 24 residuals, p = 3; separate states leave χ² 18 on 18 dof (s² = 1).
+        let alts = [
+            alt(None, 18.0, 3, 30.0),
+            alt(Some(Cause::AirInWater), 19.0, 1, 30.0),
+        ];
+        let (v, at) = judge(24, 3, &alts, 4);
+        let expected = 4.0 * chi2_upper_tail(11.0, 1.0);
+        assert_eq!(at, 1);
+        assert!((v.p_value - expected).abs() < 1e-12, "{}", v.p_value);
+        assert_eq!(v.dof, 1);
+        // The cause screened out or failed: still four alternatives in the count.
+        let (v, at) = judge(24, 3, &alts[..1], 4);
+        assert_eq!(at, 0);
+        let expected = 4.0 * chi2_upper_tail(12.0, 3.0);
+        assert!((v.p_value - expected).abs() < 1e-12, "{}", v.p_value);
+    }
 }
