@@ -8,7 +8,7 @@ use std::str::FromStr;
 /// Version of the fitting algorithm, stored with every fit (`fits.algorithm_version`). A fit
 /// made by another version is stale: `calibrate` refits it on its own. Bump it whenever a
 /// change can move a stored fit; CHANGELOG.md says what each version changed.
-pub const FIT_ALGORITHM_VERSION: i64 = 28;
+pub const FIT_ALGORITHM_VERSION: i64 = 29;
 
 /// Outcome status of a fit (`fits.status`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -227,6 +227,10 @@ impl<'a> Joint<'a> {
             .finite_difference(FiniteDifference::Forward)
             .fd_rel_step(1e-6)
             .ok()?
+            .ftol(JOINT_FTOL)
+            .ok()?
+            .xtol(JOINT_XTOL)
+            .ok()?
             .final_jacobian(false);
         let mut best: Option<JointOptimum> = None;
         // Each start is a candidate too: the answer is never worse than a start on the
@@ -279,6 +283,15 @@ impl<'a> Joint<'a> {
 
 /// Iterations of a joint polish: it starts next to its optimum (both campaigns' own fits).
 pub const JOINT_POLISH_ITERATIONS: usize = 60;
+
+/// The joint polish stops when an iteration lowers χ² by less than this fraction: the test
+/// and the ranking of causes need χ² to ~0.01 (P94's Λ, AICc ties within 2), and χ² of both
+/// campaigns is ~10–300, so 1e-6 leaves it well within that.
+pub const JOINT_FTOL: f64 = 1e-6;
+
+/// The joint polish stops when its (scaled) step is below this fraction of the (scaled)
+/// coordinates: a millionth of a coordinate moves χ² by far less than JOINT_FTOL does.
+pub const JOINT_XTOL: f64 = 1e-6;
 
 /// Where across an added effect's coordinate range the extra starts lie (log10 φ from −7 to
 /// −1.7 for air: −5.4, −4.35, −3.3 and −2.2, i.e. φ ≈ 4e-6 – 6e-3).
